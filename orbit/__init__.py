@@ -5,9 +5,22 @@ Clohessy–Wiltshire dynamics in the target's LVLH frame, the four relative-moti
 a nonlinear reference propagator, target attitude laws and camera pose labels.
 
 ``orbit`` knows nothing of pixels: it hands the pipeline states, rotations and flags.
-Conventions and equations: SPEC.md (shipped beside the project) §0–§9, §11.
+Conventions and equations: SPEC.md §0–§9, §11 (shipped beside the project).
+
+Submodules (imported lazily, so ``import orbit`` stays cheap): ``constants``, ``epoch``,
+``cw``, ``patterns``, ``sampling``, ``reference``, ``sun``, ``visibility``, ``nonlinear``,
+``rotations``, ``attitude``, ``pose``.
 """
 
-from . import constants, cw
+import importlib
 
-__all__ = ["constants", "cw"]
+__all__ = ["constants", "epoch", "cw", "patterns", "sampling", "reference", "sun", "visibility",
+           "nonlinear", "rotations", "attitude", "pose"]
+
+
+def __getattr__(name: str):
+    if name in __all__:
+        module = importlib.import_module(f".{name}", __name__)
+        globals()[name] = module
+        return module
+    raise AttributeError(f"module 'orbit' has no attribute {name!r}")

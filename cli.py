@@ -1,0 +1,245 @@
+#!/usr/bin/env python3
+"""Command line: ``python cli.py --target cassini --pattern spiral``.
+
+Until the renderer lands, the main job samples a relative orbit of the requested pattern
+around the target, propagates it with Clohessy–Wiltshire, places it on the reference orbit,
+and prints per frame the relative state in LVLH and the visibility flags (line of sight,
+Earth in the background, Sun clear of the lens, Earth shadow, illuminated fraction ν).
+``--json`` prints the same as one JSON document (keys as in the dataset's scenario.json and
+labels.json, SI units).
+
+Errors in the arguments print one line naming the parameter and what is allowed, and exit
+with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+TARGETS = ("tiangong", "spacedragon", "icesat", "cassini")
+PATTERNS = ("elliptical", "spiral", "drip-drop", "drift")
+TARGETS_FILE = Path(__file__).resolve().parent / "data" / "targets.json"
+PROG = "cli.py"
+
+
+class CLIError(Exception):
+    """A user-facing error: printed as one line, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (no usage dump) and exit status 2."""
+
+    def error(self, message: str):  # noqa: D102 - argparse hook
+        self.exit(2, f"{PROG}: error: {message}\n")
+
+
+def _int_in(lo: int, hi: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{lo}, {hi}], got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{lo}, {hi}], got {value}")
+        return value
+    return parse
+
+
+def _float_in(lo: float, hi: float, *, lo_open: bool = False, unit: str = ""):
+    def parse(text: str) -> float:
+        lo_txt = f"({lo:g}" if lo_open else f"[{lo:g}"
+        allowed = f"a finite number in {lo_txt}, {hi:g}]{(' ' + unit) if unit else ''}"
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text!r}") from None
+        if not math.isfinite(value) or value < lo or value > hi or (lo_open and value == lo):
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text}")
+        return value
+    return parse
+
+
+def _utc(text: str) -> str:
+    from orbit.epoch import to_unix_seconds
+    from orbit.sun import VALID_UTC_RANGE_S
+    try:
+        unix_s = to_unix_seconds(text, name="--epoch")
+    except ValueError:
+        unix_s = math.nan
+    if not VALID_UTC_RANGE_S[0] <= unix_s <= VALID_UTC_RANGE_S[1]:
+        raise argparse.ArgumentTypeError(f"must be an ISO 8601 UTC time in 1950-2050 such as 2026-03-20T12:00:00Z, "
+                                         f"got {text!r}")
+    return text
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the main job."""
+    p = _Parser(prog=PROG, description="Relative-orbit image generator for spacecraft vision-based navigation. "
+                "Samples a relative orbit of the requested pattern around the target and prints the "
+                "per-frame relative state and visibility flags.")
+    p.add_argument("--target", choices=TARGETS, default="cassini", help="built-in target (default: cassini)")
+    p.add_argument("--pattern", choices=PATTERNS, default="spiral",
+                   help="relative-motion pattern (default: spiral)")
+    p.add_argument("--frames", type=_int_in(1, 1_000_000), default=100,
+                   help="number of frames, evenly spaced over the window (default: 100)")
+    p.add_argument("--seed", type=_int_in(0, 2**63 - 1), default=0,
+                   help="seed of the pattern draw; same seed, same output (default: 0)")
+    p.add_argument("--window-s", type=_float_in(0.0, 1e7, lo_open=True, unit="s"), default=None,
+                   help="window length [s] (default: one period for elliptical, half for spiral and "
+                        "drip-drop, 80 m of drift for drift, scaled with the target)")
+    g = p.add_argument_group("reference orbit (circular)")
+    g.add_argument("--altitude-km", type=_float_in(100.0, 1e6, unit="km"), default=400.0,
+                   help="altitude above the equatorial radius [km] (default: 400)")
+    g.add_argument("--inclination-deg", type=_float_in(0.0, 180.0, unit="deg"),
+                   default=51.6, help="inclination [deg] (default: 51.6)")
+    g.add_argument("--raan-deg", type=_float_in(-360.0, 360.0, unit="deg"), default=0.0,
+                   help="right ascension of the ascending node [deg] (default: 0)")
+    g.add_argument("--arg-lat-deg", type=_float_in(-360.0, 360.0, unit="deg"), default=0.0,
+                   help="argument of latitude at the epoch [deg] (default: 0)")
+    g.add_argument("--epoch", type=_utc, default=None, help="UTC epoch of frame 0, ISO 8601 (default: 2026-03-20T12:00:00Z)")
+    g.add_argument("--sun-margin-deg", type=_float_in(0.0, 90.0, unit="deg"), default=20.0,
+                   help="stray-light margin added to the Sun's radius for the Sun-in-lens test [deg] (default: 20)")
+    p.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
+    return p
+
+
+def load_targets(path: Path = TARGETS_FILE) -> dict:
+    """Built-in target facts from data/targets.json (name → dict with ``bounding_radius_m``)."""
+    try:
+        table = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise CLIError(f"cannot read the target table {path}: {exc}") from None
+    return {k: v for k, v in table.items() if not k.startswith("_")}
+
+
+def run_orbit_job(args: argparse.Namespace) -> dict:
+    """Sample, propagate and evaluate one sequence; returns plain-Python results."""
+    from orbit import cw, pose, visibility
+    from orbit.attitude import TargetAttitude
+    from orbit.epoch import DEFAULT_EPOCH_UTC, to_iso_utc
+    from orbit.reference import ReferenceOrbit
+    from orbit.sampling import sample_pattern
+    from orbit.sun import sun_position_eci
+
+    targets = load_targets()
+    target = targets[args.target]
+    ref = ReferenceOrbit(altitude_m=args.altitude_km * 1e3, inclination_rad=math.radians(args.inclination_deg),
+                         raan_rad=math.radians(args.raan_deg), arg_lat_rad=math.radians(args.arg_lat_deg),
+                         epoch_utc=args.epoch if args.epoch is not None else DEFAULT_EPOCH_UTC)
+    n = ref.n_rad_s
+    sample = sample_pattern(args.pattern, n, target_radius_m=float(target["bounding_radius_m"]),
+                            n_frames=args.frames, rng=args.seed, window_s=args.window_s)
+    t_s = np.asarray(sample.t_s)
+    s_lvlh = cw.propagate(sample.s0_lvlh, n, t_s)
+    r_obs_eci, _ = ref.observer_state_eci(s_lvlh, t_s)
+    r_tgt_eci, _ = ref.target_state_eci(t_s)
+    unix_s = ref.unix_s(t_s)
+    r_sun_eci = sun_position_eci(unix_s)
+    vis = visibility.visibility(r_obs_eci, r_tgt_eci, r_sun_eci, sun_margin_rad=math.radians(args.sun_margin_deg))
+
+    R_cam_from_lvlh = pose.look_at(s_lvlh[:, :3])
+    R_lvlh_from_body = TargetAttitude(mode="lvlh-fixed").R_lvlh_from_body(t_s, n)
+    R_cam_from_body, t_cam_m = pose.pose_from_relative(s_lvlh[:, :3], R_lvlh_from_body, R_cam_from_lvlh)
+    labels = pose.pose_labels(R_cam_from_body, t_cam_m)
+
+    frames = []
+    for i in range(t_s.size):
+        frames.append({
+            "frame": i,
+            "t_s": float(t_s[i]),
+            "utc": to_iso_utc(float(unix_s[i])),
+            "r_lvlh": [float(v) for v in s_lvlh[i, :3]],
+            "v_lvlh": [float(v) for v in s_lvlh[i, 3:]],
+            "range_m": float(np.linalg.norm(s_lvlh[i, :3])),
+            "q_cam_from_body": [float(v) for v in labels.q_cam_from_body[i]],
+            "R_cam_from_body": [float(v) for v in R_cam_from_body[i].ravel()],
+            "t_cam_m": [float(v) for v in t_cam_m[i]],
+            "line_of_sight": bool(vis.line_of_sight[i]),
+            "earth_in_background": bool(vis.earth_in_background[i]),
+            "sun_angle_deg": float(np.degrees(vis.sun_angle_rad[i])),
+            "sun_clear": bool(vis.sun_clear[i]),
+            "shadow": ("sunlit", "penumbra", "umbra")[int(vis.shadow[i])],
+            "shadow_fraction": float(vis.illuminated_fraction[i]),
+            "visible": bool(vis.visible[i]),
+        })
+    return {
+        "target": args.target,
+        "target_bounding_radius_m": float(target["bounding_radius_m"]),
+        "pattern": args.pattern,
+        "seed": args.seed,
+        "reference_orbit": {"altitude_m": ref.altitude_m, "inclination_rad": ref.inclination_rad,
+                            "raan_rad": ref.raan_rad, "arg_lat_rad": ref.arg_lat_rad, "epoch_utc": ref.epoch_utc,
+                            "a_m": ref.a_m, "period_s": ref.period_s},
+        "n": n,
+        "s0_lvlh": [float(v) for v in sample.s0_lvlh],
+        "window_s": sample.window_s,
+        "range_band_m": [sample.band.r_min_m, sample.band.r_max_m],
+        "pattern_parameters": sample.params.to_dict(),
+        "sampled": dict(sample.draws),
+        "attempts": sample.attempts,
+        "t_s": [float(v) for v in t_s],
+        "frames": frames,
+    }
+
+
+def _num(value) -> str:
+    return "undefined" if value is None else (value if isinstance(value, str) else f"{value:.8g}")
+
+
+def _print_table(result: dict, out) -> None:
+    pp = result["pattern_parameters"]
+    ro = result["reference_orbit"]
+    w = out.write
+    w(f"# target {result['target']} (bounding radius {result['target_bounding_radius_m']:g} m), "
+      f"pattern {result['pattern']} {pp['side']}, seed {result['seed']}\n")
+    w(f"# reference orbit: altitude {ro['altitude_m'] / 1e3:g} km, i {math.degrees(ro['inclination_rad']):g} deg, "
+      f"RAAN {math.degrees(ro['raan_rad']):g} deg, u0 {math.degrees(ro['arg_lat_rad']):g} deg, "
+      f"epoch {ro['epoch_utc']}, n {result['n']:.10e} rad/s, T {ro['period_s']:.3f} s\n")
+    w(f"# A {pp['A']:.4f} m, x_l {pp['x_l']:.4f} m, beta {pp['beta']:.6e} m/s, gamma {pp['gamma']:.4f} m, "
+      f"sigma {_num(pp['sigma'])}, kappa {_num(pp['kappa'])}, t_p {pp['t_p']:.3f} s\n")
+    w(f"# s0_lvlh [m, m/s] = {' '.join(f'{v:.9g}' for v in result['s0_lvlh'])}\n")
+    w(f"# window {result['window_s']:.3f} s, {len(result['frames'])} frames, range band "
+      f"{result['range_band_m'][0]:g}-{result['range_band_m'][1]:g} m\n")
+    w(f"{'frame':>5} {'t_s':>10} {'x_m':>10} {'y_m':>10} {'z_m':>10} {'vx_m_s':>10} {'vy_m_s':>10} "
+      f"{'vz_m_s':>10} {'range_m':>9} {'los':>3} {'earth_bg':>8} {'sun_deg':>7} {'sun_ok':>6} "
+      f"{'shadow':>8} {'nu':>6} {'visible':>7}\n")
+    yn = ("no", "yes")
+    for f in result["frames"]:
+        x, y, z = f["r_lvlh"]
+        vx, vy, vz = f["v_lvlh"]
+        w(f"{f['frame']:5d} {f['t_s']:10.3f} {x:10.4f} {y:10.4f} {z:10.4f} {vx:10.6f} {vy:10.6f} {vz:10.6f} "
+          f"{f['range_m']:9.3f} {yn[f['line_of_sight']]:>3} {yn[f['earth_in_background']]:>8} "
+          f"{f['sun_angle_deg']:7.2f} {yn[f['sun_clear']]:>6} {f['shadow']:>8} {f['shadow_fraction']:6.4f} "
+          f"{yn[f['visible']]:>7}\n")
+    n_vis = sum(f["visible"] for f in result["frames"])
+    w(f"# {n_vis} of {len(result['frames'])} frames visible (line of sight, Sun clear of the lens, target lit)\n")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the process exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        result = run_orbit_job(args)
+    except (CLIError, ValueError) as exc:
+        sys.stderr.write(f"{PROG}: error: {exc}\n")
+        return 2
+    try:
+        if args.json:
+            json.dump(result, sys.stdout, indent=1, allow_nan=False)
+            sys.stdout.write("\n")
+        else:
+            _print_table(result, sys.stdout)
+        sys.stdout.flush()
+    except BrokenPipeError:  # e.g. `python cli.py | head`: the reader left, not an error
+        sys.stdout = None
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
