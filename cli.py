@@ -147,6 +147,11 @@ def run_orbit_job(args: argparse.Namespace) -> dict:
     R_lvlh_from_body = TargetAttitude(mode="lvlh-fixed").R_lvlh_from_body(t_s, n)
     R_cam_from_body, t_cam_m = pose.pose_from_relative(s_lvlh[:, :3], R_lvlh_from_body, R_cam_from_lvlh)
     labels = pose.pose_labels(R_cam_from_body, t_cam_m)
+    R_cam_from_eci = R_cam_from_lvlh @ np.swapaxes(ref.R_eci_from_lvlh(t_s), -1, -2)
+    sun_dir_cam = (R_cam_from_eci @ (r_sun_eci - r_obs_eci)[:, :, None])[:, :, 0]
+    sun_dir_cam /= np.linalg.norm(sun_dir_cam, axis=1, keepdims=True)
+    earth_dir_cam = (R_cam_from_eci @ -r_obs_eci[:, :, None])[:, :, 0]
+    earth_dir_cam /= np.linalg.norm(earth_dir_cam, axis=1, keepdims=True)
 
     frames = []
     for i in range(t_s.size):
@@ -160,6 +165,8 @@ def run_orbit_job(args: argparse.Namespace) -> dict:
             "q_cam_from_body": [float(v) for v in labels.q_cam_from_body[i]],
             "R_cam_from_body": [float(v) for v in R_cam_from_body[i].ravel()],
             "t_cam_m": [float(v) for v in t_cam_m[i]],
+            "sun_dir_cam": [float(v) for v in sun_dir_cam[i]],
+            "earth_dir_cam": [float(v) for v in earth_dir_cam[i]],
             "line_of_sight": bool(vis.line_of_sight[i]),
             "earth_in_background": bool(vis.earth_in_background[i]),
             "sun_angle_deg": float(np.degrees(vis.sun_angle_rad[i])),

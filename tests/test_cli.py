@@ -55,6 +55,14 @@ def test_json_states_follow_cw_dynamics_and_pattern():
         # the camera looks at the target: the target origin is on the boresight at the range
         np.testing.assert_allclose(f["t_cam_m"], [0, 0, f["range_m"]], atol=1e-9)
         assert f["visible"] == (f["line_of_sight"] and f["sun_clear"] and f["shadow_fraction"] > 0)
+        # the boresight points at the target, so the Sun direction in the camera frame makes the
+        # Sun angle with +z_cam; the Earth direction is recomputed in LVLH, without the ECI chain
+        assert np.linalg.norm(f["sun_dir_cam"]) == pytest.approx(1.0, abs=1e-12)
+        assert math.degrees(math.acos(f["sun_dir_cam"][2])) == pytest.approx(f["sun_angle_deg"], abs=1e-7)
+        r_cam_lvlh = np.array(f["r_lvlh"]) + [6378137.0 + 400e3, 0, 0]  # camera from Earth's centre
+        R_cam_from_lvlh = R  # LVLH-fixed target: body axes = LVLH axes
+        expected = R_cam_from_lvlh @ (-r_cam_lvlh / np.linalg.norm(r_cam_lvlh))
+        np.testing.assert_allclose(f["earth_dir_cam"], expected, atol=1e-12)
 
 
 def test_same_seed_same_bytes_different_seed_differs():
