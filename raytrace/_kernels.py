@@ -1,0 +1,155 @@
+"""Numba kernels of the geometry pass: ray generation, hit refinement, shading normals.
+
+The per-pixel kernels are compiled **without fastmath**: a pixel's result must not depend on
+where it sits in the cast rectangle (vector body vs scalar remainder), so that a culled
+render equals a full-frame render bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+_exact = numba.njit(cache=True, nogil=True, parallel=True)
+_exact_serial = numba.njit(cache=True, nogil=True)
+
+
+@_exact
+def make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, v0, w, h, out_o, out_d):
+    """Fill float32 origins and body-frame directions for the pixel rectangle (row-major).
+
+    Direction = R_body_from_cam · ((u − c_x)/f_x, (v − c_y)/f_y, 1): unnormalised, so the
+    ray parameter at a hit is the camera z-depth.
+    """
+    for r in numba.prange(h):
+        y = (v0 + r - cy) / fy
+        for c in range(w):
+            x = (u0 + c - cx) / fx
+            k = r * w + c
+            for a in range(3):
+                out_d[k, a] = R_body_from_cam[a, 0] * x + R_body_from_cam[a, 1] * y + R_body_from_cam[a, 2]
+                out_o[k, a] = o_body[a]
+
+
+@_exact
+def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0, w, h,
+                geom_id, prim_id, tfar, V, F, face_offset, face_normal, corner_normal,
+                depth, ray_dist, n_shade, n_geom, inst, face_idx, want_dist):
+    """Turn Embree hits into exact float64 AOVs written into full-size images.
+
+    For each hit the ray is re-intersected in float64 (Möller–Trumbore) with the triangle
+    Embree reported, giving the z-depth, barycentrics, the interpolated shading normal and
+    the geometric normal, both turned to face the camera and rotated into the camera frame.
+    """
+    for r in numba.prange(h):
+        v = v0 + r
+        y = (v - cy) / fy
+        for c in range(w):
+            k = r * w + c
+            g = geom_id[k]
+            if g < 0:
+                continue
+            u = u0 + c
+            x = (u - cx) / fx
+            dx = R_body_from_cam[0, 0] * x + R_body_from_cam[0, 1] * y + R_body_from_cam[0, 2]
+            dy = R_body_from_cam[1, 0] * x + R_body_from_cam[1, 1] * y + R_body_from_cam[1, 2]
+            dz = R_body_from_cam[2, 0] * x + R_body_from_cam[2, 1] * y + R_body_from_cam[2, 2]
+            f = face_offset[g] + prim_id[k]
+            i0 = F[f, 0]
+            i1 = F[f, 1]
+            i2 = F[f, 2]
+            e1x = V[i1, 0] - V[i0, 0]
+            e1y = V[i1, 1] - V[i0, 1]
+            e1z = V[i1, 2] - V[i0, 2]
+            e2x = V[i2, 0] - V[i0, 0]
+            e2y = V[i2, 1] - V[i0, 1]
+            e2z = V[i2, 2] - V[i0, 2]
+            px = dy * e2z - dz * e2y
+            py = dz * e2x - dx * e2z
+            pz = dx * e2y - dy * e2x
+            det = e1x * px + e1y * py + e1z * pz
+            sx = o_body[0] - V[i0, 0]
+            sy = o_body[1] - V[i0, 1]
+            sz = o_body[2] - V[i0, 2]
+            scale = math.sqrt((e1x * e1x + e1y * e1y + e1z * e1z) * (e2x * e2x + e2y * e2y + e2z * e2z)) * \
+                math.sqrt(dx * dx + dy * dy + dz * dz)
+            if abs(det) > 1e-12 * scale:
+                inv = 1.0 / det
+                b1 = (sx * px + sy * py + sz * pz) * inv
+                qx = sy * e1z - sz * e1y
+                qy = sz * e1x - sx * e1z
+                qz = sx * e1y - sy * e1x
+                b2 = (dx * qx + dy * qy + dz * qz) * inv
+                t = (e2x * qx + e2y * qy + e2z * qz) * inv
+            else:  # ray in the triangle's plane: keep Embree's answer
+                t = float(tfar[k])
+                b1 = 1.0 / 3.0
+                b2 = b1
+            b0 = 1.0 - b1 - b2
+            ngx = face_normal[f, 0]
+            ngy = face_normal[f, 1]
+            ngz = face_normal[f, 2]
+            nsx = b0 * corner_normal[f, 0, 0] + b1 * corner_normal[f, 1, 0] + b2 * corner_normal[f, 2, 0]
+            nsy = b0 * corner_normal[f, 0, 1] + b1 * corner_normal[f, 1, 1] + b2 * corner_normal[f, 2, 1]
+            nsz = b0 * corner_normal[f, 0, 2] + b1 * corner_normal[f, 1, 2] + b2 * corner_normal[f, 2, 2]
+            if ngx * dx + ngy * dy + ngz * dz > 0.0:  # back face seen: turn both towards the camera
+                ngx, ngy, ngz = -ngx, -ngy, -ngz
+                nsx, nsy, nsz = -nsx, -nsy, -nsz
+            dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+            facing = (nsx * dx + nsy * dy + nsz * dz) / dn
+            if facing > -1e-4:  # interpolated normal grazes or turns away: tilt it to the viewer
+                tilt = facing + 1e-4
+                nsx -= tilt * dx / dn
+                nsy -= tilt * dy / dn
+                nsz -= tilt * dz / dn
+            ns = math.sqrt(nsx * nsx + nsy * nsy + nsz * nsz)
+            if ns > 0.0:
+                nsx /= ns
+                nsy /= ns
+                nsz /= ns
+            else:
+                nsx, nsy, nsz = ngx, ngy, ngz
+            depth[v, u] = t
+            if want_dist:
+                ray_dist[v, u] = t * math.sqrt(x * x + y * y + 1.0)
+            for a in range(3):
+                n_shade[v, u, a] = R_cam_from_body[a, 0] * nsx + R_cam_from_body[a, 1] * nsy + R_cam_from_body[a, 2] * nsz
+                n_geom[v, u, a] = R_cam_from_body[a, 0] * ngx + R_cam_from_body[a, 1] * ngy + R_cam_from_body[a, 2] * ngz
+            inst[v, u] = g + 1
+            face_idx[v, u] = f
+
+
+@_exact_serial
+def corner_normals(V, F, face_normal, face_angle, vert_faces_ptr, vert_faces, weld, cos_crease):
+    """Shading normal at each face corner: angle-weighted mean of the normals of the faces
+    around the (welded) vertex whose normal is within the crease angle of this face's."""
+    nf = F.shape[0]
+    out = np.zeros((nf, 3, 3))
+    for f in range(nf):
+        for k in range(3):
+            wv = weld[F[f, k]]
+            sx = 0.0
+            sy = 0.0
+            sz = 0.0
+            for j in range(vert_faces_ptr[wv], vert_faces_ptr[wv + 1]):
+                g = vert_faces[j] // 3
+                kg = vert_faces[j] % 3
+                dot = face_normal[f, 0] * face_normal[g, 0] + face_normal[f, 1] * face_normal[g, 1] + \
+                    face_normal[f, 2] * face_normal[g, 2]
+                if dot >= cos_crease:
+                    a = face_angle[g, kg]
+                    sx += a * face_normal[g, 0]
+                    sy += a * face_normal[g, 1]
+                    sz += a * face_normal[g, 2]
+            n = math.sqrt(sx * sx + sy * sy + sz * sz)
+            if n > 0.0:
+                out[f, k, 0] = sx / n
+                out[f, k, 1] = sy / n
+                out[f, k, 2] = sz / n
+            else:
+                out[f, k, 0] = face_normal[f, 0]
+                out[f, k, 1] = face_normal[f, 1]
+                out[f, k, 2] = face_normal[f, 2]
+    return out

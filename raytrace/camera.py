@@ -1,0 +1,116 @@
+"""Pinhole camera (SPEC §9): intrinsics, pixel centres, OpenCV axes.
+
+Camera frame: x right, y down, z forward (boresight). Integer pixel coordinates (u = column,
+v = row) are pixel centres; a centred principal point is c = ((W − 1)/2, (H − 1)/2).
+A primary ray through pixel (u, v) has the camera-frame direction
+``d_cam = ((u − c_x)/f_x, (v − c_y)/f_y, 1)`` — unnormalised, so the ray parameter at a hit
+*is* the z-depth.
+
+The default camera (1280×960, 3.45 µm pixels, 4.0 mm focal length: f_x = 1159.4 px,
+field of view 57.8° × 45.0°) keeps a target's bounding sphere inside the frame at the near
+edge of the range band of :func:`orbit.sampling.range_band` (2.5 bounding radii, a 43.6°
+cone) and still ~150 px wide at the far edge (15 bounding radii).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Camera", "DEFAULT_WIDTH", "DEFAULT_HEIGHT", "DEFAULT_FOCAL_LENGTH_M", "DEFAULT_PIXEL_PITCH_M"]
+
+DEFAULT_WIDTH = 1280
+DEFAULT_HEIGHT = 960
+DEFAULT_FOCAL_LENGTH_M = 4.0e-3
+DEFAULT_PIXEL_PITCH_M = 3.45e-6
+_MAX_SIDE = 65535
+
+
+def _positive_finite(name: str, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a finite number > 0, got {value!r}") from None
+    if not (math.isfinite(v) and v > 0.0):
+        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True, slots=True)
+class Camera:
+    """Pinhole intrinsics and image size.
+
+    Attributes
+    ----------
+    width, height : int
+        Image size [px], 1 … 65535.
+    fx, fy : float
+        Focal lengths [px].
+    cx, cy : float
+        Principal point [px] (pixel-centre coordinates; need not lie inside the image).
+    """
+
+    width: int = DEFAULT_WIDTH
+    height: int = DEFAULT_HEIGHT
+    fx: float = DEFAULT_FOCAL_LENGTH_M / DEFAULT_PIXEL_PITCH_M
+    fy: float = DEFAULT_FOCAL_LENGTH_M / DEFAULT_PIXEL_PITCH_M
+    cx: float = (DEFAULT_WIDTH - 1) / 2.0
+    cy: float = (DEFAULT_HEIGHT - 1) / 2.0
+
+    def __post_init__(self):
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= _MAX_SIDE:
+                raise ValueError(f"{name} must be an integer in [1, {_MAX_SIDE}] px, got {v!r}")
+            object.__setattr__(self, name, int(v))
+        for name in ("fx", "fy"):
+            object.__setattr__(self, name, _positive_finite(name, getattr(self, name)))
+        for name in ("cx", "cy"):
+            v = getattr(self, name)
+            try:
+                v = float(v)
+            except (TypeError, ValueError):
+                v = math.nan
+            if not math.isfinite(v):
+                raise ValueError(f"{name} must be a finite number [px], got {getattr(self, name)!r}")
+            object.__setattr__(self, name, v)
+
+    @classmethod
+    def from_focal(cls, focal_length_m: float = DEFAULT_FOCAL_LENGTH_M,
+                   pixel_pitch_m: float = DEFAULT_PIXEL_PITCH_M, width: int = DEFAULT_WIDTH,
+                   height: int = DEFAULT_HEIGHT) -> "Camera":
+        """Camera from a focal length and a square pixel pitch, principal point centred.
+
+        f_x = f_y = focal_length_m / pixel_pitch_m; c = ((W − 1)/2, (H − 1)/2) (SPEC §9).
+        """
+        f = _positive_finite("focal_length_m", focal_length_m)
+        p = _positive_finite("pixel_pitch_m", pixel_pitch_m)
+        return cls(width=width, height=height, fx=f / p, fy=f / p, cx=(width - 1) / 2.0, cy=(height - 1) / 2.0)
+
+    @property
+    def K(self) -> np.ndarray:
+        """Intrinsic matrix [[f_x, 0, c_x], [0, f_y, c_y], [0, 0, 1]], shape (3, 3) [px]."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def fov_deg(self) -> tuple:
+        """Full horizontal and vertical field of view through the outer pixel edges [deg]."""
+        h = math.degrees(math.atan((self.cx + 0.5) / self.fx) + math.atan((self.width - 0.5 - self.cx) / self.fx))
+        v = math.degrees(math.atan((self.cy + 0.5) / self.fy) + math.atan((self.height - 0.5 - self.cy) / self.fy))
+        return h, v
+
+    def ray_directions_cam(self, u0: int = 0, v0: int = 0, u1: int | None = None, v1: int | None = None) -> np.ndarray:
+        """Unnormalised camera-frame ray directions for the pixel rectangle [u0, u1) × [v0, v1).
+
+        Returns
+        -------
+        ndarray, shape ((v1 − v0)·(u1 − u0), 3), float64
+            Row-major over the rectangle; z = 1 [-].
+        """
+        u1 = self.width if u1 is None else u1
+        v1 = self.height if v1 is None else v1
+        uu, vv = np.meshgrid(np.arange(u0, u1, dtype=np.float64), np.arange(v0, v1, dtype=np.float64))
+        return np.column_stack([((uu - self.cx) / self.fx).ravel(), ((vv - self.cy) / self.fy).ravel(),
+                                np.ones(uu.size)])

@@ -1,0 +1,294 @@
+"""One Embree scene per target and the geometry pass: exact depth, normals and ids per pixel.
+
+:class:`Scene` owns a target's Embree BVH (one geometry per component, so ``geomID`` →
+component), built lazily once and reused for every frame; it is dropped when the object is
+pickled so scenes can be sent to worker processes. :meth:`Scene.render_geometry` casts one
+primary ray per pixel centre — only inside the projection of the target's convex hull — and
+returns every geometric AOV from the same hit record (:class:`GeometryFrame`).
+
+Precision (DESIGN.md): Embree sees float32 body-frame coordinates; every hit is then
+re-intersected in float64 with the triangle Embree reported, so depth is exact to float64
+round-off rather than float32. Rays are unnormalised with z = 1 in the camera frame, so the
+hit parameter is the z-depth.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _kernels
+from .camera import Camera
+from .model import TargetModel
+
+__all__ = ["Scene", "GeometryFrame"]
+
+_MAX_RAYS_PER_CALL = 1 << 20  # bounds memory: ~40 MB of ray and hit buffers per call
+
+
+def _check_pose(R_cam_from_body, t_cam_m) -> tuple[np.ndarray, np.ndarray]:
+    R = np.asarray(R_cam_from_body, dtype=np.float64)
+    t = np.asarray(t_cam_m, dtype=np.float64)
+    if R.shape != (3, 3):
+        raise ValueError(f"R_cam_from_body must have shape (3, 3), got {R.shape}")
+    if t.shape != (3,):
+        raise ValueError(f"t_cam_m must have shape (3,), got {t.shape}")
+    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+        raise ValueError("R_cam_from_body and t_cam_m must be finite")
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise ValueError("R_cam_from_body must be a rotation matrix (orthonormal, det +1) to 1e-6")
+    return R, t
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class GeometryFrame:
+    """Geometric AOVs of one frame, all from the same primary hits (pixel centres).
+
+    Attributes
+    ----------
+    depth_m : ndarray, shape (H, W), float32
+        Z-depth along the optical axis [m]; ``inf`` where nothing is hit.
+    normal_cam : ndarray, shape (H, W, 3), float32
+        Unit shading normal in the camera frame, facing the camera; 0 on background.
+    normal_geom_cam : ndarray, shape (H, W, 3), float32
+        Unit geometric (flat triangle) normal in the camera frame, facing the camera.
+    instance : ndarray, shape (H, W), uint16
+        Component id, k + 1 for component k of the target; 0 is background.
+    face_index : ndarray, shape (H, W), int32
+        Global triangle index hit (components concatenated in order); −1 on background.
+    ray_distance_m : ndarray, shape (H, W), float32, or None
+        Distance from the optical centre along the ray [m] (when requested).
+    cast_rect : tuple of int
+        (u0, v0, u1, v1): the pixel rectangle rays were cast in (end exclusive).
+    n_components : int
+        Number of components of the target.
+    camera_inside_hull : bool
+        The optical centre lies inside (or on) the target's convex hull: culling was off.
+    """
+
+    depth_m: np.ndarray
+    normal_cam: np.ndarray
+    normal_geom_cam: np.ndarray
+    instance: np.ndarray
+    face_index: np.ndarray
+    ray_distance_m: np.ndarray | None
+    cast_rect: tuple
+    n_components: int
+    camera_inside_hull: bool
+
+    @property
+    def mask(self) -> np.ndarray:
+        """Binary target mask, shape (H, W), bool."""
+        return self.instance > 0
+
+    @property
+    def pixel_counts(self) -> np.ndarray:
+        """Visible pixels per id, shape (n_components + 1,), int64 (index 0 = background)."""
+        return np.bincount(self.instance.ravel(), minlength=self.n_components + 1)
+
+    @property
+    def bbox_xyxy(self) -> tuple | None:
+        """(u_min, v_min, u_max, v_max) of the mask, inclusive pixel indices; None if empty."""
+        rows = np.flatnonzero(self.mask.any(axis=1))
+        if rows.size == 0:
+            return None
+        cols = np.flatnonzero(self.mask.any(axis=0))
+        return int(cols[0]), int(rows[0]), int(cols[-1]), int(rows[-1])
+
+    @property
+    def bbox_xywh(self) -> tuple | None:
+        """BOP-style [x, y, width, height] of the mask [px]; None if empty."""
+        b = self.bbox_xyxy
+        return None if b is None else (b[0], b[1], b[2] - b[0] + 1, b[3] - b[1] + 1)
+
+
+class Scene:
+    """A target's Embree scene plus the float64 geometry needed to refine its hits.
+
+    Parameters
+    ----------
+    model : TargetModel
+        The target, in its body frame [m].
+    """
+
+    def __init__(self, model: TargetModel):
+        if not isinstance(model, TargetModel):
+            raise ValueError(f"model must be a raytrace.model.TargetModel, got {type(model).__name__}")
+        self.model = model
+        verts, faces, offsets, creases, comp_of_face = [], [], [0], [], []
+        base = 0
+        for k, comp in enumerate(model.components):
+            v = np.asarray(comp.mesh.vertices, dtype=np.float64)
+            f = np.asarray(comp.mesh.faces, dtype=np.int64)
+            verts.append(v)
+            faces.append(f + base)
+            base += len(v)
+            offsets.append(offsets[-1] + len(f))
+            creases.append(comp.crease_angle_rad)
+            comp_of_face.append(np.full(len(f), k, dtype=np.int64))
+        self.vertices = np.ascontiguousarray(np.concatenate(verts))
+        self.faces = np.ascontiguousarray(np.concatenate(faces))
+        self.face_offset = np.asarray(offsets, dtype=np.int64)
+        self.face_normal, self.corner_normal = self._normals(np.concatenate(comp_of_face), np.asarray(creases))
+        hull_pts = self.vertices
+        try:
+            import trimesh
+            hull_pts = np.asarray(trimesh.PointCloud(self.vertices).convex_hull.vertices)
+        except Exception:  # degenerate (flat) targets: fall back to all vertices
+            pass
+        self.hull_vertices = np.ascontiguousarray(hull_pts, dtype=np.float64)
+        self.scale_m = float(np.linalg.norm(self.vertices.max(0) - self.vertices.min(0)))
+        self._embree = None
+
+    # ------------------------------------------------------------------ build
+    def _normals(self, comp_of_face: np.ndarray, creases: np.ndarray):
+        V, F = self.vertices, self.faces
+        tri = V[F]
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        norm = np.linalg.norm(cross, axis=1)
+        if np.any(norm <= 0.0):
+            bad = int(np.flatnonzero(norm <= 0.0)[0])
+            k = int(comp_of_face[bad])
+            raise ValueError(f"component {self.model.components[k].name} has a zero-area triangle "
+                             f"(face {bad - self.face_offset[k]}); repair the mesh (raytrace.meshio) first")
+        face_normal = cross / norm[:, None]
+        # corner angles
+        angles = np.empty((len(F), 3))
+        for k in range(3):
+            a = tri[:, (k + 1) % 3] - tri[:, k]
+            b = tri[:, (k + 2) % 3] - tri[:, k]
+            angles[:, k] = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+        # weld identical positions within a component (smoothing never crosses components)
+        key = np.column_stack([V, np.repeat(np.arange(len(self.face_offset) - 1),
+                                            np.diff(self._vertex_offsets()))])
+        _, weld = np.unique(key, axis=0, return_inverse=True)
+        weld = weld.ravel().astype(np.int64)
+        corners = weld[F].ravel()
+        order = np.argsort(corners, kind="stable")
+        ptr = np.zeros(weld.max() + 2, dtype=np.int64)
+        np.add.at(ptr, corners + 1, 1)
+        ptr = np.cumsum(ptr)
+        corner = np.empty((len(F), 3, 3))
+        # one crease angle per component: run the kernel per distinct angle
+        for crease in np.unique(creases):
+            sel = np.flatnonzero(creases[comp_of_face] == crease)
+            c = _kernels.corner_normals(V, F, face_normal, angles, ptr, order.astype(np.int64), weld,
+                                        math.cos(crease))
+            corner[sel] = c[sel]
+        return np.ascontiguousarray(face_normal), np.ascontiguousarray(corner)
+
+    def _vertex_offsets(self) -> np.ndarray:
+        counts = [len(c.mesh.vertices) for c in self.model.components]
+        return np.concatenate([[0], np.cumsum(counts)])
+
+    @property
+    def embree(self):
+        """The Embree scene, built on first use (one TriangleMesh per component)."""
+        if self._embree is None:
+            from embreex import rtcore_scene
+            from embreex.mesh_construction import TriangleMesh
+            scene = rtcore_scene.EmbreeScene()
+            vo = self._vertex_offsets()
+            for k, comp in enumerate(self.model.components):
+                v = np.ascontiguousarray(self.vertices[vo[k]:vo[k + 1]], dtype=np.float32)
+                f = np.ascontiguousarray(self.faces[self.face_offset[k]:self.face_offset[k + 1]] - vo[k],
+                                         dtype=np.int32)
+                TriangleMesh(scene, v, f)
+            self._embree = scene
+        return self._embree
+
+    def __getstate__(self):
+        state = self.__dict__.copy()
+        state["_embree"] = None
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+
+    # ------------------------------------------------------------------ culling
+    def cast_rect(self, camera: Camera, R_cam_from_body, t_cam_m) -> tuple[tuple, bool]:
+        """Pixel rectangle that contains the target's projection, and whether culling was off.
+
+        The convex hull of the mesh contains the target; when all hull vertices lie in front
+        of the camera, the projected target lies inside the convex hull of the projected
+        vertices, so every pixel centre it can cover is inside the returned rectangle
+        (padded by one pixel). Otherwise the whole image is cast.
+        """
+        R, t = _check_pose(R_cam_from_body, t_cam_m)
+        p = self.hull_vertices @ R.T + t
+        z_min = 1e-9 * max(self.scale_m, 1.0)
+        if np.any(p[:, 2] <= z_min):
+            return (0, 0, camera.width, camera.height), True
+        u = camera.fx * p[:, 0] / p[:, 2] + camera.cx
+        v = camera.fy * p[:, 1] / p[:, 2] + camera.cy
+        u0 = int(max(0, math.floor(u.min()) - 1))
+        v0 = int(max(0, math.floor(v.min()) - 1))
+        u1 = int(min(camera.width, math.ceil(u.max()) + 2))
+        v1 = int(min(camera.height, math.ceil(v.max()) + 2))
+        if u1 <= u0 or v1 <= v0:
+            return (0, 0, 0, 0), False
+        return (u0, v0, u1, v1), False
+
+    # ------------------------------------------------------------------ render
+    def render_geometry(self, camera: Camera, R_cam_from_body, t_cam_m, *, cull: bool = True,
+                        ray_distance: bool = False) -> GeometryFrame:
+        """Cast primary rays and return depth, normals and ids for one pose.
+
+        Parameters
+        ----------
+        camera : Camera
+            Intrinsics and image size.
+        R_cam_from_body : array_like, shape (3, 3)
+            Target attitude in the camera frame (``p_cam = R p_body + t``) [-].
+        t_cam_m : array_like, shape (3,)
+            Target origin in the camera frame [m].
+        cull : bool, keyword-only
+            Cast only inside the projected convex hull (True, default) or every pixel.
+            Both give identical images.
+        ray_distance : bool, keyword-only
+            Also return the distance along each ray.
+
+        Returns
+        -------
+        GeometryFrame
+        """
+        if not isinstance(camera, Camera):
+            raise ValueError(f"camera must be a raytrace.camera.Camera, got {type(camera).__name__}")
+        R, t = _check_pose(R_cam_from_body, t_cam_m)
+        H, W = camera.height, camera.width
+        if cull:
+            rect, inside = self.cast_rect(camera, R, t)
+        else:
+            rect, inside = (0, 0, W, H), bool(np.any((self.hull_vertices @ R.T + t)[:, 2] <= 0))
+        depth = np.full((H, W), np.inf, dtype=np.float32)
+        dist = np.full((H, W), np.inf, dtype=np.float32) if ray_distance else np.empty((1, 1), np.float32)
+        n_shade = np.zeros((H, W, 3), dtype=np.float32)
+        n_geom = np.zeros((H, W, 3), dtype=np.float32)
+        inst = np.zeros((H, W), dtype=np.uint16)
+        face = np.full((H, W), -1, dtype=np.int32)
+
+        u0, v0, u1, v1 = rect
+        w = u1 - u0
+        if w > 0 and v1 > v0:
+            R_body_from_cam = np.ascontiguousarray(R.T)
+            o_body = -R_body_from_cam @ t
+            rows_per_call = max(1, _MAX_RAYS_PER_CALL // w)
+            scene = self.embree
+            for va in range(v0, v1, rows_per_call):
+                h = min(rows_per_call, v1 - va)
+                o32 = np.empty((h * w, 3), dtype=np.float32)
+                d32 = np.empty((h * w, 3), dtype=np.float32)
+                _kernels.make_rays(o_body, R_body_from_cam, camera.fx, camera.fy, camera.cx, camera.cy,
+                                   u0, va, w, h, o32, d32)
+                hits = scene.run(o32, d32, query="INTERSECT", output=1)
+                _kernels.refine_hits(o_body, R_body_from_cam, R, camera.fx, camera.fy, camera.cx, camera.cy,
+                                     u0, va, w, h, hits["geomID"], hits["primID"], hits["tfar"],
+                                     self.vertices, self.faces, self.face_offset, self.face_normal,
+                                     self.corner_normal, depth, dist, n_shade, n_geom, inst, face,
+                                     ray_distance)
+        return GeometryFrame(depth_m=depth, normal_cam=n_shade, normal_geom_cam=n_geom, instance=inst,
+                             face_index=face, ray_distance_m=dist if ray_distance else None,
+                             cast_rect=rect, n_components=len(self.model.components),
+                             camera_inside_hull=inside)
