@@ -1,7 +1,13 @@
-"""Numba policy for every kernel in :mod:`raytrace` (DESIGN.md).
+"""Numba policy for every kernel in :mod:`raytrace` (DESIGN.md), set once here.
 
-``cache=True`` so CI and later runs skip compilation; fastmath without ``nnan``/``ninf``
-because misses are ``inf`` and must stay so; ``prange`` only on outer pixel/ray loops.
+``cache=True`` so CI and later runs skip compilation; ``nogil`` so threads can overlap
+kernels with Embree calls; ``prange`` only on outer pixel/ray loops.
+
+* ``pjit_exact`` / ``jit_exact``: no fastmath. Per-pixel geometry kernels use these so a
+  pixel's result never depends on where it sits in the cast rectangle (SIMD body vs scalar
+  remainder): culled and full-frame renders are identical bit for bit.
+* ``pjit`` / ``jit``: fastmath without ``nnan``/``ninf`` (misses are ``inf`` and must stay
+  so), for shading kernels where the last bit does not matter.
 """
 
 from __future__ import annotations
@@ -11,7 +17,6 @@ import numba
 FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 jit = numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
-"""Serial kernel decorator."""
-
 pjit = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, parallel=True)
-"""Parallel kernel decorator (outer loop with ``numba.prange``)."""
+jit_exact = numba.njit(cache=True, nogil=True)
+pjit_exact = numba.njit(cache=True, nogil=True, parallel=True)

@@ -2,7 +2,9 @@
 
 The per-pixel kernels are compiled **without fastmath**: a pixel's result must not depend on
 where it sits in the cast rectangle (vector body vs scalar remainder), so that a culled
-render equals a full-frame render bit for bit.
+render equals a full-frame render bit for bit. They are serial and release the GIL: the
+caller runs them on row chunks in a thread pool, each chunk followed by its Embree call
+(which releases the GIL too), so both cores stay busy without nested parallelism.
 """
 
 from __future__ import annotations
@@ -12,18 +14,17 @@ import math
 import numba
 import numpy as np
 
-_exact = numba.njit(cache=True, nogil=True, parallel=True)
-_exact_serial = numba.njit(cache=True, nogil=True)
+from ._jit import jit_exact
 
 
-@_exact
+@jit_exact
 def make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, v0, w, h, out_o, out_d):
     """Fill float32 origins and body-frame directions for the pixel rectangle (row-major).
 
     Direction = R_body_from_cam · ((u − c_x)/f_x, (v − c_y)/f_y, 1): unnormalised, so the
     ray parameter at a hit is the camera z-depth.
     """
-    for r in numba.prange(h):
+    for r in range(h):
         y = (v0 + r - cy) / fy
         for c in range(w):
             x = (u0 + c - cx) / fx
@@ -33,7 +34,7 @@ def make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, v0, w, h, out_o, out_
                 out_o[k, a] = o_body[a]
 
 
-@_exact
+@jit_exact
 def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0, w, h,
                 geom_id, prim_id, tfar, V, F, face_offset, face_normal, corner_normal,
                 depth, ray_dist, n_shade, n_geom, inst, face_idx, want_dist):
@@ -43,7 +44,7 @@ def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0
     Embree reported, giving the z-depth, barycentrics, the interpolated shading normal and
     the geometric normal, both turned to face the camera and rotated into the camera frame.
     """
-    for r in numba.prange(h):
+    for r in range(h):
         v = v0 + r
         y = (v - cy) / fy
         for c in range(w):
@@ -121,7 +122,7 @@ def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0
             face_idx[v, u] = f
 
 
-@_exact_serial
+@jit_exact
 def corner_normals(V, F, face_normal, face_angle, vert_faces_ptr, vert_faces, weld, cos_crease):
     """Shading normal at each face corner: angle-weighted mean of the normals of the faces
     around the (welded) vertex whose normal is within the crease angle of this face's."""

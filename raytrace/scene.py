@@ -15,6 +15,8 @@ hit parameter is the z-depth.
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,9 +25,25 @@ from . import _kernels
 from .camera import Camera
 from .model import TargetModel
 
-__all__ = ["Scene", "GeometryFrame"]
+__all__ = ["Scene", "GeometryFrame", "default_threads"]
 
-_MAX_RAYS_PER_CALL = 1 << 20  # bounds memory: ~40 MB of ray and hit buffers per call
+_RAYS_PER_CHUNK = 1 << 16  # rays per Embree call: small enough to balance threads, large enough to amortise
+_POOL: ThreadPoolExecutor | None = None
+
+
+def default_threads() -> int:
+    """Threads for the geometry pass: the CPUs this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _pool() -> ThreadPoolExecutor:
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=default_threads(), thread_name_prefix="raytrace")
+    return _POOL
 
 
 def _check_pose(R_cam_from_body, t_cam_m) -> tuple[np.ndarray, np.ndarray]:
@@ -233,7 +251,7 @@ class Scene:
 
     # ------------------------------------------------------------------ render
     def render_geometry(self, camera: Camera, R_cam_from_body, t_cam_m, *, cull: bool = True,
-                        ray_distance: bool = False) -> GeometryFrame:
+                        ray_distance: bool = False, threads: int | None = None) -> GeometryFrame:
         """Cast primary rays and return depth, normals and ids for one pose.
 
         Parameters
@@ -249,6 +267,10 @@ class Scene:
             Both give identical images.
         ray_distance : bool, keyword-only
             Also return the distance along each ray.
+        threads : int, keyword-only, optional
+            Threads for ray casting (default: every CPU of the process, see
+            :func:`default_threads`); 1 runs in the calling thread. The result does not
+            depend on it.
 
         Returns
         -------
@@ -274,20 +296,30 @@ class Scene:
         if w > 0 and v1 > v0:
             R_body_from_cam = np.ascontiguousarray(R.T)
             o_body = -R_body_from_cam @ t
-            rows_per_call = max(1, _MAX_RAYS_PER_CALL // w)
             scene = self.embree
-            for va in range(v0, v1, rows_per_call):
-                h = min(rows_per_call, v1 - va)
+            fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
+
+            def chunk(va: int, h: int) -> None:  # rows [va, va + h): disjoint outputs per chunk
                 o32 = np.empty((h * w, 3), dtype=np.float32)
                 d32 = np.empty((h * w, 3), dtype=np.float32)
-                _kernels.make_rays(o_body, R_body_from_cam, camera.fx, camera.fy, camera.cx, camera.cy,
-                                   u0, va, w, h, o32, d32)
+                _kernels.make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, va, w, h, o32, d32)
                 hits = scene.run(o32, d32, query="INTERSECT", output=1)
-                _kernels.refine_hits(o_body, R_body_from_cam, R, camera.fx, camera.fy, camera.cx, camera.cy,
-                                     u0, va, w, h, hits["geomID"], hits["primID"], hits["tfar"],
-                                     self.vertices, self.faces, self.face_offset, self.face_normal,
-                                     self.corner_normal, depth, dist, n_shade, n_geom, inst, face,
-                                     ray_distance)
+                _kernels.refine_hits(o_body, R_body_from_cam, R, fx, fy, cx, cy, u0, va, w, h,
+                                     hits["geomID"], hits["primID"], hits["tfar"], self.vertices, self.faces,
+                                     self.face_offset, self.face_normal, self.corner_normal,
+                                     depth, dist, n_shade, n_geom, inst, face, ray_distance)
+
+            rows = max(1, _RAYS_PER_CHUNK // w)
+            starts = range(v0, v1, rows)
+            if threads is None:
+                threads = default_threads()
+            if threads == 1 or len(starts) == 1:
+                for va in starts:
+                    chunk(va, min(rows, v1 - va))
+            else:
+                futures = [_pool().submit(chunk, va, min(rows, v1 - va)) for va in starts]
+                for f in futures:
+                    f.result()
         return GeometryFrame(depth_m=depth, normal_cam=n_shade, normal_geom_cam=n_geom, instance=inst,
                              face_index=face, ray_distance_m=dist if ray_distance else None,
                              cast_rect=rect, n_components=len(self.model.components),
