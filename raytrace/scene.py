@@ -84,6 +84,14 @@ class GeometryFrame:
         Number of components of the target.
     camera_inside_hull : bool
         The optical centre lies inside (or on) the target's convex hull: culling was off.
+    semantic_lut : ndarray, shape (n_components + 1,), uint8
+        Semantic class id of each instance id (0 → 0, background).
+    visible_fraction : float
+        Fraction of the target's silhouette (as the same pinhole would see it on an
+        unbounded sensor) that falls inside the image [-]: 1 when the whole target is in
+        frame, 0 when it is out of view; NaN when the camera is inside the target's convex
+        hull (the silhouette is unbounded there). Silhouettes reaching far beyond the image
+        are counted on a coarser grid (see :meth:`Scene.render_geometry`).
     """
 
     depth_m: np.ndarray
@@ -95,6 +103,13 @@ class GeometryFrame:
     cast_rect: tuple
     n_components: int
     camera_inside_hull: bool
+    semantic_lut: np.ndarray
+    visible_fraction: float
+
+    @property
+    def semantic(self) -> np.ndarray:
+        """Semantic class id per pixel (raytrace.model.SEMANTIC_CLASSES index + 1), shape (H, W), uint8."""
+        return self.semantic_lut[self.instance]
 
     @property
     def mask(self) -> np.ndarray:
@@ -158,6 +173,7 @@ class Scene:
             pass
         self.hull_vertices = np.ascontiguousarray(hull_pts, dtype=np.float64)
         self.scale_m = float(np.linalg.norm(self.vertices.max(0) - self.vertices.min(0)))
+        self.semantic_lut = np.array([0] + [c.semantic_id for c in model.components], dtype=np.uint8)
         self._embree = None
 
     # ------------------------------------------------------------------ build
@@ -226,32 +242,50 @@ class Scene:
         self.__dict__.update(state)
 
     # ------------------------------------------------------------------ culling
-    def cast_rect(self, camera: Camera, R_cam_from_body, t_cam_m) -> tuple[tuple, bool]:
-        """Pixel rectangle that contains the target's projection, and whether culling was off.
+    def projected_rect(self, camera: Camera, R_cam_from_body, t_cam_m) -> tuple | None:
+        """Unclipped pixel rectangle (u0, v0, u1, v1), end exclusive, holding every pixel centre
+        the target can cover; None when part of the target is at or behind the optical centre.
 
         The convex hull of the mesh contains the target; when all hull vertices lie in front
         of the camera, the projected target lies inside the convex hull of the projected
-        vertices, so every pixel centre it can cover is inside the returned rectangle
-        (padded by one pixel). Otherwise the whole image is cast.
+        vertices, so the rectangle (padded by one pixel) contains it.
         """
         R, t = _check_pose(R_cam_from_body, t_cam_m)
         p = self.hull_vertices @ R.T + t
-        z_min = 1e-9 * max(self.scale_m, 1.0)
-        if np.any(p[:, 2] <= z_min):
-            return (0, 0, camera.width, camera.height), True
+        if np.any(p[:, 2] <= 1e-9 * max(self.scale_m, 1.0)):
+            return None
         u = camera.fx * p[:, 0] / p[:, 2] + camera.cx
         v = camera.fy * p[:, 1] / p[:, 2] + camera.cy
-        u0 = int(max(0, math.floor(u.min()) - 1))
-        v0 = int(max(0, math.floor(v.min()) - 1))
-        u1 = int(min(camera.width, math.ceil(u.max()) + 2))
-        v1 = int(min(camera.height, math.ceil(v.max()) + 2))
+        return (math.floor(u.min()) - 1, math.floor(v.min()) - 1, math.ceil(u.max()) + 2, math.ceil(v.max()) + 2)
+
+    def cast_rect(self, camera: Camera, R_cam_from_body, t_cam_m) -> tuple[tuple, bool]:
+        """Pixel rectangle to cast (the projected rectangle clipped to the image), and whether
+        culling was off because the camera is inside the target's convex hull."""
+        full = self.projected_rect(camera, R_cam_from_body, t_cam_m)
+        if full is None:
+            return (0, 0, camera.width, camera.height), True
+        u0, v0 = max(0, full[0]), max(0, full[1])
+        u1, v1 = min(camera.width, full[2]), min(camera.height, full[3])
         if u1 <= u0 or v1 <= v0:
             return (0, 0, 0, 0), False
-        return (u0, v0, u1, v1), False
+        return (int(u0), int(v0), int(u1), int(v1)), False
+
+    def _silhouette_pixels(self, camera: Camera, R, t, full: tuple, max_rays: int) -> float:
+        """Pixel count of the target's silhouette over the unclipped rectangle ``full``, on the
+        image's own pixel grid (a virtual sensor around it), subsampled by an integer stride
+        when that would cast more than ``max_rays`` rays (then an estimate: hits · stride²)."""
+        u0, v0, u1, v1 = full
+        stride = max(1, math.ceil(math.sqrt((u1 - u0) * (v1 - v0) / max_rays)))
+        virtual = Camera(width=max(1, math.ceil((u1 - u0) / stride)), height=max(1, math.ceil((v1 - v0) / stride)),
+                         fx=camera.fx / stride, fy=camera.fy / stride,
+                         cx=(camera.cx - u0) / stride, cy=(camera.cy - v0) / stride)
+        g = self.render_geometry(virtual, R, t, visible_fraction=False)
+        return float(g.mask.sum()) * stride * stride
 
     # ------------------------------------------------------------------ render
     def render_geometry(self, camera: Camera, R_cam_from_body, t_cam_m, *, cull: bool = True,
-                        ray_distance: bool = False, threads: int | None = None) -> GeometryFrame:
+                        ray_distance: bool = False, threads: int | None = None,
+                        visible_fraction: bool = True) -> GeometryFrame:
         """Cast primary rays and return depth, normals and ids for one pose.
 
         Parameters
@@ -271,6 +305,10 @@ class Scene:
             Threads for ray casting (default: every CPU of the process, see
             :func:`default_threads`); 1 runs in the calling thread. The result does not
             depend on it.
+        visible_fraction : bool, keyword-only
+            Compute :attr:`GeometryFrame.visible_fraction`. Free when the target is wholly in
+            frame; when it crosses the border the silhouette outside the image is cast too
+            (on the same pixel grid, or a coarser one beyond 4× the image area).
 
         Returns
         -------
@@ -320,7 +358,21 @@ class Scene:
                 futures = [_pool().submit(chunk, va, min(rows, v1 - va)) for va in starts]
                 for f in futures:
                     f.result()
+        fraction = math.nan
+        if visible_fraction:
+            full = self.projected_rect(camera, R, t)
+            seen = int(np.count_nonzero(inst))
+            if full is None:
+                fraction = math.nan
+            elif rect[2] <= rect[0] or rect[3] <= rect[1]:
+                fraction = 0.0  # the projection misses the image
+            elif full[0] >= 0 and full[1] >= 0 and full[2] <= W and full[3] <= H:
+                fraction = 1.0 if seen else 0.0  # wholly inside the image (or hidden: nothing to see)
+            else:
+                total = self._silhouette_pixels(camera, R, t, full, max_rays=4 * W * H)
+                fraction = 0.0 if total == 0 else min(1.0, seen / total)
         return GeometryFrame(depth_m=depth, normal_cam=n_shade, normal_geom_cam=n_geom, instance=inst,
                              face_index=face, ray_distance_m=dist if ray_distance else None,
                              cast_rect=rect, n_components=len(self.model.components),
-                             camera_inside_hull=inside)
+                             camera_inside_hull=inside, semantic_lut=self.semantic_lut,
+                             visible_fraction=fraction)

@@ -369,3 +369,30 @@ def test_scene_pickles_without_embree():
     assert clone._embree is None
     b = clone.render_geometry(cam, R, t)
     assert np.array_equal(a.depth_m, b.depth_m) and np.array_equal(a.instance, b.instance)
+
+
+def test_visible_fraction_and_semantic_map():
+    sphere = trimesh.creation.icosphere(subdivisions=5, radius=1.0)
+    model = TargetModel("s", (Component("ball", sphere, "white_paint", "dish", 1.0),))
+    scene = Scene(model)
+    cam = Camera(width=200, height=160, fx=200.0, fy=200.0, cx=99.5, cy=79.5)
+    R = np.eye(3)
+    assert scene.render_geometry(cam, R, [0, 0, 10.0]).visible_fraction == 1.0
+    # centre projected onto the left image border (u = -0.5): half the disc is inside
+    z = 10.0
+    x = (-0.5 - cam.cx) * z / cam.fx
+    g = scene.render_geometry(cam, R, [x, 0.0, z])
+    r_px = cam.fx * 1.0 / math.sqrt(z * z - 1.0)
+    assert g.visible_fraction == pytest.approx(0.5, abs=2 * (2 * r_px) / (math.pi * r_px ** 2))
+    # a silhouette much larger than the image: counted on a coarser grid, still close
+    g = scene.render_geometry(cam, R, [-1.0, 0.0, 1.3])
+    assert 0.0 < g.visible_fraction < 0.2
+    exact_total = scene._silhouette_pixels(cam, R, np.array([-1.0, 0.0, 1.3]),
+                                           scene.projected_rect(cam, R, [-1.0, 0.0, 1.3]), max_rays=10**8)
+    assert g.visible_fraction == pytest.approx(g.mask.sum() / exact_total, rel=0.02)
+    assert scene.render_geometry(cam, R, [50.0, 0.0, 10.0]).visible_fraction == 0.0  # out of view
+    assert math.isnan(scene.render_geometry(cam, R, [0.0, 0.0, 0.5]).visible_fraction)  # inside the ball
+    g = scene.render_geometry(cam, R, [0, 0, 10.0])
+    from raytrace.model import SEMANTIC_CLASSES
+    assert set(np.unique(g.semantic)) == {0, SEMANTIC_CLASSES.index("dish") + 1}
+    assert np.array_equal(g.semantic > 0, g.mask)
