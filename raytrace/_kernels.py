@@ -18,11 +18,13 @@ from ._jit import jit_exact
 
 
 @jit_exact
-def make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, v0, w, h, out_o, out_d):
+def make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, v0, w, h, z0, out_o, out_d):
     """Fill float32 origins and body-frame directions for the pixel rectangle (row-major).
 
     Direction = R_body_from_cam · ((u − c_x)/f_x, (v − c_y)/f_y, 1): unnormalised, so the
-    ray parameter at a hit is the camera z-depth.
+    ray parameter is the camera z-depth. Each origin is advanced to the plane z_cam = z0
+    (just in front of the target): Embree then works in target-sized float32 coordinates,
+    not camera-distance ones, and its hit parameter is z-depth − z0.
     """
     for r in range(h):
         y = (v0 + r - cy) / fy
@@ -30,12 +32,13 @@ def make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, v0, w, h, out_o, out_
             x = (u0 + c - cx) / fx
             k = r * w + c
             for a in range(3):
-                out_d[k, a] = R_body_from_cam[a, 0] * x + R_body_from_cam[a, 1] * y + R_body_from_cam[a, 2]
-                out_o[k, a] = o_body[a]
+                d = R_body_from_cam[a, 0] * x + R_body_from_cam[a, 1] * y + R_body_from_cam[a, 2]
+                out_d[k, a] = d
+                out_o[k, a] = o_body[a] + z0 * d
 
 
 @jit_exact
-def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0, w, h,
+def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0, w, h, z0,
                 geom_id, prim_id, tfar, V, F, face_offset, face_normal, corner_normal,
                 depth, ray_dist, n_shade, n_geom, inst, face_idx, want_dist):
     """Turn Embree hits into exact float64 AOVs written into full-size images.
@@ -85,7 +88,7 @@ def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0
                 b2 = (dx * qx + dy * qy + dz * qz) * inv
                 t = (e2x * qx + e2y * qy + e2z * qz) * inv
             else:  # ray in the triangle's plane: keep Embree's answer
-                t = float(tfar[k])
+                t = float(tfar[k]) + z0
                 b1 = 1.0 / 3.0
                 b2 = b1
             b0 = 1.0 - b1 - b2

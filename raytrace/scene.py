@@ -6,10 +6,12 @@ pickled so scenes can be sent to worker processes. :meth:`Scene.render_geometry`
 primary ray per pixel centre — only inside the projection of the target's convex hull — and
 returns every geometric AOV from the same hit record (:class:`GeometryFrame`).
 
-Precision (DESIGN.md): Embree sees float32 body-frame coordinates; every hit is then
-re-intersected in float64 with the triangle Embree reported, so depth is exact to float64
-round-off rather than float32. Rays are unnormalised with z = 1 in the camera frame, so the
-hit parameter is the z-depth.
+Precision (DESIGN.md): Embree sees float32 body-frame coordinates, with every ray origin
+advanced to just in front of the target so that they stay target-sized at any range; every
+hit is then re-intersected in float64 with the triangle Embree reported from the true
+optical centre, so depth is exact to float64 round-off rather than float32. Rays are
+unnormalised with z = 1 in the camera frame, so the hit parameter is the z-depth. Embree
+runs in robust (watertight) mode: no ray slips between triangles sharing an edge.
 """
 
 from __future__ import annotations
@@ -223,7 +225,7 @@ class Scene:
         if self._embree is None:
             from embreex import rtcore_scene
             from embreex.mesh_construction import TriangleMesh
-            scene = rtcore_scene.EmbreeScene()
+            scene = rtcore_scene.EmbreeScene(robust=True)  # watertight: no leaks at shared edges and vertices
             vo = self._vertex_offsets()
             for k, comp in enumerate(self.model.components):
                 v = np.ascontiguousarray(self.vertices[vo[k]:vo[k + 1]], dtype=np.float32)
@@ -334,15 +336,18 @@ class Scene:
         if w > 0 and v1 > v0:
             R_body_from_cam = np.ascontiguousarray(R.T)
             o_body = -R_body_from_cam @ t
+            # start rays just in front of the target (its nearest hull vertex) unless inside it
+            z_hull = (self.hull_vertices @ R.T + t)[:, 2]
+            z0 = 0.0 if inside else max(0.0, float(z_hull.min()) - 1e-3 * max(self.scale_m, 1.0))
             scene = self.embree
             fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
 
             def chunk(va: int, h: int) -> None:  # rows [va, va + h): disjoint outputs per chunk
                 o32 = np.empty((h * w, 3), dtype=np.float32)
                 d32 = np.empty((h * w, 3), dtype=np.float32)
-                _kernels.make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, va, w, h, o32, d32)
+                _kernels.make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, va, w, h, z0, o32, d32)
                 hits = scene.run(o32, d32, query="INTERSECT", output=1)
-                _kernels.refine_hits(o_body, R_body_from_cam, R, fx, fy, cx, cy, u0, va, w, h,
+                _kernels.refine_hits(o_body, R_body_from_cam, R, fx, fy, cx, cy, u0, va, w, h, z0,
                                      hits["geomID"], hits["primID"], hits["tfar"], self.vertices, self.faces,
                                      self.face_offset, self.face_normal, self.corner_normal,
                                      depth, dist, n_shade, n_geom, inst, face, ray_distance)
