@@ -18,13 +18,10 @@ import argparse
 import json
 import math
 import sys
-from pathlib import Path
-
 import numpy as np
 
-TARGETS = ("tiangong", "spacedragon", "icesat", "cassini")
-PATTERNS = ("elliptical", "spiral", "drip-drop", "drift")
-TARGETS_FILE = Path(__file__).resolve().parent / "data" / "targets.json"
+from orbit.patterns import PATTERNS
+from raytrace.targets import BUILTIN_TARGETS as TARGETS
 PROG = "cli.py"
 
 
@@ -109,15 +106,6 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def load_targets(path: Path = TARGETS_FILE) -> dict:
-    """Built-in target facts from data/targets.json (name → dict with ``bounding_radius_m``)."""
-    try:
-        table = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise CLIError(f"cannot read the target table {path}: {exc}") from None
-    return {k: v for k, v in table.items() if not k.startswith("_")}
-
-
 def run_orbit_job(args: argparse.Namespace) -> dict:
     """Sample, propagate and evaluate one sequence; returns plain-Python results."""
     from orbit import cw, pose, visibility
@@ -127,13 +115,14 @@ def run_orbit_job(args: argparse.Namespace) -> dict:
     from orbit.sampling import sample_pattern
     from orbit.sun import sun_position_eci
 
-    targets = load_targets()
-    target = targets[args.target]
+    from raytrace.targets import load_target
+
+    radius_m = load_target(args.target).bounding_radius_m  # measured on the built-in mesh
     ref = ReferenceOrbit(altitude_m=args.altitude_km * 1e3, inclination_rad=math.radians(args.inclination_deg),
                          raan_rad=math.radians(args.raan_deg), arg_lat_rad=math.radians(args.arg_lat_deg),
                          epoch_utc=args.epoch if args.epoch is not None else DEFAULT_EPOCH_UTC)
     n = ref.n_rad_s
-    sample = sample_pattern(args.pattern, n, target_radius_m=float(target["bounding_radius_m"]),
+    sample = sample_pattern(args.pattern, n, target_radius_m=radius_m,
                             n_frames=args.frames, rng=args.seed, window_s=args.window_s)
     t_s = np.asarray(sample.t_s)
     s_lvlh = cw.propagate(sample.s0_lvlh, n, t_s)
@@ -177,7 +166,7 @@ def run_orbit_job(args: argparse.Namespace) -> dict:
         })
     return {
         "target": args.target,
-        "target_bounding_radius_m": float(target["bounding_radius_m"]),
+        "target_bounding_radius_m": radius_m,
         "pattern": args.pattern,
         "seed": args.seed,
         "reference_orbit": {"altitude_m": ref.altitude_m, "inclination_rad": ref.inclination_rad,
@@ -203,7 +192,7 @@ def _print_table(result: dict, out) -> None:
     pp = result["pattern_parameters"]
     ro = result["reference_orbit"]
     w = out.write
-    w(f"# target {result['target']} (bounding radius {result['target_bounding_radius_m']:g} m), "
+    w(f"# target {result['target']} (bounding radius {result['target_bounding_radius_m']:.2f} m), "
       f"pattern {result['pattern']} {pp['side']}, seed {result['seed']}\n")
     w(f"# reference orbit: altitude {ro['altitude_m'] / 1e3:g} km, i {math.degrees(ro['inclination_rad']):g} deg, "
       f"RAAN {math.degrees(ro['raan_rad']):g} deg, u0 {math.degrees(ro['arg_lat_rad']):g} deg, "
