@@ -40,7 +40,7 @@ def make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, v0, w, h, z0, out_o, 
 @jit_exact
 def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0, w, h, z0,
                 geom_id, prim_id, tfar, V, F, face_offset, face_normal, corner_normal,
-                depth, ray_dist, n_shade, n_geom, inst, face_idx, want_dist):
+                depth, ray_dist, n_shade, n_geom, inst, face_idx, want_dist, want_geom):
     """Turn Embree hits into exact float64 AOVs written into full-size images.
 
     For each hit the ray is re-intersected in float64 (Möller–Trumbore) with the triangle
@@ -120,7 +120,9 @@ def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0
                 ray_dist[v, u] = t * math.sqrt(x * x + y * y + 1.0)
             for a in range(3):
                 n_shade[v, u, a] = R_cam_from_body[a, 0] * nsx + R_cam_from_body[a, 1] * nsy + R_cam_from_body[a, 2] * nsz
-                n_geom[v, u, a] = R_cam_from_body[a, 0] * ngx + R_cam_from_body[a, 1] * ngy + R_cam_from_body[a, 2] * ngz
+            if want_geom:
+                for a in range(3):
+                    n_geom[v, u, a] = R_cam_from_body[a, 0] * ngx + R_cam_from_body[a, 1] * ngy + R_cam_from_body[a, 2] * ngz
             inst[v, u] = g + 1
             face_idx[v, u] = f
 

@@ -72,8 +72,9 @@ class GeometryFrame:
         Z-depth along the optical axis [m]; ``inf`` where nothing is hit.
     normal_cam : ndarray, shape (H, W, 3), float32
         Unit shading normal in the camera frame, facing the camera; 0 on background.
-    normal_geom_cam : ndarray, shape (H, W, 3), float32
-        Unit geometric (flat triangle) normal in the camera frame, facing the camera.
+    normal_geom_cam : ndarray, shape (H, W, 3), float32, or None
+        Unit geometric (flat triangle) normal in the camera frame, facing the camera (when
+        requested).
     instance : ndarray, shape (H, W), uint16
         Component id, k + 1 for component k of the target; 0 is background.
     face_index : ndarray, shape (H, W), int32
@@ -92,13 +93,13 @@ class GeometryFrame:
         Fraction of the target's silhouette (as the same pinhole would see it on an
         unbounded sensor) that falls inside the image [-]: 1 when the whole target is in
         frame, 0 when it is out of view; NaN when the camera is inside the target's convex
-        hull (the silhouette is unbounded there). Silhouettes reaching far beyond the image
-        are counted on a coarser grid (see :meth:`Scene.render_geometry`).
+        hull (the silhouette is unbounded there). The part outside the image is counted on a
+        coarser grid when it is large (see :meth:`Scene.render_geometry`).
     """
 
     depth_m: np.ndarray
     normal_cam: np.ndarray
-    normal_geom_cam: np.ndarray
+    normal_geom_cam: np.ndarray | None
     instance: np.ndarray
     face_index: np.ndarray
     ray_distance_m: np.ndarray | None
@@ -272,22 +273,39 @@ class Scene:
             return (0, 0, 0, 0), False
         return (int(u0), int(v0), int(u1), int(v1)), False
 
-    def _silhouette_pixels(self, camera: Camera, R, t, full: tuple, max_rays: int) -> float:
-        """Pixel count of the target's silhouette over the unclipped rectangle ``full``, on the
-        image's own pixel grid (a virtual sensor around it), subsampled by an integer stride
-        when that would cast more than ``max_rays`` rays (then an estimate: hits · stride²)."""
-        u0, v0, u1, v1 = full
-        stride = max(1, math.ceil(math.sqrt((u1 - u0) * (v1 - v0) / max_rays)))
-        virtual = Camera(width=max(1, math.ceil((u1 - u0) / stride)), height=max(1, math.ceil((v1 - v0) / stride)),
-                         fx=camera.fx / stride, fy=camera.fy / stride,
-                         cx=(camera.cx - u0) / stride, cy=(camera.cy - v0) / stride)
-        g = self.render_geometry(virtual, R, t, visible_fraction=False)
-        return float(g.mask.sum()) * stride * stride
-
+    def _pixels_outside_image(self, camera: Camera, R, t, full: tuple, max_rays: int) -> float:
+        """Silhouette pixels of the target outside the image, within the unclipped projected
+        rectangle ``full``: the strips above, below, left and right of the image are cast
+        (hit or miss only) on the image's pixel grid, subsampled by an integer stride when
+        they hold more than ``max_rays`` pixels (then an estimate: hits · stride²)."""
+        U0, V0, U1, V1 = full
+        W, H = camera.width, camera.height
+        va, vb = max(V0, 0), min(V1, H)
+        strips = [(U0, V0, U1, min(V1, 0)), (U0, max(V0, H), U1, V1),      # above, below
+                  (U0, va, min(U1, 0), vb), (max(U0, W), va, U1, vb)]      # left, right
+        strips = [s for s in strips if s[2] > s[0] and s[3] > s[1]]
+        area = sum((s[2] - s[0]) * (s[3] - s[1]) for s in strips)
+        if area == 0:
+            return 0.0
+        stride = max(1, math.ceil(math.sqrt(area / max_rays)))
+        R_body_from_cam = np.ascontiguousarray(R.T)
+        o_body = -R_body_from_cam @ t
+        z0 = max(0.0, float((self.hull_vertices @ R.T + t)[:, 2].min()) - 1e-3 * max(self.scale_m, 1.0))
+        hits = 0
+        for u0, v0, u1, v1 in strips:
+            # pixel centres u0 + k·stride (…), cast through a camera whose pixels are stride wide
+            w = (u1 - u0 + stride - 1) // stride
+            h = (v1 - v0 + stride - 1) // stride
+            o32 = np.empty((w * h, 3), dtype=np.float32)
+            d32 = np.empty((w * h, 3), dtype=np.float32)
+            _kernels.make_rays(o_body, R_body_from_cam, camera.fx / stride, camera.fy / stride,
+                               (camera.cx - u0) / stride, (camera.cy - v0) / stride, 0, 0, w, h, z0, o32, d32)
+            hits += int(np.count_nonzero(self.embree.run(o32, d32) >= 0))
+        return float(hits) * stride * stride
     # ------------------------------------------------------------------ render
     def render_geometry(self, camera: Camera, R_cam_from_body, t_cam_m, *, cull: bool = True,
-                        ray_distance: bool = False, threads: int | None = None,
-                        visible_fraction: bool = True) -> GeometryFrame:
+                        ray_distance: bool = False, geometric_normal: bool = False,
+                        threads: int | None = None, visible_fraction: bool = True) -> GeometryFrame:
         """Cast primary rays and return depth, normals and ids for one pose.
 
         Parameters
@@ -303,14 +321,17 @@ class Scene:
             Both give identical images.
         ray_distance : bool, keyword-only
             Also return the distance along each ray.
+        geometric_normal : bool, keyword-only
+            Also return the flat (triangle) normal.
         threads : int, keyword-only, optional
             Threads for ray casting (default: every CPU of the process, see
             :func:`default_threads`); 1 runs in the calling thread. The result does not
             depend on it.
         visible_fraction : bool, keyword-only
             Compute :attr:`GeometryFrame.visible_fraction`. Free when the target is wholly in
-            frame; when it crosses the border the silhouette outside the image is cast too
-            (on the same pixel grid, or a coarser one beyond 4× the image area).
+            frame; when it crosses the border, the part of its silhouette outside the image is
+            counted with hit-only rays on the same pixel grid (a coarser one when that would
+            take more than 1/8 of the image's rays).
 
         Returns
         -------
@@ -327,7 +348,7 @@ class Scene:
         depth = np.full((H, W), np.inf, dtype=np.float32)
         dist = np.full((H, W), np.inf, dtype=np.float32) if ray_distance else np.empty((1, 1), np.float32)
         n_shade = np.zeros((H, W, 3), dtype=np.float32)
-        n_geom = np.zeros((H, W, 3), dtype=np.float32)
+        n_geom = np.zeros((H, W, 3), dtype=np.float32) if geometric_normal else np.empty((1, 1, 3), np.float32)
         inst = np.zeros((H, W), dtype=np.uint16)
         face = np.full((H, W), -1, dtype=np.int32)
 
@@ -350,7 +371,7 @@ class Scene:
                 _kernels.refine_hits(o_body, R_body_from_cam, R, fx, fy, cx, cy, u0, va, w, h, z0,
                                      hits["geomID"], hits["primID"], hits["tfar"], self.vertices, self.faces,
                                      self.face_offset, self.face_normal, self.corner_normal,
-                                     depth, dist, n_shade, n_geom, inst, face, ray_distance)
+                                     depth, dist, n_shade, n_geom, inst, face, ray_distance, geometric_normal)
 
             rows = max(1, _RAYS_PER_CHUNK // w)
             starts = range(v0, v1, rows)
@@ -374,9 +395,10 @@ class Scene:
             elif full[0] >= 0 and full[1] >= 0 and full[2] <= W and full[3] <= H:
                 fraction = 1.0 if seen else 0.0  # wholly inside the image (or hidden: nothing to see)
             else:
-                total = self._silhouette_pixels(camera, R, t, full, max_rays=4 * W * H)
+                total = seen + self._pixels_outside_image(camera, R, t, full, max_rays=max(1024, W * H // 8))
                 fraction = 0.0 if total == 0 else min(1.0, seen / total)
-        return GeometryFrame(depth_m=depth, normal_cam=n_shade, normal_geom_cam=n_geom, instance=inst,
+        return GeometryFrame(depth_m=depth, normal_cam=n_shade, normal_geom_cam=n_geom if geometric_normal else None,
+                             instance=inst,
                              face_index=face, ray_distance_m=dist if ray_distance else None,
                              cast_rect=rect, n_components=len(self.model.components),
                              camera_inside_hull=inside, semantic_lut=self.semantic_lut,

@@ -43,7 +43,7 @@ def test_plane_depth_and_normal_exact():
     cam = Camera(width=320, height=240, fx=300.0, fy=300.0, cx=159.5, cy=119.5)
     pos = 15.0 * np.array([math.sin(math.radians(50)), 0.0, math.cos(math.radians(50))])
     R, t = pose_looking_at_origin(pos, up=(0, 1, 0))
-    g = scene.render_geometry(cam, R, t, ray_distance=True)
+    g = scene.render_geometry(cam, R, t, ray_distance=True, geometric_normal=True)
     hit = g.mask
     assert hit.sum() > 1000
     # closed form: plane z_body = +0.01 (top face); ray p = o + s d (body), s = z-depth
@@ -66,7 +66,7 @@ def test_thin_plate_at_grazing_angles(grazing_deg):
     a = math.radians(grazing_deg)
     pos = 12.0 * np.array([math.sin(a), 0.0, math.cos(a)])
     R, t = pose_looking_at_origin(pos, up=(0, 1, 0))
-    g = scene.render_geometry(cam, R, t)
+    g = scene.render_geometry(cam, R, t, geometric_normal=True)
     top = g.mask & (g.normal_geom_cam @ (R @ [0, 0, 1.0]) > 0.99)
     assert top.sum() > 50
     d_body = pixel_rays_cam(cam) @ R
@@ -146,7 +146,7 @@ def test_normals_face_the_camera_on_open_and_flipped_geometry():
     cam = Camera(width=200, height=200, fx=200.0, fy=200.0, cx=99.5, cy=99.5)
     for pos in ([0.3, 0.2, 5.0], [0.3, 0.2, -5.0]):
         R, t = pose_looking_at_origin(pos, up=(0, 1, 0))
-        g = scene.render_geometry(cam, R, t)
+        g = scene.render_geometry(cam, R, t, geometric_normal=True)
         rays = pixel_rays_cam(cam)
         m = g.mask
         assert m.sum() > 100
@@ -285,8 +285,8 @@ def test_culled_render_equals_full_frame_bit_for_bit():
         pos *= rng.uniform(3.0, 30.0) / np.linalg.norm(pos)
         R, t = pose_looking_at_origin(pos)
         R = axis_angle([0, 0, 1.0], rng.uniform(-0.3, 0.3)) @ R  # target off-centre
-        a = scene.render_geometry(cam, R, t, ray_distance=True)
-        b = scene.render_geometry(cam, R, t, cull=False, ray_distance=True)
+        a = scene.render_geometry(cam, R, t, ray_distance=True, geometric_normal=True)
+        b = scene.render_geometry(cam, R, t, cull=False, ray_distance=True, geometric_normal=True)
         assert a.cast_rect != (0, 0, cam.width, cam.height) or a.mask.mean() > 0.5
         for name in ("depth_m", "normal_cam", "normal_geom_cam", "instance", "face_index", "ray_distance_m"):
             assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), name
@@ -387,9 +387,14 @@ def test_visible_fraction_and_semantic_map():
     # a silhouette much larger than the image: counted on a coarser grid, still close
     g = scene.render_geometry(cam, R, [-1.0, 0.0, 1.3])
     assert 0.0 < g.visible_fraction < 0.2
-    exact_total = scene._silhouette_pixels(cam, R, np.array([-1.0, 0.0, 1.3]),
-                                           scene.projected_rect(cam, R, [-1.0, 0.0, 1.3]), max_rays=10**8)
+    exact_total = g.mask.sum() + scene._pixels_outside_image(
+        cam, R, np.array([-1.0, 0.0, 1.3]), scene.projected_rect(cam, R, [-1.0, 0.0, 1.3]), max_rays=10**8)
     assert g.visible_fraction == pytest.approx(g.mask.sum() / exact_total, rel=0.02)
+    # independent: the same silhouette on a sensor 5x larger (same pixel grid, centred the same way)
+    big = Camera(width=1000, height=800, fx=cam.fx, fy=cam.fy, cx=cam.cx + 400, cy=cam.cy + 320)
+    gb = scene.render_geometry(big, R, [-1.0, 0.0, 1.3], visible_fraction=False)
+    if gb.mask[0].sum() + gb.mask[-1].sum() + gb.mask[:, 0].sum() + gb.mask[:, -1].sum() == 0:
+        assert g.visible_fraction == pytest.approx(g.mask.sum() / gb.mask.sum(), rel=0.02)
     assert scene.render_geometry(cam, R, [50.0, 0.0, 10.0]).visible_fraction == 0.0  # out of view
     assert math.isnan(scene.render_geometry(cam, R, [0.0, 0.0, 0.5]).visible_fraction)  # inside the ball
     g = scene.render_geometry(cam, R, [0, 0, 10.0])
