@@ -29,7 +29,7 @@ from .model import TargetModel
 
 __all__ = ["Scene", "GeometryFrame", "default_threads"]
 
-_RAYS_PER_CHUNK = 1 << 16  # rays per Embree call: small enough to balance threads, large enough to amortise
+_RAYS_PER_CHUNK = 1 << 14  # rays per Embree call: small enough to balance threads, large enough to amortise
 _POOL: ThreadPoolExecutor | None = None
 
 
@@ -254,17 +254,28 @@ class Scene:
         vertices, so the rectangle (padded by one pixel) contains it.
         """
         R, t = _check_pose(R_cam_from_body, t_cam_m)
-        p = self.hull_vertices @ R.T + t
+        return self._projected_rect(camera, self.hull_vertices @ R.T + t)
+
+    def _projected_rect(self, camera: Camera, p_hull_cam: np.ndarray) -> tuple | None:
+        p = p_hull_cam
         if np.any(p[:, 2] <= 1e-9 * max(self.scale_m, 1.0)):
             return None
         u = camera.fx * p[:, 0] / p[:, 2] + camera.cx
         v = camera.fy * p[:, 1] / p[:, 2] + camera.cy
         return (math.floor(u.min()) - 1, math.floor(v.min()) - 1, math.ceil(u.max()) + 2, math.ceil(v.max()) + 2)
 
+    def _near_plane(self, p_hull_cam: np.ndarray) -> float:
+        """z of a plane just in front of the target, where rays start (0 if it straddles the camera)."""
+        return max(0.0, float(p_hull_cam[:, 2].min()) - 1e-3 * max(self.scale_m, 1.0))
+
     def cast_rect(self, camera: Camera, R_cam_from_body, t_cam_m) -> tuple[tuple, bool]:
         """Pixel rectangle to cast (the projected rectangle clipped to the image), and whether
         culling was off because the camera is inside the target's convex hull."""
         full = self.projected_rect(camera, R_cam_from_body, t_cam_m)
+        return self._clip(camera, full)
+
+    @staticmethod
+    def _clip(camera: Camera, full: tuple | None) -> tuple[tuple, bool]:
         if full is None:
             return (0, 0, camera.width, camera.height), True
         u0, v0 = max(0, full[0]), max(0, full[1])
@@ -273,7 +284,8 @@ class Scene:
             return (0, 0, 0, 0), False
         return (int(u0), int(v0), int(u1), int(v1)), False
 
-    def _pixels_outside_image(self, camera: Camera, R, t, full: tuple, max_rays: int) -> float:
+    def _pixels_outside_image(self, camera: Camera, R, t, full: tuple, max_rays: int,
+                              z0: float | None = None) -> float:
         """Silhouette pixels of the target outside the image, within the unclipped projected
         rectangle ``full``: the strips above, below, left and right of the image are cast
         (hit or miss only) on the image's pixel grid, subsampled by an integer stride when
@@ -290,7 +302,8 @@ class Scene:
         stride = max(1, math.ceil(math.sqrt(area / max_rays)))
         R_body_from_cam = np.ascontiguousarray(R.T)
         o_body = -R_body_from_cam @ t
-        z0 = max(0.0, float((self.hull_vertices @ R.T + t)[:, 2].min()) - 1e-3 * max(self.scale_m, 1.0))
+        if z0 is None:
+            z0 = self._near_plane(self.hull_vertices @ R.T + t)
         hits = 0
         for u0, v0, u1, v1 in strips:
             # pixel centres u0 + k·stride (…), cast through a camera whose pixels are stride wide
@@ -341,10 +354,11 @@ class Scene:
             raise ValueError(f"camera must be a raytrace.camera.Camera, got {type(camera).__name__}")
         R, t = _check_pose(R_cam_from_body, t_cam_m)
         H, W = camera.height, camera.width
-        if cull:
-            rect, inside = self.cast_rect(camera, R, t)
-        else:
-            rect, inside = (0, 0, W, H), bool(np.any((self.hull_vertices @ R.T + t)[:, 2] <= 0))
+        p_hull = self.hull_vertices @ R.T + t  # projected once per frame
+        full = self._projected_rect(camera, p_hull)
+        rect, inside = self._clip(camera, full)
+        if not cull:
+            rect = (0, 0, W, H)
         depth = np.full((H, W), np.inf, dtype=np.float32)
         dist = np.full((H, W), np.inf, dtype=np.float32) if ray_distance else np.empty((1, 1), np.float32)
         n_shade = np.zeros((H, W, 3), dtype=np.float32)
@@ -358,8 +372,7 @@ class Scene:
             R_body_from_cam = np.ascontiguousarray(R.T)
             o_body = -R_body_from_cam @ t
             # start rays just in front of the target (its nearest hull vertex) unless inside it
-            z_hull = (self.hull_vertices @ R.T + t)[:, 2]
-            z0 = 0.0 if inside else max(0.0, float(z_hull.min()) - 1e-3 * max(self.scale_m, 1.0))
+            z0 = 0.0 if inside else self._near_plane(p_hull)
             scene = self.embree
             fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
 
@@ -386,7 +399,6 @@ class Scene:
                     f.result()
         fraction = math.nan
         if visible_fraction:
-            full = self.projected_rect(camera, R, t)
             seen = int(np.count_nonzero(inst))
             if full is None:
                 fraction = math.nan
@@ -395,7 +407,8 @@ class Scene:
             elif full[0] >= 0 and full[1] >= 0 and full[2] <= W and full[3] <= H:
                 fraction = 1.0 if seen else 0.0  # wholly inside the image (or hidden: nothing to see)
             else:
-                total = seen + self._pixels_outside_image(camera, R, t, full, max_rays=max(1024, W * H // 8))
+                total = seen + self._pixels_outside_image(camera, R, t, full, max_rays=max(1024, W * H // 8),
+                                                          z0=self._near_plane(p_hull))
                 fraction = 0.0 if total == 0 else min(1.0, seen / total)
         return GeometryFrame(depth_m=depth, normal_cam=n_shade, normal_geom_cam=n_geom if geometric_normal else None,
                              instance=inst,
