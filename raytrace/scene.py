@@ -48,6 +48,32 @@ def _pool() -> ThreadPoolExecutor:
     return _POOL
 
 
+_KDOP_DIRECTIONS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)
+                             if (i, j, k) != (0, 0, 0)], dtype=np.float64)
+_KDOP_DIRECTIONS /= np.linalg.norm(_KDOP_DIRECTIONS, axis=1, keepdims=True)
+
+
+def _bounding_vertices(V: np.ndarray, max_vertices: int = 2048, max_points: int = 100_000) -> np.ndarray:
+    """Vertices of a convex polytope that contains every point of ``V``, projected every
+    frame to find the pixels worth casting: the convex hull when ``V`` has at most
+    ``max_points`` points and the hull at most ``max_vertices`` vertices; else (or for flat
+    point sets) a 26-DOP padded by 1e-6 of the size (the intersection of the 26 half-spaces
+    n·x ≤ max n·V), which is looser but has a few dozen vertices."""
+    from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
+    if len(V) <= max_points:
+        try:
+            hull = ConvexHull(V)
+            if len(hull.vertices) <= max_vertices:
+                return np.ascontiguousarray(V[hull.vertices], dtype=np.float64)
+        except QhullError:
+            pass  # flat or degenerate: the padded 26-DOP is full-dimensional
+    size = max(float(np.ptp(V, axis=0).max()), 1e-9)
+    h = (V @ _KDOP_DIRECTIONS.T).max(axis=0) + 1e-6 * size
+    halfspaces = np.hstack([_KDOP_DIRECTIONS, -h[:, None]])
+    inside = HalfspaceIntersection(halfspaces, V.mean(axis=0))
+    return np.ascontiguousarray(inside.intersections, dtype=np.float64)
+
+
 def _check_pose(R_cam_from_body, t_cam_m) -> tuple[np.ndarray, np.ndarray]:
     R = np.asarray(R_cam_from_body, dtype=np.float64)
     t = np.asarray(t_cam_m, dtype=np.float64)
@@ -166,15 +192,11 @@ class Scene:
             comp_of_face.append(np.full(len(f), k, dtype=np.int64))
         self.vertices = np.ascontiguousarray(np.concatenate(verts))
         self.faces = np.ascontiguousarray(np.concatenate(faces))
+        if len(self.vertices) >= 2**31:
+            raise ValueError(f"model {model.name}: at most 2**31 - 1 vertices, got {len(self.vertices)}")
         self.face_offset = np.asarray(offsets, dtype=np.int64)
         self.face_normal, self.corner_normal = self._normals(np.concatenate(comp_of_face), np.asarray(creases))
-        hull_pts = self.vertices
-        try:
-            import trimesh
-            hull_pts = np.asarray(trimesh.PointCloud(self.vertices).convex_hull.vertices)
-        except Exception:  # degenerate (flat) targets: fall back to all vertices
-            pass
-        self.hull_vertices = np.ascontiguousarray(hull_pts, dtype=np.float64)
+        self.hull_vertices = _bounding_vertices(self.vertices)
         self.scale_m = float(np.linalg.norm(self.vertices.max(0) - self.vertices.min(0)))
         self.semantic_lut = np.array([0] + [c.semantic_id for c in model.components], dtype=np.uint8)
         self._embree = None
@@ -214,7 +236,8 @@ class Scene:
             c = _kernels.corner_normals(V, F, face_normal, angles, ptr, order.astype(np.int64), weld,
                                         math.cos(crease))
             corner[sel] = c[sel]
-        return np.ascontiguousarray(face_normal), np.ascontiguousarray(corner)
+        # float32 normals: 1e-7 rad is plenty, and half the memory traffic per hit
+        return (np.ascontiguousarray(face_normal, dtype=np.float32), np.ascontiguousarray(corner, dtype=np.float32))
 
     def _vertex_offsets(self) -> np.ndarray:
         counts = [len(c.mesh.vertices) for c in self.model.components]
