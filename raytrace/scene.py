@@ -367,7 +367,8 @@ class Scene:
             Compute :attr:`GeometryFrame.visible_fraction`. Free when the target is wholly in
             frame; when it crosses the border, the part of its silhouette outside the image is
             counted with hit-only rays on the same pixel grid (a coarser one when that would
-            take more than 1/8 of the image's rays).
+            take more than 1/4 of the image's rays: then the fraction is an estimate, good to a
+            few per cent for a target mostly outside the image).
 
         Returns
         -------
@@ -430,7 +431,7 @@ class Scene:
             elif full[0] >= 0 and full[1] >= 0 and full[2] <= W and full[3] <= H:
                 fraction = 1.0 if seen else 0.0  # wholly inside the image (or hidden: nothing to see)
             else:
-                total = seen + self._pixels_outside_image(camera, R, t, full, max_rays=max(1024, W * H // 8),
+                total = seen + self._pixels_outside_image(camera, R, t, full, max_rays=max(1024, W * H // 4),
                                                           z0=self._near_plane(p_hull))
                 fraction = 0.0 if total == 0 else min(1.0, seen / total)
         return GeometryFrame(depth_m=depth, normal_cam=n_shade, normal_geom_cam=n_geom if geometric_normal else None,
