@@ -11,6 +11,7 @@ from orbit.rotations import axis_angle
 from raytrace.camera import Camera
 from raytrace.model import Component, TargetModel
 from raytrace.scene import Scene
+from tests.raytrace.oracles import point_mesh_distance
 
 
 def model_of(*meshes, names=None):
@@ -213,28 +214,6 @@ def test_embree_path_agrees_with_numpy_moller_trumbore():
 
 
 # ------------------------------------------------------------------ pose <-> pixels
-def point_mesh_distance(points, V, F):
-    """Brute-force distance from each point to the nearest triangle (plane if the projection is
-    inside the triangle, else the nearest edge segment)."""
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    n = np.cross(b - a, c - a)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    best = np.full(len(points), np.inf)
-    for i, p in enumerate(points):
-        dp = np.einsum("fk,fk->f", p - a, n)
-        q = p - dp[:, None] * n
-        inside = np.ones(len(F), bool)
-        for u, v in ((a, b), (b, c), (c, a)):
-            inside &= np.einsum("fk,fk->f", np.cross(v - u, q - u), n) >= 0
-        d = np.where(inside, np.abs(dp), np.inf)
-        for u, v in ((a, b), (b, c), (c, a)):
-            e = v - u
-            s = np.clip(np.einsum("fk,fk->f", p - u, e) / np.einsum("fk,fk->f", e, e), 0.0, 1.0)
-            d = np.minimum(d, np.linalg.norm(p - (u + s[:, None] * e), axis=1))
-        best[i] = d.min()
-    return best
-
-
 def test_vertices_project_onto_their_component_and_depth_backprojects_onto_mesh():
     # subdivided so that most vertices lie inside faces, not only on silhouette corners
     base = small_assembly()

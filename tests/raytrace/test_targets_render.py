@@ -17,29 +17,9 @@ from orbit.sampling import range_band, sample_pattern
 from raytrace.camera import Camera
 from raytrace.scene import Scene
 from raytrace.targets import BUILTIN_TARGETS, load_target
+from tests.raytrace.oracles import point_mesh_distance
 
 N = 1.1313666536110223e-3
-
-
-def point_triangles_distance(points, V, F):
-    """Brute-force distance from each point to the nearest of the triangles (V, F)."""
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    n = np.cross(b - a, c - a)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    out = np.empty(len(points))
-    for i, p in enumerate(points):
-        dp = np.einsum("fk,fk->f", p - a, n)
-        q = p - dp[:, None] * n
-        inside = np.ones(len(F), bool)
-        for u, v in ((a, b), (b, c), (c, a)):
-            inside &= np.einsum("fk,fk->f", np.cross(v - u, q - u), n) >= -1e-12
-        d = np.where(inside, np.abs(dp), np.inf)
-        for u, v in ((a, b), (b, c), (c, a)):
-            e = v - u
-            s = np.clip(np.einsum("fk,fk->f", p - u, e) / np.einsum("fk,fk->f", e, e), 0.0, 1.0)
-            d = np.minimum(d, np.linalg.norm(p - (u + s[:, None] * e), axis=1))
-        out[i] = d.min()
-    return out
 
 
 @pytest.fixture(scope="module", params=BUILTIN_TARGETS)
@@ -124,7 +104,7 @@ def test_labels_agree_with_pixels(target):
             assert hit > 0 and gj.depth_m[1, 1] == pytest.approx(z, rel=1e-6), model.components[ks[j]].name
             if hit != ks[j] + 1:  # allowed only where another part's surface passes through the vertex
                 other = model.components[hit - 1].mesh
-                d = point_triangles_distance(P[j:j + 1], np.asarray(other.vertices), np.asarray(other.faces))
+                d = point_mesh_distance(P[j:j + 1], np.asarray(other.vertices), np.asarray(other.faces))
                 assert d[0] < 1e-6 * range_m, (model.components[ks[j]].name, model.components[hit - 1].name)
         assert in_view.sum() >= 5
         # back-projection onto the surface of the component the pixel is labelled with
@@ -136,7 +116,7 @@ def test_labels_agree_with_pixels(target):
         ids = g.instance[v[sel], u[sel]]
         for k in np.unique(ids):
             mesh = model.components[k - 1].mesh
-            d = point_triangles_distance(p_body[ids == k], np.asarray(mesh.vertices), np.asarray(mesh.faces))
+            d = point_mesh_distance(p_body[ids == k], np.asarray(mesh.vertices), np.asarray(mesh.faces))
             assert d.max() < 1e-4 * np.linalg.norm(rho), model.components[k - 1].name
 
 
