@@ -48,7 +48,7 @@ def same_rays(scene: Scene, cam: Camera, R, t):
     w, h = u1 - u0, v1 - v0
     o = np.empty((w * h, 3), np.float32)
     d = np.empty((w * h, 3), np.float32)
-    z0 = max(0.0, float((scene.hull_vertices @ R.T + t)[:, 2].min()) - 1e-3 * max(scene.scale_m, 1.0))
+    z0 = scene._near_plane(scene.hull_vertices @ R.T + t)  # rays start where the pass starts them
     _kernels.make_rays(-R.T @ t, np.ascontiguousarray(R.T), cam.fx, cam.fy, cam.cx, cam.cy, u0, v0, w, h, z0, o, d)
     return o, d, w
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 from ._jit import jit_exact
@@ -130,7 +129,8 @@ def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0
 @jit_exact
 def corner_normals(V, F, face_normal, face_angle, vert_faces_ptr, vert_faces, weld, cos_crease):
     """Shading normal at each face corner: angle-weighted mean of the normals of the faces
-    around the (welded) vertex whose normal is within the crease angle of this face's."""
+    around the (welded) vertex whose normal is within the crease angle of this face's
+    (``cos_crease[f]``: cosine of the crease angle of face f's component)."""
     nf = F.shape[0]
     out = np.zeros((nf, 3, 3))
     for f in range(nf):
@@ -144,7 +144,7 @@ def corner_normals(V, F, face_normal, face_angle, vert_faces_ptr, vert_faces, we
                 kg = vert_faces[j] % 3
                 dot = face_normal[f, 0] * face_normal[g, 0] + face_normal[f, 1] * face_normal[g, 1] + \
                     face_normal[f, 2] * face_normal[g, 2]
-                if dot >= cos_crease:
+                if dot >= cos_crease[f]:
                     a = face_angle[g, kg]
                     sx += a * face_normal[g, 0]
                     sy += a * face_normal[g, 1]

@@ -195,6 +195,7 @@ class Scene:
         if len(self.vertices) >= 2**31:
             raise ValueError(f"model {model.name}: at most 2**31 - 1 vertices, got {len(self.vertices)}")
         self.face_offset = np.asarray(offsets, dtype=np.int64)
+        self.vertex_offset = np.cumsum([0] + [len(v) for v in verts])
         self.face_normal, self.corner_normal = self._normals(np.concatenate(comp_of_face), np.asarray(creases))
         self.hull_vertices = _bounding_vertices(self.vertices)
         self.scale_m = float(np.linalg.norm(self.vertices.max(0) - self.vertices.min(0)))
@@ -220,8 +221,7 @@ class Scene:
             b = tri[:, (k + 2) % 3] - tri[:, k]
             angles[:, k] = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
         # weld identical positions within a component (smoothing never crosses components)
-        key = np.column_stack([V, np.repeat(np.arange(len(self.face_offset) - 1),
-                                            np.diff(self._vertex_offsets()))])
+        key = np.column_stack([V, np.repeat(np.arange(len(self.face_offset) - 1), np.diff(self.vertex_offset))])
         _, weld = np.unique(key, axis=0, return_inverse=True)
         weld = weld.ravel().astype(np.int64)
         corners = weld[F].ravel()
@@ -229,19 +229,10 @@ class Scene:
         ptr = np.zeros(weld.max() + 2, dtype=np.int64)
         np.add.at(ptr, corners + 1, 1)
         ptr = np.cumsum(ptr)
-        corner = np.empty((len(F), 3, 3))
-        # one crease angle per component: run the kernel per distinct angle
-        for crease in np.unique(creases):
-            sel = np.flatnonzero(creases[comp_of_face] == crease)
-            c = _kernels.corner_normals(V, F, face_normal, angles, ptr, order.astype(np.int64), weld,
-                                        math.cos(crease))
-            corner[sel] = c[sel]
+        cos_crease = np.cos(creases)[comp_of_face]  # each face smooths with its component's angle
+        corner = _kernels.corner_normals(V, F, face_normal, angles, ptr, order.astype(np.int64), weld, cos_crease)
         # float32 normals: 1e-7 rad is plenty, and half the memory traffic per hit
         return (np.ascontiguousarray(face_normal, dtype=np.float32), np.ascontiguousarray(corner, dtype=np.float32))
-
-    def _vertex_offsets(self) -> np.ndarray:
-        counts = [len(c.mesh.vertices) for c in self.model.components]
-        return np.concatenate([[0], np.cumsum(counts)])
 
     @property
     def embree(self):
@@ -250,7 +241,7 @@ class Scene:
             from embreex import rtcore_scene
             from embreex.mesh_construction import TriangleMesh
             scene = rtcore_scene.EmbreeScene(robust=True)  # watertight: no leaks at shared edges and vertices
-            vo = self._vertex_offsets()
+            vo = self.vertex_offset
             for k, comp in enumerate(self.model.components):
                 v = np.ascontiguousarray(self.vertices[vo[k]:vo[k + 1]], dtype=np.float32)
                 f = np.ascontiguousarray(self.faces[self.face_offset[k]:self.face_offset[k + 1]] - vo[k],

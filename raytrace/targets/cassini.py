@@ -299,7 +299,6 @@ def _magnetometer():
     can_c = (0.0, 0.95)
     canister = trimesh.creation.cylinder(radius=0.28, segment=[_p(*can_c, 0.0), _p(*can_c, 0.55)], sections=32)
     y0 = can_c[1] + 0.20                            # root just inside the canister wall
-    y1 = y0 + MAG_BOOM_LENGTH_M
     circ = 0.20                                      # triangular lattice, side 0.35 m
     corners = [np.array([circ * math.cos(a), 0.0, -circ * math.sin(a)])
                for a in (math.radians(90.0), math.radians(210.0), math.radians(330.0))]

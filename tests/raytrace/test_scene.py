@@ -381,3 +381,24 @@ def test_visible_fraction_and_semantic_map():
     from raytrace.model import SEMANTIC_CLASSES
     assert set(np.unique(g.semantic)) == {0, SEMANTIC_CLASSES.index("dish") + 1}
     assert np.array_equal(g.semantic > 0, g.mask)
+
+
+def test_crease_angle_is_per_component():
+    # the same 12-sided cylinder twice: crease 0 → faceted (shading = flat normal), default → smooth
+    cyl = trimesh.creation.cylinder(radius=1.0, height=2.0, sections=12)
+    faceted, smooth = cyl.copy(), cyl.copy()
+    faceted.apply_translation([-1.5, 0, 0])
+    smooth.apply_translation([1.5, 0, 0])
+    model = TargetModel("c", (Component("faceted", faceted, "white_paint", "bus", 1.0, crease_angle_rad=0.0),
+                              Component("smooth", smooth, "white_paint", "bus", 1.0)))
+    cam = Camera(width=320, height=160, fx=150.0, fy=150.0, cx=159.5, cy=79.5)
+    R, t = pose_looking_at_origin([0.0, -10.0, 0.3])
+    g = Scene(model).render_geometry(cam, R, t, geometric_normal=True)
+    side = g.mask & (np.abs(g.normal_geom_cam @ (R @ [0, 0, 1.0])) < 0.5)  # cylinder walls, not the caps
+    gap = np.zeros(g.mask.shape)
+    gap[g.mask] = angle_deg(g.normal_cam[g.mask], g.normal_geom_cam[g.mask])
+    f, s = side & (g.instance == 1), side & (g.instance == 2)
+    assert f.sum() > 500 and s.sum() > 500
+    assert gap[f].max() < 1e-3  # flat shading on the faceted copy
+    assert np.percentile(gap[s], 90) > 3.0  # interpolated across the 30° facets on the smooth one
+    assert gap[s].max() < 15.0 + 1e-3  # never beyond half a facet
