@@ -17,11 +17,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
+import time
+
 import numpy as np
 
 from orbit.patterns import PATTERNS
 from raytrace.targets import BUILTIN_TARGETS as TARGETS
+
 PROG = "cli.py"
 
 
@@ -32,7 +36,7 @@ class CLIError(Exception):
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors (no usage dump) and exit status 2."""
 
-    def error(self, message: str):  # noqa: D102 - argparse hook
+    def error(self, message: str):
         self.exit(2, f"{PROG}: error: {message}\n")
 
 
@@ -114,7 +118,6 @@ def run_orbit_job(args: argparse.Namespace) -> dict:
     from orbit.reference import ReferenceOrbit
     from orbit.sampling import sample_pattern
     from orbit.sun import sun_position_eci
-
     from raytrace.targets import load_target
 
     radius_m = load_target(args.target).bounding_radius_m  # measured on the built-in mesh
@@ -217,8 +220,115 @@ def _print_table(result: dict, out) -> None:
     w(f"# {n_vis} of {len(result['frames'])} frames visible (line of sight, Sun clear of the lens, target lit)\n")
 
 
+# --------------------------------------------------------------------------- render-scene
+def _write_image(path: str, pixels: np.ndarray) -> None:
+    """Write an image with OpenImageIO (format from the extension); raise OSError on failure."""
+    import OpenImageIO as oiio
+    out = oiio.ImageOutput.create(path)
+    if out is None:
+        raise OSError(f"cannot create {path}: {oiio.geterror()}")
+    if pixels.ndim == 2:
+        pixels = pixels[:, :, None]
+    h, w, c = pixels.shape
+    fmt = {np.dtype(np.uint8): oiio.UINT8, np.dtype(np.uint16): oiio.UINT16,
+           np.dtype(np.float32): oiio.FLOAT}[pixels.dtype]
+    spec = oiio.ImageSpec(w, h, c, fmt)
+    if path.endswith(".exr"):
+        spec.attribute("compression", "zip")
+    ok = out.open(path, spec) and out.write_image(np.ascontiguousarray(pixels))
+    out.close()
+    if not ok:
+        raise OSError(f"cannot write {path}: {out.geterror()}")
+
+
+def frame_images(frame, *, name: str = "000000") -> dict:
+    """The files of one rendered frame (relative path → pixels), as in a sequence folder:
+    clean sRGB 8-bit ``rgb/`` (auto exposure), 16-bit instance ``mask/`` (0 background),
+    float32 z-depth ``depth/`` (metres, inf on background), float32 camera-frame ``normal/``
+    and linear radiance ``hdr/`` [W/(m²·sr)]. Also returns the exposure scale used."""
+    from degrade.encode import srgb_encode
+    from degrade.exposure import auto_exposure
+    geo = frame.geometry
+    linear, scale = auto_exposure(frame.radiance, geo.mask)
+    rgb = srgb_encode(np.clip(linear, 0.0, 1.0), bits=8)
+    return {f"rgb/{name}.png": rgb, f"mask/{name}.png": geo.instance.astype(np.uint16),
+            f"depth/{name}.exr": geo.depth_m.astype(np.float32), f"normal/{name}.exr": geo.normal_cam,
+            f"hdr/{name}.exr": frame.radiance.astype(np.float32)}, scale
+
+
+def write_files_atomically(out_dir: str, files: dict, texts: dict) -> None:
+    """Write every file into ``out_dir`` or none: all go to a hidden temporary folder first,
+    then are moved into place; on any failure the temporary folder is removed."""
+    import shutil
+    import tempfile
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+        tmp = tempfile.mkdtemp(prefix=".partial-", dir=out_dir)
+    except OSError as exc:
+        raise CLIError(f"--out: cannot create {out_dir} ({exc.strerror})") from None
+    try:
+        for rel, pixels in files.items():
+            os.makedirs(os.path.join(tmp, os.path.dirname(rel)), exist_ok=True)
+            _write_image(os.path.join(tmp, rel), pixels)
+        for rel, text in texts.items():
+            with open(os.path.join(tmp, rel), "w", encoding="utf-8") as fh:
+                fh.write(text)
+        for rel in list(files) + list(texts):
+            dst = os.path.join(out_dir, rel)
+            os.makedirs(os.path.dirname(dst) or out_dir, exist_ok=True)
+            os.replace(os.path.join(tmp, rel), dst)
+    except OSError as exc:
+        raise CLIError(f"--out: cannot write into {out_dir} ({exc})") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def render_scene_main(argv: list[str]) -> int:
+    """``cli.py render-scene SCENE.json --out DIR``: render one frame of an explicit scene."""
+    parser = _Parser(prog=f"{PROG} render-scene",
+                     description="Render one frame of the scene described by a JSON file (schema in README).")
+    parser.add_argument("scene", help="scene file (JSON)")
+    parser.add_argument("--out", required=True, help="output folder (created if missing)")
+    parser.add_argument("--quality", choices=("fast", "balanced", "reference"), default=None,
+                        help="overrides the file's quality preset")
+    parser.add_argument("--samples", type=_int_in(1, 1 << 20), default=None,
+                        help="overrides the preset's sample count")
+    parser.add_argument("--seed", type=_int_in(0, 2**31 - 1), default=None, help="overrides the file's seed")
+    args = parser.parse_args(argv)
+    from raytrace.scene import Scene
+    from raytrace.scenefile import load_scene_file
+    from raytrace.shade import render
+    try:
+        spec = load_scene_file(args.scene)
+        quality = args.quality or spec.quality
+        samples = args.samples if args.samples is not None else (spec.samples if args.quality is None else None)
+        seed = args.seed if args.seed is not None else spec.seed
+        t0 = time.perf_counter()
+        frame = render(Scene(spec.model), spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting,
+                       quality=quality, samples=samples, seed=seed)
+        elapsed = time.perf_counter() - t0
+        files, scale = frame_images(frame)
+        geo = frame.geometry
+        info = {"scene": os.path.abspath(args.scene), "quality": frame.quality.name, "samples": samples,
+                "seed": seed, "render_s": elapsed, "timings_s": frame.timings_s, "exposure_scale": scale,
+                "width": spec.camera.width, "height": spec.camera.height, "K": spec.camera.K.tolist(),
+                "R_cam_from_body": spec.R_cam_from_body.ravel().tolist(), "t_cam_m": spec.t_cam_m.tolist(),
+                "components": list(spec.model.component_names),
+                "pixel_counts": geo.pixel_counts.tolist(), "bbox_xywh": geo.bbox_xywh,
+                "visible_fraction": None if math.isnan(geo.visible_fraction) else geo.visible_fraction}
+        write_files_atomically(args.out, files, {"frame.json": json.dumps(info, indent=1) + "\n"})
+    except (CLIError, ValueError) as exc:
+        sys.stderr.write(f"{PROG}: error: {exc}\n")
+        return 2
+    sys.stdout.write(f"rendered {args.scene} ({frame.quality.name}) in {elapsed:.2f} s -> {args.out}\n")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the process exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] == "render-scene":
+        return render_scene_main(argv[1:])
     args = build_parser().parse_args(argv)
     try:
         result = run_orbit_job(args)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Camera", "DEFAULT_WIDTH", "DEFAULT_HEIGHT", "DEFAULT_FOCAL_LENGTH_M", "DEFAULT_PIXEL_PITCH_M"]
+__all__ = ["DEFAULT_FOCAL_LENGTH_M", "DEFAULT_HEIGHT", "DEFAULT_PIXEL_PITCH_M", "DEFAULT_WIDTH", "Camera"]
 
 DEFAULT_WIDTH = 1280
 DEFAULT_HEIGHT = 960
@@ -80,7 +80,7 @@ class Camera:
     @classmethod
     def from_focal(cls, focal_length_m: float = DEFAULT_FOCAL_LENGTH_M,
                    pixel_pitch_m: float = DEFAULT_PIXEL_PITCH_M, width: int = DEFAULT_WIDTH,
-                   height: int = DEFAULT_HEIGHT) -> "Camera":
+                   height: int = DEFAULT_HEIGHT) -> Camera:
         """Camera from a focal length and a square pixel pitch, principal point centred.
 
         f_x = f_y = focal_length_m / pixel_pitch_m; c = ((W − 1)/2, (H − 1)/2) (SPEC §9).

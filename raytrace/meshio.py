@@ -61,8 +61,14 @@ import trimesh
 
 from .model import MATERIALS, SEMANTIC_CLASSES, Component, TargetModel
 
-__all__ = ["DEGENERATE_AREA_M2", "RECENTRE_MODES", "PartReport", "MeshReport", "load_mesh",
-           "component_summary"]
+__all__ = [
+    "DEGENERATE_AREA_M2",
+    "RECENTRE_MODES",
+    "MeshReport",
+    "PartReport",
+    "component_summary",
+    "load_mesh",
+]
 
 DEGENERATE_AREA_M2 = 1e-12
 """Faces with an area at or below this, after scaling to metres, are degenerate [m²]."""
@@ -527,4 +533,4 @@ def component_summary(model: TargetModel) -> list:
         Keys ``name``, ``material``, ``semantic`` and ``faces`` (triangle count).
     """
     return [{"name": c.name, "material": c.material, "semantic": c.semantic,
-             "faces": int(len(c.mesh.faces))} for c in model.components]
+             "faces": len(c.mesh.faces)} for c in model.components]

@@ -16,8 +16,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import trimesh
 
-__all__ = ["MATERIALS", "SEMANTIC_CLASSES", "DEFAULT_CREASE_ANGLE_RAD", "Component", "TargetModel",
-           "centre_on_mass"]
+__all__ = [
+    "DEFAULT_CREASE_ANGLE_RAD",
+    "MATERIALS",
+    "SEMANTIC_CLASSES",
+    "Component",
+    "TargetModel",
+    "centre_on_mass",
+]
 
 MATERIALS = (
     "gold_mli",        # gold-coloured multi-layer insulation (Kapton/aluminised)
@@ -62,6 +68,10 @@ class Component:
     crease_angle_rad : float
         Shading-normal crease angle: smooth across gentler edges, faceted across sharper
         ones [rad].
+    albedo : tuple of 3 float or None
+        When set, the component is shaded as a pure Lambertian surface with this linear RGB
+        albedo in [0, 1] instead of its material's BRDF preset (``material`` still names
+        what it is) [-].
     """
 
     name: str
@@ -70,6 +80,7 @@ class Component:
     semantic: str
     mass_kg: float = 0.0
     crease_angle_rad: float = DEFAULT_CREASE_ANGLE_RAD
+    albedo: tuple | None = None
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
@@ -91,6 +102,12 @@ class Component:
         if not (0.0 <= self.crease_angle_rad <= math.pi):
             raise ValueError(f"component {self.name}: crease_angle_rad must be in [0, pi], "
                              f"got {self.crease_angle_rad!r}")
+        if self.albedo is not None:
+            a = tuple(float(x) for x in np.ravel(self.albedo))
+            if len(a) != 3 or not all(math.isfinite(x) and 0.0 <= x <= 1.0 for x in a):
+                raise ValueError(f"component {self.name}: albedo must be 3 numbers in [0, 1] (linear RGB), "
+                                 f"got {self.albedo!r}")
+            object.__setattr__(self, "albedo", a)
 
     @property
     def semantic_id(self) -> int:
@@ -177,5 +194,5 @@ def centre_on_mass(components) -> tuple:
         mesh = c.mesh.copy()
         mesh.apply_translation(-com)
         out.append(Component(name=c.name, mesh=mesh, material=c.material, semantic=c.semantic,
-                             mass_kg=c.mass_kg, crease_angle_rad=c.crease_angle_rad))
+                             mass_kg=c.mass_kg, crease_angle_rad=c.crease_angle_rad, albedo=c.albedo))
     return tuple(out)

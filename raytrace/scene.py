@@ -27,7 +27,7 @@ from . import _kernels
 from .camera import Camera
 from .model import TargetModel
 
-__all__ = ["Scene", "GeometryFrame", "default_threads"]
+__all__ = ["GeometryFrame", "Scene", "default_threads"]
 
 _RAYS_PER_CHUNK = 1 << 14  # rays per Embree call: small enough to balance threads, large enough to amortise
 _POOL: ThreadPoolExecutor | None = None
@@ -196,11 +196,13 @@ class Scene:
             raise ValueError(f"model {model.name}: at most 2**31 - 1 vertices, got {len(self.vertices)}")
         self.face_offset = np.asarray(offsets, dtype=np.int64)
         self.vertex_offset = np.cumsum([0] + [len(v) for v in verts])
-        self.face_normal, self.corner_normal = self._normals(np.concatenate(comp_of_face), np.asarray(creases))
+        self.component_of_face = np.concatenate(comp_of_face)
+        self.face_normal, self.corner_normal = self._normals(self.component_of_face, np.asarray(creases))
         self.hull_vertices = _bounding_vertices(self.vertices)
         self.scale_m = float(np.linalg.norm(self.vertices.max(0) - self.vertices.min(0)))
         self.semantic_lut = np.array([0] + [c.semantic_id for c in model.components], dtype=np.uint8)
         self._embree = None
+        self._cache = None
 
     # ------------------------------------------------------------------ build
     def _normals(self, comp_of_face: np.ndarray, creases: np.ndarray):
@@ -224,6 +226,7 @@ class Scene:
         key = np.column_stack([V, np.repeat(np.arange(len(self.face_offset) - 1), np.diff(self.vertex_offset))])
         _, weld = np.unique(key, axis=0, return_inverse=True)
         weld = weld.ravel().astype(np.int64)
+        self.vertex_weld = weld  # welded vertex id of each vertex (same position, same component)
         corners = weld[F].ravel()
         order = np.argsort(corners, kind="stable")
         ptr = np.zeros(weld.max() + 2, dtype=np.int64)
@@ -250,13 +253,75 @@ class Scene:
             self._embree = scene
         return self._embree
 
+    @property
+    def materials(self) -> tuple:
+        """BRDF of each component (:func:`raytrace.materials.material_of`)."""
+        from .materials import material_of
+        return tuple(material_of(c) for c in self.model.components)
+
+    @property
+    def two_sided(self) -> np.ndarray:
+        """Per component: True when its mesh is open (both sides can be seen and lit), False
+        when it is a closed shell (only the outside is), shape (n_components,), bool."""
+        if not hasattr(self, "_two_sided"):
+            self._two_sided = np.array([not c.mesh.is_watertight for c in self.model.components])
+        return self._two_sided
+
+    def radiance_cache(self, **options):
+        """The body-space radiance cache of this scene (:class:`raytrace.cache.RadianceCache`),
+        built on first use with ``options`` and reused while they stay the same."""
+        from .cache import RadianceCache
+        if self._cache is None or self._cache_options != options:
+            self._cache = RadianceCache(self, **options)
+            self._cache_options = dict(options)
+        return self._cache
+
     def __getstate__(self):
         state = self.__dict__.copy()
         state["_embree"] = None
+        state["_cache"] = None
         return state
 
     def __setstate__(self, state):
         self.__dict__.update(state)
+
+    # ------------------------------------------------------------------ batched rays
+    def _run(self, origins, directions, tfar, query, output):
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        n = len(o)
+        far = None if tfar is None else np.ascontiguousarray(np.broadcast_to(tfar, (n,)), dtype=np.float32)
+        scene = self.embree
+        chunk = 4 * _RAYS_PER_CHUNK
+        spans = [(a, min(a + chunk, n)) for a in range(0, n, chunk)]
+
+        def run(span):
+            a, b = span
+            kw = {} if far is None else {"dists": far[a:b].copy()}
+            return scene.run(o[a:b], d[a:b], query=query, output=output, **kw)
+
+        if len(spans) <= 1:
+            parts = [run(s) for s in spans]
+        else:
+            parts = list(_pool().map(run, spans))
+        return parts
+
+    def intersect(self, origins, directions, *, tfar=None) -> dict:
+        """Closest hits of a batch of rays (float32 body frame; directions need not be unit),
+        run in chunks on the thread pool: Embree's ``geomID``, ``primID``, ``u``, ``v``,
+        ``tfar`` arrays (geomID −1 on a miss; ``tfar`` in units of the direction's length)."""
+        parts = self._run(origins, directions, tfar, "INTERSECT", 1)
+        if not parts:
+            return {"geomID": np.empty(0, np.int32), "primID": np.empty(0, np.int32),
+                    "u": np.empty(0, np.float32), "v": np.empty(0, np.float32), "tfar": np.empty(0, np.float32)}
+        return {k: np.concatenate([p[k] for p in parts]) for k in ("geomID", "primID", "u", "v", "tfar")}
+
+    def occluded(self, origins, directions, *, tfar=None) -> np.ndarray:
+        """True where a ray hits anything before ``tfar`` (default: infinity), shape (n,)."""
+        parts = self._run(origins, directions, tfar, "OCCLUDED", None)
+        if not parts:
+            return np.zeros(0, dtype=bool)
+        return np.concatenate(parts) >= 0
 
     # ------------------------------------------------------------------ culling
     def projected_rect(self, camera: Camera, R_cam_from_body, t_cam_m) -> tuple | None:

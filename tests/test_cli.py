@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+import cli
 from orbit import cw
 from orbit.patterns import parameters
 
@@ -103,3 +104,58 @@ def test_impossible_window_is_a_clear_error():
     assert r.returncode == 2
     assert len(r.stderr.strip().splitlines()) == 1
     assert "window_s" in r.stderr
+
+
+# --------------------------------------------------------------------------- render-scene
+def _tiny_scene(tmp_path, **over):
+    import trimesh
+
+    from orbit.pose import look_at
+    (tmp_path / "parts").mkdir(exist_ok=True)
+    trimesh.creation.box((1.0, 1.0, 1.0)).export(tmp_path / "parts" / "bus.ply")
+    rho = np.array([2.0, -8.0, 3.0])
+    R = look_at(rho)
+    scene = {"meshes": [{"path": "parts/bus.ply", "albedo": [0.6, 0.6, 0.6]}],
+             "camera": {"K": [[120.0, 0, 31.5], [0, 120.0, 23.5], [0, 0, 1]], "width": 64, "height": 48,
+                        "R_cam_from_body": R.ravel().tolist(), "t_cam_m": (-R @ rho).tolist()},
+             "sun": {"sun_dir_body": [0.6, -0.48, 0.64], "sun_irradiance_W_m2": 1361.0},
+             "ambient_radiance_W_m2_sr": 1.0, "quality": "fast"}
+    scene.update(over)
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(scene))
+    return path
+
+
+def test_render_scene_writes_a_frame(tmp_path):
+    import OpenImageIO as oiio
+    path = _tiny_scene(tmp_path)
+    out = tmp_path / "out"
+    assert cli.main(["render-scene", str(path), "--out", str(out)]) == 0
+    for rel in ("rgb/000000.png", "mask/000000.png", "depth/000000.exr", "normal/000000.exr", "hdr/000000.exr",
+                "frame.json"):
+        assert (out / rel).is_file(), rel
+    mask = oiio.ImageBuf(str(out / "mask/000000.png")).get_pixels(oiio.UINT16)[..., 0]
+    depth = oiio.ImageBuf(str(out / "depth/000000.exr")).get_pixels(oiio.FLOAT)[..., 0]
+    hdr = oiio.ImageBuf(str(out / "hdr/000000.exr")).get_pixels(oiio.FLOAT)
+    assert mask.shape == (48, 64) and np.any(mask == 1)
+    assert np.array_equal(mask > 0, np.isfinite(depth))  # labels agree with pixels
+    assert np.all(hdr[mask > 0].sum(-1) > 0)
+    assert not [p for p in out.iterdir() if p.name.startswith(".partial")]
+
+
+@pytest.mark.parametrize("over,match", [
+    ({"quality": "ultra"}, "quality must be one of"),
+    ({"sun": {"sun_dir_body": [0, 0, float("nan")]}}, "sun_dir_body"),
+    ({"camera": {"K": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "width": 0, "height": 4,
+                 "R_cam_from_body": np.eye(3).ravel().tolist(), "t_cam_m": [0, 0, 5]}}, "width"),
+    ({"meshes": [{"path": "missing.ply", "albedo": 0.5}]}, "missing.ply"),
+    ({"meshes": [{"path": "parts/bus.ply", "material": "unobtainium"}]}, "material must be one of"),
+    ({"extra": 1}, "unknown keys"),
+])
+def test_render_scene_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, over, match):
+    path = _tiny_scene(tmp_path, **over)
+    out = tmp_path / "out"
+    assert cli.main(["render-scene", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert match in err and err.count("\n") == 1
+    assert not out.exists()

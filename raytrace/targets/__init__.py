@@ -17,7 +17,7 @@ __all__ = ["BUILTIN_TARGETS", "load_target"]
 BUILTIN_TARGETS = ("tiangong", "spacedragon", "icesat", "cassini")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def load_target(name: str) -> TargetModel:
     """Build (once) and return the built-in target ``name``.
 

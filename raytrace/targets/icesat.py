@@ -76,7 +76,7 @@ import trimesh
 
 from ..model import Component, TargetModel, centre_on_mass
 
-__all__ = ["build", "LAUNCH_MASS_KG", "GLAS_MASS_KG"]
+__all__ = ["GLAS_MASS_KG", "LAUNCH_MASS_KG", "build"]
 
 # ---- published figures (see the table in the module docstring) -------------------------------
 LAUNCH_MASS_KG = 970.0          # [1], [2]

@@ -1,0 +1,23 @@
+"""Numba policy for every kernel in :mod:`degrade` (DESIGN.md), set once here.
+
+Mirrors ``raytrace/_jit.py`` without importing it (``degrade`` knows nothing of the other
+packages). ``cache=True`` so CI and later runs skip compilation; ``nogil`` so kernels can
+overlap NumPy random sampling running in another thread; ``prange`` only on outer loops,
+each iteration writing only its own rows.
+
+* ``pjit_exact`` / ``jit_exact``: no fastmath. Every sum runs in a fixed order and a pixel's
+  value never depends on whether it fell in a SIMD body or a scalar remainder, so outputs are
+  byte-reproducible and equal to their NumPy definitions.
+* ``pjit``: fastmath without ``nnan``/``ninf``, only for the sRGB transfer curve where the
+  last float32 bit does not matter (it is tested against a float64 reference).
+"""
+
+from __future__ import annotations
+
+import numba
+
+FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+pjit = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, parallel=True)
+jit_exact = numba.njit(cache=True, nogil=True)
+pjit_exact = numba.njit(cache=True, nogil=True, parallel=True)

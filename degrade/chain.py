@@ -1,0 +1,236 @@
+"""The physical imaging chain (SPEC §10) in one call: optics → sensor → encoding.
+
+    I_lin ⊛ PSF_total → RGGB mosaic → photons → electrons (Poisson) → full-well clip
+          → + read noise → ADC → demosaic → sRGB encode (8/16 bit)
+
+PSF_total = PSF_diffraction ⊛ PSF_aberration ⊛ PSF_defocus ⊛ PSF_motion, per colour channel
+(the Airy pattern scales with wavelength). A stage whose config is ``None`` (or whose
+parameters make it the identity, e.g. zero motion) is skipped (DESIGN.md, "Skip what a frame
+does not need"). Per-frame quantities (motion length and angle from the image-plane
+velocity × exposure, defocus radius from the range) go into :class:`OpticsConfig` via
+:func:`dataclasses.replace`; the PSF of each distinct configuration is built once and cached.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _checks
+from .convolve import convolve_image
+from .encode import srgb_encode
+from .psf import airy_psf, compose, defocus_psf, gaussian_psf, motion_psf
+from .sensor import SensorConfig, _simulate
+
+__all__ = ["ENCODINGS", "DegradeConfig", "OpticsConfig", "apply_optics", "degrade", "optics_psf"]
+
+ENCODINGS = ("srgb8", "srgb16", "srgb", "linear")
+"""Output encodings: sRGB rounded to 8 or 16 bit levels, sRGB float, or linear float."""
+
+
+@dataclass(frozen=True, slots=True)
+class OpticsConfig:
+    """Lens, aberration, defocus and motion blur of one frame.
+
+    Attributes
+    ----------
+    focal_length_m : float
+        Focal length f [m]. Default 4 mm (the default camera of ``raytrace``).
+    aperture_m : float or None
+        Entrance-pupil diameter D [m]; None: no diffraction. Default 1 mm (f/4, SPEC §10's
+        example: r₁ = 0.78 px at 550 nm with 3.45 µm pixels).
+    pixel_pitch_m : float
+        Pixel pitch p [m]. Default 3.45 µm (IMX250 class).
+    wavelengths_m : tuple of 3 float
+        Centre wavelength of the R, G, B channels [m], used for the Airy pattern. Default
+        (600, 530, 460) nm, near the transmission peaks of common Bayer dyes. A monochrome
+        (H×W) image uses the G value.
+    aberration_sigma_px : float
+        σ of the Gaussian aberration PSF at the image centre [px]; 0: none.
+    corner_sigma_px : float or None
+        Optional field-dependent aberration: σ at the image corners [px]. The image is blurred
+        with both the centre and the corner PSF and blended with weight ρ² (ρ = distance from
+        the centre / half-diagonal), a cheap stand-in for off-axis blur. None: uniform PSF.
+    defocus_radius_px : float
+        Blur-circle radius R [px] (:func:`degrade.psf.defocus_radius_px`); 0: in focus.
+    motion_length_px : float
+        Motion-blur length L [px] (image-plane speed × exposure); 0: none.
+    motion_angle_deg : float
+        Motion direction θ [deg], counter-clockwise from +column as displayed.
+    """
+
+    focal_length_m: float = 4.0e-3
+    aperture_m: float | None = 1.0e-3
+    pixel_pitch_m: float = 3.45e-6
+    wavelengths_m: tuple[float, float, float] = (600e-9, 530e-9, 460e-9)
+    aberration_sigma_px: float = 0.0
+    corner_sigma_px: float | None = None
+    defocus_radius_px: float = 0.0
+    motion_length_px: float = 0.0
+    motion_angle_deg: float = 0.0
+
+    def __post_init__(self):
+        for name in ("focal_length_m", "pixel_pitch_m"):
+            object.__setattr__(self, name, _checks.finite_scalar(name, getattr(self, name), positive=True))
+        if self.aperture_m is not None:
+            object.__setattr__(self, "aperture_m", _checks.finite_scalar("aperture_m", self.aperture_m, positive=True))
+        wl = self.wavelengths_m
+        if isinstance(wl, (str, bytes)) or np.ndim(wl) != 1 or len(wl) != 3:
+            raise ValueError(f"wavelengths_m must be 3 wavelengths (R, G, B) [m], got {wl!r}")
+        object.__setattr__(self, "wavelengths_m", tuple(
+            _checks.finite_scalar(f"wavelengths_m[{i}]", v, positive=True) for i, v in enumerate(wl)))
+        for name in ("aberration_sigma_px", "defocus_radius_px", "motion_length_px"):
+            object.__setattr__(self, name, _checks.finite_scalar(name, getattr(self, name), nonnegative=True))
+        if self.corner_sigma_px is not None:
+            object.__setattr__(self, "corner_sigma_px",
+                               _checks.finite_scalar("corner_sigma_px", self.corner_sigma_px, nonnegative=True))
+        object.__setattr__(self, "motion_angle_deg", _checks.finite_scalar("motion_angle_deg", self.motion_angle_deg))
+
+
+@dataclass(frozen=True, slots=True)
+class DegradeConfig:
+    """What the physical chain does to a frame.
+
+    Attributes
+    ----------
+    optics : OpticsConfig or None
+        Blur; None skips it.
+    sensor : SensorConfig or None
+        Mosaic, noise, ADC and demosaic; None skips them (the image stays noiseless).
+    encoding : {"srgb8", "srgb16", "srgb", "linear"}
+        Output: sRGB (IEC 61966-2-1) rounded to 8- or 16-bit levels, sRGB float, or linear.
+    """
+
+    optics: OpticsConfig | None = field(default_factory=OpticsConfig)
+    sensor: SensorConfig | None = field(default_factory=SensorConfig)
+    encoding: str = "srgb8"
+
+    def __post_init__(self):
+        if self.optics is not None:
+            _checks.instance("optics", self.optics, OpticsConfig)
+        if self.sensor is not None:
+            _checks.instance("sensor", self.sensor, SensorConfig)
+        _checks.one_of("encoding", self.encoding, ENCODINGS)
+
+
+def optics_psf(optics: OpticsConfig, channels: int = 3, *, corner: bool = False) -> np.ndarray:
+    """Total PSF of the optics, one kernel per channel (SPEC §10).
+
+    Parameters
+    ----------
+    optics : OpticsConfig
+        Optical parameters.
+    channels : {3, 1}, optional
+        3: R, G, B kernels from ``wavelengths_m``; 1: one kernel at the G wavelength.
+    corner : bool, optional
+        Use ``corner_sigma_px`` instead of ``aberration_sigma_px`` (field-dependent blur).
+
+    Returns
+    -------
+    psf : ndarray of float64, shape (channels, K, K)
+        Read-only; each kernel sums to 1 [1].
+    """
+    _checks.instance("optics", optics, OpticsConfig)
+    _checks.one_of("channels", channels, (3, 1))
+    if corner and optics.corner_sigma_px is None:
+        raise ValueError("corner=True needs optics.corner_sigma_px, got None")
+    return _optics_psf(optics, channels, bool(corner))
+
+
+@functools.lru_cache(maxsize=128)
+def _optics_psf(optics: OpticsConfig, channels: int, corner: bool) -> np.ndarray:
+    sigma = optics.corner_sigma_px if corner else optics.aberration_sigma_px
+    common = (gaussian_psf(sigma), defocus_psf(optics.defocus_radius_px),
+              motion_psf(optics.motion_length_px, optics.motion_angle_deg))
+    wavelengths = optics.wavelengths_m if channels == 3 else optics.wavelengths_m[1:2]
+    kernels = []
+    for lam in wavelengths:
+        airy = () if optics.aperture_m is None else (
+            airy_psf(optics.aperture_m, lam, optics.focal_length_m, optics.pixel_pitch_m),)
+        kernels.append(compose(*airy, *common))
+    size = max(k.shape[0] for k in kernels)
+    stack = np.zeros((channels, size, size))
+    for c, k in enumerate(kernels):  # centre smaller kernels (all sizes are odd)
+        o = (size - k.shape[0]) // 2
+        stack[c, o:o + k.shape[0], o:o + k.shape[1]] = k
+    stack.flags.writeable = False
+    return stack
+
+
+def _radius2_weight(h: int, w: int) -> np.ndarray:
+    """ρ² = squared distance from the image centre / squared half-diagonal, shape (H, W, 1)."""
+    yy = ((np.arange(h, dtype=np.float32) - (h - 1) / 2) ** 2)[:, None]
+    xx = ((np.arange(w, dtype=np.float32) - (w - 1) / 2) ** 2)[None, :]
+    half_diag2 = ((h - 1) / 2) ** 2 + ((w - 1) / 2) ** 2
+    return ((yy + xx) / np.float32(max(half_diag2, 1.0)))[:, :, None]
+
+
+def apply_optics(image_linear, optics: OpticsConfig) -> np.ndarray:
+    """Blur a linear image with the optics' PSF (mirror padding, see :mod:`degrade.convolve`).
+
+    Parameters
+    ----------
+    image_linear : array_like of float, shape (H, W, 3) or (H, W)
+        Linear intensity, ≥ 0 [1].
+    optics : OpticsConfig
+        Optical parameters.
+
+    Returns
+    -------
+    blurred : ndarray of float32, shape like ``image_linear``
+        Linear intensity [1].
+    """
+    return _apply_optics(_checks.image("image_linear", image_linear, channels=3), optics)
+
+
+def _apply_optics(img: np.ndarray, optics: OpticsConfig) -> np.ndarray:
+    channels = 3 if img.ndim == 3 else 1
+    psf = optics_psf(optics, channels)
+    centre = convolve_image(img, psf if channels == 3 else psf[0])
+    if optics.corner_sigma_px is None:
+        return centre
+    psf_c = optics_psf(optics, channels, corner=True)
+    corner = convolve_image(img, psf_c if channels == 3 else psf_c[0])
+    weight = _radius2_weight(*img.shape[:2])
+    if img.ndim == 2:
+        weight = weight[:, :, 0]
+    corner -= centre
+    corner *= weight
+    centre += corner
+    return centre
+
+
+def degrade(image_linear, config: DegradeConfig = DegradeConfig(), *, rng=None) -> np.ndarray:
+    """Run the physical chain of SPEC §10 on one linear frame.
+
+    Parameters
+    ----------
+    image_linear : array_like of float, shape (H, W, 3) or (H, W)
+        Linear intensity from the renderer, ≥ 0 and finite; 1 means Φ_max photons per pixel
+        (by default just a full well). float32 is used as is, other floats are converted.
+        H×W images are monochrome and need ``config.sensor.demosaic=None``.
+    config : DegradeConfig, optional
+        Optics, sensor and output encoding.
+    rng : numpy.random.Generator or int or None, keyword-only
+        Random source (normalised with :func:`numpy.random.default_rng`); the same seed gives
+        byte-identical output.
+
+    Returns
+    -------
+    image : ndarray of float32, shape like ``image_linear``
+        Encoded as ``config.encoding`` says: for "srgb8"/"srgb16" the values are exactly
+        ``code/(2**bits − 1)`` (see :func:`degrade.encode.quantise`) [1].
+    """
+    _checks.instance("config", config, DegradeConfig)
+    img = _checks.image("image_linear", image_linear, channels=3)
+    rng = np.random.default_rng(rng)
+    if config.optics is not None:
+        img = _apply_optics(img, config.optics)
+    if config.sensor is not None:
+        img = _simulate(img, config.sensor, rng)
+    if config.encoding == "linear":
+        return img.copy() if img is image_linear else img
+    bits = {"srgb8": 8, "srgb16": 16, "srgb": None}[config.encoding]
+    return srgb_encode(img, bits=bits)

@@ -1,0 +1,512 @@
+"""Numba kernels of the shading pass (fast and balanced qualities): surface points from rays,
+direct sunlight, cache look-ups, final gather, the AOV-guided filter and anti-aliasing rays.
+
+Conventions: body frame, float64 except the float32 arrays handed to Embree; ``wo`` points
+from the surface to the viewer; normals are turned to face the incoming ray.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+
+from . import environment as env
+from ._jit import jit, pjit
+from .brdf import brdf_cos, onb, sample_brdf, specular_albedo
+from .cache import _hash01, interpolate_rows, lattice_rows
+
+
+@jit
+def intersect_face(ox, oy, oz, dx, dy, dz, V, F, f):
+    """Float64 Möller–Trumbore of ray (o, d) with triangle f: (t, b1, b2); t = −1 if parallel."""
+    i0 = F[f, 0]
+    i1 = F[f, 1]
+    i2 = F[f, 2]
+    e1x = V[i1, 0] - V[i0, 0]
+    e1y = V[i1, 1] - V[i0, 1]
+    e1z = V[i1, 2] - V[i0, 2]
+    e2x = V[i2, 0] - V[i0, 0]
+    e2y = V[i2, 1] - V[i0, 1]
+    e2z = V[i2, 2] - V[i0, 2]
+    px = dy * e2z - dz * e2y
+    py = dz * e2x - dx * e2z
+    pz = dx * e2y - dy * e2x
+    det = e1x * px + e1y * py + e1z * pz
+    if det == 0.0:
+        return -1.0, 1.0 / 3.0, 1.0 / 3.0
+    inv = 1.0 / det
+    sx = ox - V[i0, 0]
+    sy = oy - V[i0, 1]
+    sz = oz - V[i0, 2]
+    b1 = (sx * px + sy * py + sz * pz) * inv
+    qx = sy * e1z - sz * e1y
+    qy = sz * e1x - sx * e1z
+    qz = sx * e1y - sy * e1x
+    b2 = (dx * qx + dy * qy + dz * qz) * inv
+    t = (e2x * qx + e2y * qy + e2z * qz) * inv
+    return t, b1, b2
+
+
+@pjit
+def surfaces(O, D, face, V, F, face_normal, corner_normal, P, NS, NG, WO, B, SIDE):
+    """Hit point, shading and geometric normals (facing the ray), direction to the viewer,
+    barycentrics and the side of the triangle seen (0 front, 1 back) for rays (O, D) known to
+    hit triangle ``face`` (re-intersected in float64)."""
+    for k in numba.prange(D.shape[0]):
+        ox = O[k, 0]
+        oy = O[k, 1]
+        oz = O[k, 2]
+        dx = D[k, 0]
+        dy = D[k, 1]
+        dz = D[k, 2]
+        dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+        dx /= dn
+        dy /= dn
+        dz /= dn
+        f = face[k]
+        _t, b1, b2 = intersect_face(ox, oy, oz, dx, dy, dz, V, F, f)
+        b1 = min(max(b1, 0.0), 1.0)
+        b2 = min(max(b2, 0.0), 1.0 - b1)
+        b0 = 1.0 - b1 - b2
+        for a in range(3):
+            P[k, a] = b0 * V[F[f, 0], a] + b1 * V[F[f, 1], a] + b2 * V[F[f, 2], a]
+        ngx = face_normal[f, 0]
+        ngy = face_normal[f, 1]
+        ngz = face_normal[f, 2]
+        nsx = b0 * corner_normal[f, 0, 0] + b1 * corner_normal[f, 1, 0] + b2 * corner_normal[f, 2, 0]
+        nsy = b0 * corner_normal[f, 0, 1] + b1 * corner_normal[f, 1, 1] + b2 * corner_normal[f, 2, 1]
+        nsz = b0 * corner_normal[f, 0, 2] + b1 * corner_normal[f, 1, 2] + b2 * corner_normal[f, 2, 2]
+        side = 0
+        if ngx * dx + ngy * dy + ngz * dz > 0.0:
+            side = 1
+            ngx, ngy, ngz = -ngx, -ngy, -ngz
+            nsx, nsy, nsz = -nsx, -nsy, -nsz
+        facing = -(nsx * dx + nsy * dy + nsz * dz)
+        if facing < 1e-4:  # interpolated normal turned away from the viewer: tilt it back
+            tilt = 1e-4 - facing
+            nsx -= tilt * dx
+            nsy -= tilt * dy
+            nsz -= tilt * dz
+        ns = math.sqrt(nsx * nsx + nsy * nsy + nsz * nsz)
+        NS[k, 0] = nsx / ns
+        NS[k, 1] = nsy / ns
+        NS[k, 2] = nsz / ns
+        NG[k, 0] = ngx
+        NG[k, 1] = ngy
+        NG[k, 2] = ngz
+        WO[k, 0] = -dx
+        WO[k, 1] = -dy
+        WO[k, 2] = -dz
+        B[k, 0] = b1
+        B[k, 1] = b2
+        SIDE[k] = side
+
+
+@pjit
+def sun_rays(P, NS, NG, sx, sy, sz, eps, want, out_o):
+    """Which points can see the Sun's direction at all (both normals towards it), and the
+    shadow-ray origins (offset along the geometric normal)."""
+    for k in numba.prange(P.shape[0]):
+        ok = (NS[k, 0] * sx + NS[k, 1] * sy + NS[k, 2] * sz > 0.0) and \
+             (NG[k, 0] * sx + NG[k, 1] * sy + NG[k, 2] * sz > 0.0)
+        want[k] = ok
+        for a in range(3):
+            out_o[k, a] = P[k, a] + eps * NG[k, a]
+
+
+@pjit
+def shade_sun(NS, WO, comp, mat_diff, mat_f0, mat_alpha, sx, sy, sz, e_sun, lit, out):
+    """out += f·cosθ·E_sun where lit (radiance, RGB)."""
+    for k in numba.prange(NS.shape[0]):
+        if not lit[k]:
+            continue
+        c = comp[k]
+        r, g, b = brdf_cos(NS[k, 0], NS[k, 1], NS[k, 2], WO[k, 0], WO[k, 1], WO[k, 2], sx, sy, sz,
+                           mat_diff[c, 0], mat_diff[c, 1], mat_diff[c, 2], mat_f0[c, 0], mat_f0[c, 1],
+                           mat_f0[c, 2], mat_alpha[c])
+        out[k, 0] += r * e_sun
+        out[k, 1] += g * e_sun
+        out[k, 2] += b * e_sun
+
+
+@pjit
+def cache_irradiance(values, valid, face_s, lat_start, lat_ids, face, B, SIDE, out):
+    """Per point: a per-row cache quantity interpolated at (face, b1, b2, side)."""
+    for k in numba.prange(face.shape[0]):
+        r, g, b = interpolate_rows(values, valid, face_s, lat_start, lat_ids, face[k], B[k, 0], B[k, 1], SIDE[k])
+        out[k, 0] = r
+        out[k, 1] = g
+        out[k, 2] = b
+
+
+@pjit
+def add_diffuse(E, comp, mat_diff, out):
+    """out += ρ_d/π · E."""
+    for k in numba.prange(E.shape[0]):
+        c = comp[k]
+        for a in range(3):
+            out[k, a] += mat_diff[c, a] / math.pi * E[k, a]
+
+
+@pjit
+def mirror_rays(NS, NG, WO, P, eps, want, out_o, out_d):
+    """Mirror direction of the view about the shading normal, where it leaves the surface."""
+    for k in numba.prange(NS.shape[0]):
+        c = NS[k, 0] * WO[k, 0] + NS[k, 1] * WO[k, 1] + NS[k, 2] * WO[k, 2]
+        rx = 2.0 * c * NS[k, 0] - WO[k, 0]
+        ry = 2.0 * c * NS[k, 1] - WO[k, 1]
+        rz = 2.0 * c * NS[k, 2] - WO[k, 2]
+        ok = want[k] and (rx * NG[k, 0] + ry * NG[k, 1] + rz * NG[k, 2] > 0.0)
+        want[k] = ok
+        out_d[k, 0] = rx
+        out_d[k, 1] = ry
+        out_d[k, 2] = rz
+        for a in range(3):
+            out_o[k, a] = P[k, a] + eps * NG[k, a]
+
+
+@jit
+def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_normal, corner_normal, comp_of_face,
+             mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex):
+    """Radiance arriving along a traced ray (o, d): the environment where it escaped; where it
+    hit a surface, that surface's radiance towards the ray from the cache: diffuse ρ_d/π·E,
+    the exact specular reflection of the Sun towards −d (its shadowing from the cache) and
+    the specular albedo times the rest of its irradiance over π. ``sun`` = (s_x, s_y, s_z,
+    ν·E_sun)."""
+    dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+    dx /= dn
+    dy /= dn
+    dz /= dn
+    if geom < 0:
+        return env.env_radiance(p, tex, ox, oy, oz, dx, dy, dz)
+    f = face_offset[geom] + prim
+    side = 0 if dx * face_normal[f, 0] + dy * face_normal[f, 1] + dz * face_normal[f, 2] < 0.0 else 1
+    r0, r1, r2, w0, w1, w2 = lattice_rows(valid, face_s, lat_start, lat_ids, f, hu, hv, side)
+    er = w0 * E_tot[r0, 0] + w1 * E_tot[r1, 0] + w2 * E_tot[r2, 0]
+    eg = w0 * E_tot[r0, 1] + w1 * E_tot[r1, 1] + w2 * E_tot[r2, 1]
+    eb = w0 * E_tot[r0, 2] + w1 * E_tot[r1, 2] + w2 * E_tot[r2, 2]
+    c = comp_of_face[f]
+    lr = mat_diff[c, 0] / math.pi * er
+    lg = mat_diff[c, 1] / math.pi * eg
+    lb = mat_diff[c, 2] / math.pi * eb
+    if mat_f0[c, 0] > 0.0 or mat_f0[c, 1] > 0.0 or mat_f0[c, 2] > 0.0:
+        b1 = hu
+        b2 = hv
+        b0 = 1.0 - b1 - b2
+        sgn = 1.0 if side == 0 else -1.0
+        nx = sgn * (b0 * corner_normal[f, 0, 0] + b1 * corner_normal[f, 1, 0] + b2 * corner_normal[f, 2, 0])
+        ny = sgn * (b0 * corner_normal[f, 0, 1] + b1 * corner_normal[f, 1, 1] + b2 * corner_normal[f, 2, 1])
+        nz = sgn * (b0 * corner_normal[f, 0, 2] + b1 * corner_normal[f, 1, 2] + b2 * corner_normal[f, 2, 2])
+        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+        nx /= nn
+        ny /= nn
+        nz /= nn
+        mu = -(nx * dx + ny * dy + nz * dz)
+        if mu > 0.0:
+            es = w0 * E_sun[r0] + w1 * E_sun[r1] + w2 * E_sun[r2]
+            cs = nx * sun[0] + ny * sun[1] + nz * sun[2]
+            if es > 0.0 and cs > 0.0 and sun[3] > 0.0:
+                vis = min(es / (sun[3] * cs), 1.0)
+                sr, sg, sb = brdf_cos(nx, ny, nz, -dx, -dy, -dz, sun[0], sun[1], sun[2], 0.0, 0.0, 0.0,
+                                      mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2], mat_alpha[c])
+                lr += sr * sun[3] * vis
+                lg += sg * sun[3] * vis
+                lb += sb * sun[3] * vis
+            ar, ag, ab = specular_albedo(table, mu, mat_alpha[c], mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2])
+            lr += ar * max(er - es, 0.0) / math.pi
+            lg += ag * max(eg - es, 0.0) / math.pi
+            lb += ab * max(eb - es, 0.0) / math.pi
+    return lr, lg, lb
+
+
+@pjit
+def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset, face_normal, corner_normal,
+               comp_of_face, mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids,
+               p, tex, out):
+    """out += L̄_in · (F0·A + B): the specular reflection of the environment and other parts,
+    with L̄_in blended by the lobe width α from the radiance along the mirror direction
+    (sharp lobes, α ≤ 0.05) to E/π, the mean radiance of the point's own indirect irradiance
+    ``E_point`` (wide lobes, α ≥ 0.35), as if it arrived uniformly."""
+    for j in numba.prange(idx.shape[0]):
+        k = idx[j]
+        r, g, b = incoming(geom[j], prim[j], hu[j], hv[j], O[j, 0], O[j, 1], O[j, 2], D[j, 0], D[j, 1], D[j, 2],
+                           face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, table,
+                           sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex)
+        c = comp[k]
+        t = min(max((mat_alpha[c] - 0.05) / 0.3, 0.0), 1.0)
+        r = (1.0 - t) * r + t * E_point[k, 0] / math.pi
+        g = (1.0 - t) * g + t * E_point[k, 1] / math.pi
+        b = (1.0 - t) * b + t * E_point[k, 2] / math.pi
+        mu = NS[k, 0] * WO[k, 0] + NS[k, 1] * WO[k, 1] + NS[k, 2] * WO[k, 2]
+        ar, ag, ab = specular_albedo(table, mu, mat_alpha[c], mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2])
+        out[k, 0] += r * ar
+        out[k, 1] += g * ag
+        out[k, 2] += b * ab
+
+
+@jit
+def _strata(n):
+    """Columns of an exact gx × (n / gx) stratification of n samples (the largest divisor of
+    n not above √n): every stratum gets exactly one sample, so none is left out."""
+    g = int(math.sqrt(n))
+    while n % g:
+        g -= 1
+    return g
+
+
+@pjit
+def gather_rays(P, NS, NG, n_rays, seed, pix, eps, out_o, out_d):
+    """n_rays cosine-weighted directions about the shading normal per point, stratified in
+    (radius², azimuth) on an exact gx × gy grid and rotated per pixel and seed."""
+    gx = _strata(n_rays)
+    gy = n_rays // gx
+    for k in numba.prange(P.shape[0]):
+        tx, ty, tz, bx, by, bz = onb(NS[k, 0], NS[k, 1], NS[k, 2])
+        key = pix[k] * 1009 + seed
+        for j in range(n_rays):  # jittered: an independent point in every stratum
+            u1 = ((j % gx) + _hash01(key, 2 * j + 11)) / gx
+            u2 = ((j // gx) + _hash01(key, 2 * j + 12)) / gy
+            r = math.sqrt(u1)
+            phi = 2.0 * math.pi * u2
+            lx = r * math.cos(phi)
+            ly = r * math.sin(phi)
+            lz = math.sqrt(max(0.0, 1.0 - u1))
+            m = k * n_rays + j
+            out_d[m, 0] = lx * tx + ly * bx + lz * NS[k, 0]
+            out_d[m, 1] = lx * ty + ly * by + lz * NS[k, 1]
+            out_d[m, 2] = lx * tz + ly * bz + lz * NS[k, 2]
+            for a in range(3):
+                out_o[m, a] = P[k, a] + eps * NG[k, a]
+
+
+@pjit
+def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
+               mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, out):
+    """Irradiance estimate π/N Σ L_in per point (rays under the geometric surface count 0)."""
+    for k in numba.prange(out.shape[0]):
+        sr = 0.0
+        sg = 0.0
+        sb = 0.0
+        for j in range(n_rays):
+            m = k * n_rays + j
+            if D[m, 0] * NG[k, 0] + D[m, 1] * NG[k, 1] + D[m, 2] * NG[k, 2] <= 0.0:
+                continue
+            r, g, b = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
+                               D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
+                               mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex)
+            sr += r
+            sg += g
+            sb += b
+        k_ = math.pi / n_rays
+        out[k, 0] = sr * k_
+        out[k, 1] = sg * k_
+        out[k, 2] = sb * k_
+
+
+@pjit
+def atrous(img, inst, normal, depth, fx, fy, cx, cy, step, out):
+    """One pass of the edge-avoiding à-trous wavelet filter (Dammertz et al. 2010,
+    doi:10.2312/EGGH/HPG10/067-075): a 5×5 B3-spline kernel with holes of ``step`` pixels,
+    weighted by same instance id, normal agreement (n·n')^64 and distance from the centre
+    pixel's tangent plane (in units of the pixel footprint)."""
+    H, W = inst.shape
+    h = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
+    for v in numba.prange(H):
+        for u in range(W):
+            i0 = inst[v, u]
+            if i0 == 0:
+                continue
+            z0 = depth[v, u]
+            n0x = normal[v, u, 0]
+            n0y = normal[v, u, 1]
+            n0z = normal[v, u, 2]
+            foot = z0 / fx
+            sr = 0.0
+            sg = 0.0
+            sb = 0.0
+            sw = 0.0
+            for a in range(5):
+                vv = v + (a - 2) * step
+                if vv < 0 or vv >= H:
+                    continue
+                for b in range(5):
+                    uu = u + (b - 2) * step
+                    if uu < 0 or uu >= W or inst[vv, uu] != i0:
+                        continue
+                    nd = n0x * normal[vv, uu, 0] + n0y * normal[vv, uu, 1] + n0z * normal[vv, uu, 2]
+                    if nd <= 0.0:
+                        continue
+                    wn = nd ** 64
+                    # distance from the centre's tangent plane, camera frame: X = (u − cx) z / fx
+                    z1 = depth[vv, uu]
+                    dxp = ((uu - u) * z1 + (u - cx) * (z1 - z0)) / fx
+                    dyp = ((vv - v) * z1 + (v - cy) * (z1 - z0)) / fy
+                    dzp = z1 - z0
+                    dist = abs(n0x * dxp + n0y * dyp + n0z * dzp) / (foot * (1.0 + step))
+                    w = h[a] * h[b] * wn * math.exp(-dist)
+                    sr += w * img[vv, uu, 0]
+                    sg += w * img[vv, uu, 1]
+                    sb += w * img[vv, uu, 2]
+                    sw += w
+            out[v, u, 0] = sr / sw
+            out[v, u, 1] = sg / sw
+            out[v, u, 2] = sb / sw
+
+
+@pjit
+def edge_pixels(inst, lit_img, normal, depth, earth_px, rect, out):
+    """Pixels whose 4-neighbours disagree: another id (or Earth vs space), lit vs shadowed,
+    a crease (normals > ~25° apart) or a depth step (> 3 % of the depth)."""
+    H, W = inst.shape
+    u0, v0, u1, v1 = rect[0], rect[1], rect[2], rect[3]
+    for v in numba.prange(v0, v1):
+        for u in range(u0, u1):
+            i0 = inst[v, u]
+            e0 = earth_px[v, u]
+            flag = False
+            for a in range(4):
+                vv = v + (1 if a == 0 else (-1 if a == 1 else 0))
+                uu = u + (1 if a == 2 else (-1 if a == 3 else 0))
+                if vv < 0 or vv >= H or uu < 0 or uu >= W:
+                    continue
+                if inst[vv, uu] != i0 or earth_px[vv, uu] != e0:
+                    flag = True
+                    break
+                if i0 == 0:
+                    continue
+                if lit_img[vv, uu] != lit_img[v, u]:
+                    flag = True
+                    break
+                nd = normal[v, u, 0] * normal[vv, uu, 0] + normal[v, u, 1] * normal[vv, uu, 1] + \
+                    normal[v, u, 2] * normal[vv, uu, 2]
+                if nd < 0.9 or abs(depth[vv, uu] - depth[v, u]) > 0.03 * depth[v, u]:
+                    flag = True
+                    break
+            out[v, u] = flag
+
+
+@pjit
+def subpixel_rays(pix, W, n_grid, o_body, R_body_from_cam, fx, fy, cx, cy, out_d):
+    """n_grid² stratified sub-pixel ray directions (body frame, z_cam = 1) per edge pixel."""
+    S = n_grid * n_grid
+    for k in numba.prange(pix.shape[0]):
+        v = pix[k] // W
+        u = pix[k] % W
+        for j in range(S):
+            du = ((j % n_grid) + 0.5) / n_grid - 0.5
+            dv = ((j // n_grid) + 0.5) / n_grid - 0.5
+            x = (u + du - cx) / fx
+            y = (v + dv - cy) / fy
+            m = k * S + j
+            for a in range(3):
+                out_d[m, a] = R_body_from_cam[a, 0] * x + R_body_from_cam[a, 1] * y + R_body_from_cam[a, 2]
+
+
+@pjit
+def background(pix, W, o_body, R_body_from_cam, fx, fy, cx, cy, n_grid, p, tex, out):
+    """Earth (no ambient sky) seen through each listed pixel, box-filtered over n_grid²
+    sub-pixel rays; returns nothing, writes out[k]."""
+    S = n_grid * n_grid
+    for k in numba.prange(pix.shape[0]):
+        v = pix[k] // W
+        u = pix[k] % W
+        sr = 0.0
+        sg = 0.0
+        sb = 0.0
+        for j in range(S):
+            du = ((j % n_grid) + 0.5) / n_grid - 0.5
+            dv = ((j // n_grid) + 0.5) / n_grid - 0.5
+            x = (u + du - cx) / fx
+            y = (v + dv - cy) / fy
+            dx = R_body_from_cam[0, 0] * x + R_body_from_cam[0, 1] * y + R_body_from_cam[0, 2]
+            dy = R_body_from_cam[1, 0] * x + R_body_from_cam[1, 1] * y + R_body_from_cam[1, 2]
+            dz = R_body_from_cam[2, 0] * x + R_body_from_cam[2, 1] * y + R_body_from_cam[2, 2]
+            dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+            r, g, b = env.env_radiance(p, tex, o_body[0], o_body[1], o_body[2], dx / dn, dy / dn, dz / dn)
+            sr += r
+            sg += g
+            sb += b
+        out[k, 0] = sr / S
+        out[k, 1] = sg / S
+        out[k, 2] = sb / S
+
+
+@pjit
+def earth_mask(o_body, R_body_from_cam, fx, fy, cx, cy, p, rect, out):
+    """Pixels (inside rect) whose centre ray meets Earth."""
+    for v in numba.prange(rect[1], rect[3]):
+        y = (v - cy) / fy
+        for u in range(rect[0], rect[2]):
+            x = (u - cx) / fx
+            dx = R_body_from_cam[0, 0] * x + R_body_from_cam[0, 1] * y + R_body_from_cam[0, 2]
+            dy = R_body_from_cam[1, 0] * x + R_body_from_cam[1, 1] * y + R_body_from_cam[1, 2]
+            dz = R_body_from_cam[2, 0] * x + R_body_from_cam[2, 1] * y + R_body_from_cam[2, 2]
+            dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+            out[v, u] = env.earth_hit(p, o_body[0], o_body[1], o_body[2], dx / dn, dy / dn, dz / dn) >= 0.0
+
+
+@pjit
+def env_along(o_body, D, p, tex, out):
+    """Environment radiance along unit directions D from o_body."""
+    for k in numba.prange(D.shape[0]):
+        r, g, b = env.env_radiance(p, tex, o_body[0], o_body[1], o_body[2], D[k, 0], D[k, 1], D[k, 2])
+        out[k, 0] = r
+        out[k, 1] = g
+        out[k, 2] = b
+
+
+@pjit
+def lobe_rays(idx, P, NS, NG, WO, comp, mat_f0, mat_alpha, n_rays, seed, pix, eps, out_o, out_d, out_w):
+    """n_rays directions per listed point drawn from its GGX lobe (visible normals, stratified,
+    rotated per pixel), with weights f_spec·cos/pdf (RGB; 0 where the draw fails or goes
+    under the geometric surface)."""
+    gx = _strata(n_rays)
+    gy = n_rays // gx
+    for j in numba.prange(idx.shape[0]):
+        k = idx[j]
+        c = comp[k]
+        key = pix[k] * 1013 + seed
+        for r in range(n_rays):
+            u1 = ((r % gx) + _hash01(key, 2 * r + 21)) / gx
+            u2 = ((r // gx) + _hash01(key, 2 * r + 22)) / gy
+            lx, ly, lz, wr, wg, wb, ok = sample_brdf(NS[k, 0], NS[k, 1], NS[k, 2], WO[k, 0], WO[k, 1], WO[k, 2],
+                                                     0.0, 0.0, 0.0, mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2],
+                                                     mat_alpha[c], 0.0, u1, u2)
+            m = j * n_rays + r
+            if not ok or lx * NG[k, 0] + ly * NG[k, 1] + lz * NG[k, 2] <= 0.0:
+                wr = 0.0
+                wg = 0.0
+                wb = 0.0
+                lx, ly, lz = NG[k, 0], NG[k, 1], NG[k, 2]
+            out_d[m, 0] = lx
+            out_d[m, 1] = ly
+            out_d[m, 2] = lz
+            out_w[m, 0] = wr
+            out_w[m, 1] = wg
+            out_w[m, 2] = wb
+            for a in range(3):
+                out_o[m, a] = P[k, a] + eps * NG[k, a]
+
+
+@pjit
+def lobe_sum(n_rays, O, D, Wt, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
+             mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, out):
+    """Mean of weight × incoming radiance over each point's lobe rays."""
+    for j in numba.prange(out.shape[0]):
+        sr = 0.0
+        sg = 0.0
+        sb = 0.0
+        for r in range(n_rays):
+            m = j * n_rays + r
+            if Wt[m, 0] == 0.0 and Wt[m, 1] == 0.0 and Wt[m, 2] == 0.0:
+                continue
+            a, b, c = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
+                               D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
+                               mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex)
+            sr += Wt[m, 0] * a
+            sg += Wt[m, 1] * b
+            sb += Wt[m, 2] * c
+        out[j, 0] = sr / n_rays
+        out[j, 1] = sg / n_rays
+        out[j, 2] = sb / n_rays

@@ -1,0 +1,446 @@
+"""Body-space radiance cache: environment occlusion and inter-reflection, precomputed once.
+
+A target is rigid: in its body frame the geometry never changes, only the light does. So the
+expensive part of global illumination — which part of the surface sees which other part, and
+which directions of the sky it sees — is computed once per target and reused for every frame
+(the idea of precomputed radiance transfer, Sloan et al. 2002, doi:10.1145/566654.566612, with
+a radiosity-style surface discretisation, Cohen & Wallace 1993).
+
+Samples
+    Surface points on a barycentric lattice over every triangle: a triangle whose longest edge
+    is ℓ gets s = ⌈ℓ/h⌉ subdivisions ((s+1)(s+2)/2 lattice points, h the spacing). Corner
+    points are shared by all triangles that share the (welded) vertex and its shading normal,
+    so the cache is continuous across smooth meshes. Each sample has a front row and, on open
+    (two-sided) components, a back row.
+Transfer (once)
+    From every row, G cosine-weighted stratified rays. A ray that hits the front of a surface
+    (or either side of an open one) adds 1/G, split over the three lattice points around the
+    hit with their interpolation weights, to the row's entries of the surface matrix W_ss; a
+    ray that escapes adds 1/G to the octahedral sky cell (n×n) it leaves through (W_se). A
+    row whose rays mostly hit the inside of a closed shell lies buried in another part: it
+    takes the values of the nearest unburied row of its component and side.
+Per frame
+    E_sun (one shadow ray per row), L_env on the sky cells (Earth + ambient), then the
+    Jacobi iteration of the radiosity equation for irradiance, all bounces:
+
+        E = E_sun + π W_se L_env + W_ss (ρ ⊙ E),     L_out = ρ/π ⊙ E
+
+    where ρ is each surface's bounce albedo (diffuse plus the cosine-averaged specular albedo:
+    within the cache, light reflected towards other parts is treated as diffuse). Seen along
+    a given ray (:func:`raytrace._shading.incoming`), a glossy surface instead returns its
+    diffuse part, its exact specular reflection of the Sun towards that ray, and its
+    specular albedo times the rest of its irradiance (as if that arrived uniformly).
+
+Errors: the cache resolves occlusion to the lattice spacing and the sky to one cell; the
+``balanced`` renderer therefore uses it only one bounce away from the pixel (final gather),
+and ``fast`` uses it directly, interpolated (see :mod:`raytrace.shade`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+import scipy.sparse as sp
+
+from . import environment as env
+from ._jit import jit, pjit
+from .brdf import bounce_albedo
+
+__all__ = ["CacheFrame", "RadianceCache"]
+
+_BURIED_FRACTION = 0.25
+
+
+@jit
+def _lattice_local(s, a, b):
+    """Index of lattice point (a, b) (a + b ≤ s) within its triangle's table."""
+    return a * (s + 1) - (a * (a - 1)) // 2 + b
+
+
+@jit
+def lattice_weights(s, b1, b2):
+    """The three lattice points around barycentrics (b1, b2) and their weights:
+    (a0, b0, a1, b1, a2, b2, w0, w1, w2) in lattice coordinates."""
+    x = min(max(b1, 0.0), 1.0) * s
+    y = min(max(b2, 0.0), 1.0) * s
+    i = min(int(x), s - 1)
+    j = min(int(y), s - 1 - i)
+    fx = x - i
+    fy = y - j
+    if fx + fy > 1.0 and i + j + 2 <= s:
+        return i + 1, j, i, j + 1, i + 1, j + 1, 1.0 - fy, 1.0 - fx, fx + fy - 1.0
+    w1 = min(max(fx, 0.0), 1.0)
+    w2 = min(max(fy, 0.0), 1.0 - w1)
+    return i, j, i + 1, j, i, j + 1, 1.0 - w1 - w2, w1, w2
+
+
+@jit
+def _lattice_points(V, F, corner_normal, face_s, lat_start, pos, nrm):
+    """Position and interpolated shading normal of every lattice point of every triangle."""
+    for f in range(F.shape[0]):
+        s = face_s[f]
+        base = lat_start[f]
+        for a in range(s + 1):
+            for b in range(s + 1 - a):
+                k = base + _lattice_local(s, a, b)
+                w1 = a / s
+                w2 = b / s
+                w0 = 1.0 - w1 - w2
+                nx = w0 * corner_normal[f, 0, 0] + w1 * corner_normal[f, 1, 0] + w2 * corner_normal[f, 2, 0]
+                ny = w0 * corner_normal[f, 0, 1] + w1 * corner_normal[f, 1, 1] + w2 * corner_normal[f, 2, 1]
+                nz = w0 * corner_normal[f, 0, 2] + w1 * corner_normal[f, 1, 2] + w2 * corner_normal[f, 2, 2]
+                nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+                for c in range(3):
+                    pos[k, c] = w0 * V[F[f, 0], c] + w1 * V[F[f, 1], c] + w2 * V[F[f, 2], c]
+                nrm[k, 0] = nx / nn
+                nrm[k, 1] = ny / nn
+                nrm[k, 2] = nz / nn
+
+
+@jit
+def _hash01(i, k):
+    h = (i * 0x9E3779B1 + k * 0x85EBCA77 + 0x27D4EB2F) & 0xFFFFFFFF
+    h ^= h >> 15
+    h = (h * 0x2C1B3C6D) & 0xFFFFFFFF
+    h ^= h >> 12
+    h = (h * 0x297A2D39) & 0xFFFFFFFF
+    h ^= h >> 15
+    return (h & 0xFFFFFF) / 16777216.0
+
+
+@pjit
+def _oct_cells(nrm, n):
+    out = np.empty(nrm.shape[0], np.int64)
+    for i in numba.prange(nrm.shape[0]):
+        out[i] = env.oct_cell(nrm[i, 0], nrm[i, 1], nrm[i, 2], n)
+    return out
+
+
+@pjit
+def _cache_rays(rows, pos, nrm, eps, gx, gy, out_o, out_d):
+    """G = gx·gy cosine-weighted directions per row (sample 2i front, 2i+1 back), jittered
+    stratified in (radius², azimuth)."""
+    G = gx * gy
+    for r in numba.prange(rows.shape[0]):
+        row = rows[r]
+        i = row // 2
+        sgn = 1.0 if row % 2 == 0 else -1.0
+        nx = sgn * nrm[i, 0]
+        ny = sgn * nrm[i, 1]
+        nz = sgn * nrm[i, 2]
+        sign = 1.0 if nz >= 0.0 else -1.0
+        a = -1.0 / (sign + nz)
+        b = nx * ny * a
+        tx, ty, tz = 1.0 + sign * nx * nx * a, sign * b, -sign * nx
+        bx, by, bz = b, sign + ny * ny * a, -ny
+        for k in range(G):  # jittered: an independent point in every stratum
+            u1 = ((k % gx) + _hash01(row, 2 * k + 1)) / gx
+            u2 = ((k // gx) + _hash01(row, 2 * k + 2)) / gy
+            rr = math.sqrt(u1)
+            phi = 2.0 * math.pi * u2
+            lx = rr * math.cos(phi)
+            ly = rr * math.sin(phi)
+            lz = math.sqrt(max(0.0, 1.0 - u1))
+            j = r * G + k
+            out_d[j, 0] = lx * tx + ly * bx + lz * nx
+            out_d[j, 1] = lx * ty + ly * by + lz * ny
+            out_d[j, 2] = lx * tz + ly * bz + lz * nz
+            out_o[j, 0] = pos[i, 0] + eps * nx
+            out_o[j, 1] = pos[i, 1] + eps * ny
+            out_o[j, 2] = pos[i, 2] + eps * nz
+
+
+@jit
+def _bin_hits(G, d, geom, prim, hu, hv, face_offset, face_normal, two_sided_face, face_s, lat_start, lat_ids,
+              n_cells, hit_ray, hit_cols, hit_w, esc_ray, esc_cell, buried):
+    """Classify a chunk's rays: escapes (sky cell), hits (the three lattice rows around the hit
+    and their interpolation weights), and hits on the inside of a closed shell (counted per
+    row in ``buried``). Returns the numbers of hits and escapes written."""
+    nh = 0
+    ne = 0
+    for j in range(d.shape[0]):
+        g = geom[j]
+        if g < 0:
+            esc_ray[ne] = j
+            esc_cell[ne] = env.oct_cell(d[j, 0], d[j, 1], d[j, 2], n_cells)
+            ne += 1
+            continue
+        f = face_offset[g] + prim[j]
+        dot = d[j, 0] * face_normal[f, 0] + d[j, 1] * face_normal[f, 1] + d[j, 2] * face_normal[f, 2]
+        side = 0 if dot < 0.0 else 1
+        if side == 1 and not two_sided_face[f]:
+            buried[j // G] += 1
+            continue
+        s = face_s[f]
+        a0, b0, a1, b1, a2, b2, w0, w1, w2 = lattice_weights(s, hu[j], hv[j])
+        base = lat_start[f]
+        hit_ray[nh] = j
+        hit_cols[nh, 0] = 2 * lat_ids[base + _lattice_local(s, a0, b0)] + side
+        hit_cols[nh, 1] = 2 * lat_ids[base + _lattice_local(s, a1, b1)] + side
+        hit_cols[nh, 2] = 2 * lat_ids[base + _lattice_local(s, a2, b2)] + side
+        hit_w[nh, 0] = w0
+        hit_w[nh, 1] = w1
+        hit_w[nh, 2] = w2
+        nh += 1
+    return nh, ne
+
+
+@pjit
+def _sun_rays(rows, pos, nrm, eps, sx, sy, sz, cos_out, out_o, out_d):
+    for r in numba.prange(rows.shape[0]):
+        row = rows[r]
+        i = row // 2
+        sgn = 1.0 if row % 2 == 0 else -1.0
+        c = sgn * (nrm[i, 0] * sx + nrm[i, 1] * sy + nrm[i, 2] * sz)
+        cos_out[r] = c
+        for a in range(3):
+            out_o[r, a] = pos[i, a] + sgn * eps * nrm[i, a]
+        out_d[r, 0] = sx
+        out_d[r, 1] = sy
+        out_d[r, 2] = sz
+
+
+@jit
+def lattice_rows(valid, face_s, lat_start, lat_ids, f, b1, b2, side):
+    """The three cache rows around barycentrics (b1, b2) of face f on ``side`` (0 front, 1
+    back) and their linear interpolation weights; rows that do not exist get weight 0 (the
+    others are renormalised; all three 0 when none exists)."""
+    s = face_s[f]
+    a0, c0, a1, c1, a2, c2, w0, w1, w2 = lattice_weights(s, b1, b2)
+    base = lat_start[f]
+    r0 = 2 * lat_ids[base + _lattice_local(s, a0, c0)] + side
+    r1 = 2 * lat_ids[base + _lattice_local(s, a1, c1)] + side
+    r2 = 2 * lat_ids[base + _lattice_local(s, a2, c2)] + side
+    if not valid[r0]:
+        w0 = 0.0
+    if not valid[r1]:
+        w1 = 0.0
+    if not valid[r2]:
+        w2 = 0.0
+    wt = w0 + w1 + w2
+    if wt > 0.0:
+        w0 /= wt
+        w1 /= wt
+        w2 /= wt
+    return r0, r1, r2, w0, w1, w2
+
+
+@jit
+def interpolate_rows(values, valid, face_s, lat_start, lat_ids, f, b1, b2, side):
+    """Value (RGB) of a per-row array at barycentrics (b1, b2) of face f on ``side``."""
+    r0, r1, r2, w0, w1, w2 = lattice_rows(valid, face_s, lat_start, lat_ids, f, b1, b2, side)
+    return (w0 * values[r0, 0] + w1 * values[r1, 0] + w2 * values[r2, 0],
+            w0 * values[r0, 1] + w1 * values[r1, 1] + w2 * values[r2, 1],
+            w0 * values[r0, 2] + w1 * values[r1, 2] + w2 * values[r2, 2])
+
+
+class CacheFrame:
+    """The cache solved for one frame's light.
+
+    Attributes
+    ----------
+    irradiance_W_m2 : ndarray, shape (rows, 3)
+        Total irradiance per row, all bounces [W/m²].
+    sun_irradiance_W_m2 : ndarray, shape (rows,)
+        Direct sunlight per row (with shadow) [W/m²].
+    indirect_W_m2 : ndarray, shape (rows, 3)
+        Irradiance from everything but the direct Sun (sky, Earth, other parts) [W/m²].
+    radiance_out : ndarray, shape (rows, 3)
+        Outgoing radiance, diffuse-equivalent, ρ/π · E [W/(m²·sr)].
+    iterations : int
+        Jacobi iterations taken.
+    """
+
+    __slots__ = ("indirect_W_m2", "irradiance_W_m2", "iterations", "radiance_out", "sun_irradiance_W_m2")
+
+    def __init__(self, E, E_sun, radiance_out, iterations):
+        self.irradiance_W_m2 = E
+        self.sun_irradiance_W_m2 = E_sun
+        self.indirect_W_m2 = np.ascontiguousarray(E - E_sun[:, None])
+        self.radiance_out = radiance_out
+        self.iterations = iterations
+
+
+class RadianceCache:
+    """The precomputed transfer of a :class:`~raytrace.scene.Scene` (see module notes).
+
+    Parameters
+    ----------
+    scene : Scene
+    spacing_m : float, optional
+        Lattice spacing h (default: 1/100 of the target's bounding-box diagonal) [m].
+    rays_per_sample : int
+        G, rays per sample row (a multiple of 8) [-].
+    sky_cells : int
+        n, the octahedral sky map has n×n cells [-].
+    """
+
+    def __init__(self, scene, *, spacing_m: float | None = None, rays_per_sample: int = 128, sky_cells: int = 16):
+        if spacing_m is None:
+            spacing_m = scene.scale_m / 60.0
+        if not (math.isfinite(spacing_m) and spacing_m > 0):
+            raise ValueError(f"spacing_m must be a positive finite length, got {spacing_m!r}")
+        if not (isinstance(rays_per_sample, int) and rays_per_sample >= 8 and rays_per_sample % 8 == 0):
+            raise ValueError(f"rays_per_sample must be a positive multiple of 8, got {rays_per_sample!r}")
+        if not (isinstance(sky_cells, int) and 4 <= sky_cells <= 256):
+            raise ValueError(f"sky_cells must be an integer in [4, 256], got {sky_cells!r}")
+        self.scene = scene
+        self.spacing_m = float(spacing_m)
+        self.G = rays_per_sample
+        self.n_cells = sky_cells
+        self.eps_m = 2e-5 * max(scene.scale_m, 1e-3)
+        V, F = scene.vertices, scene.faces
+        tri = V[F]
+        area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        self.face_s = np.clip(np.ceil(np.sqrt(area2) / self.spacing_m), 1, 64).astype(np.int64)
+        counts = (self.face_s + 1) * (self.face_s + 2) // 2
+        self.lat_start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        pos = np.zeros((int(counts.sum()), 3))
+        nrm = np.zeros_like(pos)
+        _lattice_points(V, F, scene.corner_normal.astype(np.float64), self.face_s, self.lat_start, pos, nrm)
+        # merge lattice points of one component that lie in the same cell of side h/2 and whose
+        # normals fall in the same octahedral cell (8×8): one sample each, shared by triangles
+        comp = np.repeat(scene.component_of_face, counts)
+        cell = np.floor(pos / (0.5 * self.spacing_m)).astype(np.int64)
+        ncell = _oct_cells(nrm, 8)
+        key = np.column_stack([comp, cell, ncell])
+        _, self.lat_ids = np.unique(key, axis=0, return_inverse=True)
+        self.lat_ids = self.lat_ids.ravel().astype(np.int64)
+        n_samples = int(self.lat_ids.max()) + 1
+        members = np.bincount(self.lat_ids, minlength=n_samples).astype(np.float64)
+        mean = np.column_stack([np.bincount(self.lat_ids, pos[:, c], n_samples) for c in range(3)])
+        mean /= members[:, None]
+        # each sample sits at its member nearest the members' mean: on the surface, not
+        # inside a curved one (a mean of points on a convex surface lies below it)
+        dist = np.linalg.norm(pos - mean[self.lat_ids], axis=1)
+        order = np.lexsort((dist, self.lat_ids))
+        first = order[np.searchsorted(self.lat_ids[order], np.arange(n_samples))]
+        self.positions = pos[first]
+        self.normals = nrm[first]
+        self.n_samples = n_samples
+        two_face = scene.two_sided[scene.component_of_face]
+        self.two_sided_face = two_face
+        # rows 2i (front) always; 2i+1 (back) for samples on open components
+        sample_two = np.zeros(n_samples, dtype=bool)
+        sample_two[self.lat_ids] = np.repeat(two_face, counts)
+        sample_face = np.zeros(n_samples, dtype=np.int64)
+        sample_face[self.lat_ids] = np.repeat(np.arange(len(F)), counts)
+        self.n_rows = 2 * n_samples
+        valid = np.zeros(self.n_rows, dtype=bool)
+        valid[0::2] = True
+        valid[1::2] = sample_two
+        comp = scene.component_of_face[sample_face]
+        self.row_component = np.repeat(comp, 2)
+        mats = scene.materials
+        bounce = np.array([bounce_albedo(m.diffuse, m.f0, m.roughness) for m in mats])
+        self.rho_bounce = np.repeat(bounce[comp], 2, axis=0)  # (rows, 3)
+        self.solved = self._transfer(valid)  # rows solved for; buried rows copy their alias
+        self.valid = valid & (self.solved | (self.alias != np.arange(self.n_rows)))
+
+    def _transfer(self, valid: np.ndarray) -> np.ndarray:
+        scene = self.scene
+        rows_all = np.flatnonzero(valid).astype(np.int64)
+        G = self.G
+        chunk = max(1, (1 << 18) // G)
+        hit_rows, hit_cols, hit_w, esc_rows, esc_cells = [], [], [], [], []
+        buried = np.zeros(len(rows_all), dtype=np.int64)
+        for a in range(0, len(rows_all), chunk):
+            rows = rows_all[a:a + chunk]
+            n = len(rows) * G
+            o = np.empty((n, 3), dtype=np.float32)
+            d = np.empty((n, 3), dtype=np.float32)
+            _cache_rays(rows, self.positions, self.normals, self.eps_m, 8, G // 8, o, d)
+            h = scene.intersect(o, d)
+            hr = np.empty(n, np.int64)
+            hc = np.empty((n, 3), np.int64)
+            hw = np.empty((n, 3), np.float64)
+            er = np.empty(n, np.int64)
+            ec = np.empty(n, np.int64)
+            nh, ne = _bin_hits(G, d, h["geomID"], h["primID"], h["u"].astype(np.float64), h["v"].astype(np.float64),
+                               scene.face_offset, scene.face_normal, self.two_sided_face, self.face_s,
+                               self.lat_start, self.lat_ids, self.n_cells, hr, hc, hw, er, ec,
+                               buried[a:a + len(rows)])
+            hit_rows.append(rows[hr[:nh] // G])
+            hit_cols.append(hc[:nh])
+            hit_w.append(hw[:nh])
+            esc_rows.append(rows[er[:ne] // G])
+            esc_cells.append(ec[:ne])
+        ok = valid.copy()
+        ok[rows_all[buried > _BURIED_FRACTION * G]] = False
+        self.alias = self._aliases(valid, ok)
+        # a hit on a buried row takes the value of the row standing in for it
+        hr = np.concatenate(hit_rows) if hit_rows else np.empty(0, np.int64)
+        hc = self.alias[np.concatenate(hit_cols)] if hit_cols else np.empty((0, 3), np.int64)
+        hw = (np.concatenate(hit_w) if hit_w else np.empty((0, 3))) / G
+        keep_rows = ok[hr]
+        self.W_ss = sp.csr_matrix((hw[keep_rows].ravel(), (np.repeat(hr[keep_rows], 3), hc[keep_rows].ravel())),
+                                  shape=(self.n_rows, self.n_rows))
+        er = np.concatenate(esc_rows) if esc_rows else np.empty(0, np.int64)
+        ec = np.concatenate(esc_cells) if esc_cells else np.empty(0, np.int64)
+        ke = ok[er]
+        self.W_se = sp.csr_matrix((np.full(int(ke.sum()), 1.0 / G), (er[ke], ec[ke])),
+                                  shape=(self.n_rows, self.n_cells ** 2))
+        return ok
+
+    def _aliases(self, exists: np.ndarray, ok: np.ndarray) -> np.ndarray:
+        """For every buried row, the nearest unburied row of the same component and side whose
+        normal is within 60° (else the nearest of the same component and side, else itself):
+        buried rows take its values, so a surface point next to a junction is never dark."""
+        from scipy.spatial import cKDTree
+        alias = np.arange(self.n_rows)
+        buried = np.flatnonzero(exists & ~ok)
+        if len(buried) == 0:
+            return alias
+        comp = self.row_component
+        for side in (0, 1):
+            good = np.flatnonzero(ok & (np.arange(self.n_rows) % 2 == side))
+            bad = buried[buried % 2 == side]
+            if len(good) == 0 or len(bad) == 0:
+                continue
+            tree = cKDTree(self.positions[good // 2])
+            k = min(16, len(good))
+            _, nn = tree.query(self.positions[bad // 2], k=k)
+            nn = good[nn.reshape(len(bad), k)]
+            same = comp[nn] == comp[bad][:, None]
+            close = same & (np.einsum("ij,ikj->ik", self.normals[bad // 2], self.normals[nn // 2]) > 0.5)
+            for mask in (same, close):  # prefer close in normal, else same component
+                has = mask.any(axis=1)
+                alias[bad[has]] = nn[has, mask[has].argmax(axis=1)]
+        return alias
+
+    def solve(self, lighting, *, max_iterations: int = 64, tolerance: float = 1e-4) -> CacheFrame:
+        """Irradiance and outgoing radiance of every row under ``lighting``
+        (:class:`raytrace.lighting.Lighting`), all bounces, Jacobi to ``tolerance`` (relative)."""
+        rows = np.flatnonzero(self.solved).astype(np.int64)
+        E_sun = np.zeros(self.n_rows)
+        e_sun = lighting.sun_irradiance_at_target_W_m2
+        if e_sun > 0.0 and len(rows):
+            o = np.empty((len(rows), 3), np.float32)
+            d = np.empty((len(rows), 3), np.float32)
+            cosv = np.empty(len(rows))
+            sx, sy, sz = lighting.sun_dir_body
+            _sun_rays(rows, self.positions, self.normals, self.eps_m, sx, sy, sz, cosv, o, d)
+            lit = cosv > 0.0
+            seen = ~self.scene.occluded(o[lit], d[lit])
+            vals = np.zeros(len(rows))
+            vals[np.flatnonzero(lit)[seen]] = e_sun * cosv[lit][seen]
+            E_sun[rows] = vals
+        p, tex = lighting.packed()
+        L_env = env.env_cells(p, tex, self.n_cells, 4)
+        E0 = E_sun[:, None] + math.pi * (self.W_se @ L_env)
+        E = E0.copy()
+        it = 0
+        scale = max(float(np.abs(E0).max()), 1e-30)
+        for it in range(1, max_iterations + 1):
+            E_new = E0 + self.W_ss @ (self.rho_bounce * E)
+            delta = float(np.abs(E_new - E).max())
+            E = E_new
+            if delta <= tolerance * scale:
+                break
+        E[~self.solved] = 0.0
+        E = E[self.alias]  # buried rows take their stand-in's values
+        E_sun = E_sun[self.alias]
+        L_out = self.rho_bounce / math.pi * E
+        return CacheFrame(np.ascontiguousarray(E), E_sun, np.ascontiguousarray(L_out), it)

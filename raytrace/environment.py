@@ -1,0 +1,223 @@
+"""Numba kernels of the light that arrives from far away: Earth and a constant sky.
+
+The environment radiance ``L_env(o, ω)`` seen along a ray from ``o`` (body frame) is Earth's
+radiance where the ray meets Earth's sphere, else the ambient sky radiance. The Sun is not
+part of it: it is a directional light handled by explicit shadow rays.
+
+Earth is a sphere of radius ``R`` centred at ``d·ê`` (distance d along the unit vector ê from
+the target), a Lambertian reflector of the Sun: at a point with outward normal m its radiance
+is ``a(m)·E_sun·max(0, m·ŝ)/π`` (day side lit, night side dark, the terminator where m·ŝ = 0),
+with ``a(m)`` the albedo: uniform, a procedural Earth (oceans, land, ice and clouds, scaled
+so its mean equals the requested albedo) or an equirectangular image in Earth-fixed axes.
+
+Everything is packed into one float64 parameter vector (:data:`P_*` indices) plus the texture
+array, so kernels take only arrays and scalars.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from ._jit import jit, pjit
+
+# parameter vector layout
+P_HAS_EARTH, P_EX, P_EY, P_EZ, P_DIST, P_RADIUS, P_ALBEDO = 0, 1, 2, 3, 4, 5, 6
+P_SX, P_SY, P_SZ, P_ESUN, P_AMBIENT, P_TEXTURE, P_TEX_SCALE = 7, 8, 9, 10, 11, 12, 13
+P_R = 14  # 9 entries: R_earth_from_body, row-major
+N_PARAMS = 23
+
+TEX_UNIFORM, TEX_PROCEDURAL, TEX_IMAGE = 0, 1, 2
+
+
+@jit
+def _hash3(i, j, k):
+    h = (i * 73856093) ^ (j * 19349663) ^ (k * 83492791)
+    h = (h ^ (h >> 13)) * 1274126177
+    h = h ^ (h >> 16)
+    return (h & 0xFFFFFF) / 16777215.0
+
+
+@jit
+def _value_noise(x, y, z):
+    ix = math.floor(x)
+    iy = math.floor(y)
+    iz = math.floor(z)
+    fx = x - ix
+    fy = y - iy
+    fz = z - iz
+    ux = fx * fx * (3.0 - 2.0 * fx)
+    uy = fy * fy * (3.0 - 2.0 * fy)
+    uz = fz * fz * (3.0 - 2.0 * fz)
+    i = int(ix)
+    j = int(iy)
+    k = int(iz)
+    acc = 0.0
+    for a in range(2):
+        wa = ux if a else 1.0 - ux
+        for b in range(2):
+            wb = uy if b else 1.0 - uy
+            for c in range(2):
+                wc = uz if c else 1.0 - uz
+                acc += wa * wb * wc * _hash3(i + a, j + b, k + c)
+    return acc
+
+
+@jit
+def _fbm(x, y, z, octaves):
+    s = 0.0
+    amp = 0.5
+    norm = 0.0
+    for _ in range(octaves):
+        s += amp * _value_noise(x, y, z)
+        norm += amp
+        x *= 2.03
+        y *= 2.03
+        z *= 2.03
+        amp *= 0.5
+    return s / norm
+
+
+@jit
+def _smoothstep(a, b, x):
+    t = min(max((x - a) / (b - a), 0.0), 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+@jit
+def procedural_albedo(mx, my, mz):
+    """Unscaled albedo (RGB) of the procedural Earth at the Earth-fixed unit vector m:
+    dark blue oceans, brown-green land, polar ice, and white clouds from value-noise fBm."""
+    land = _smoothstep(0.52, 0.56, _fbm(1.7 * mx + 11.0, 1.7 * my + 3.0, 1.7 * mz + 7.0, 5))
+    r = 0.03 + land * (0.19 - 0.03)
+    g = 0.05 + land * (0.17 - 0.05)
+    b = 0.10 + land * (0.11 - 0.10)
+    ice = _smoothstep(0.90, 0.95, abs(mz))
+    r += ice * (0.75 - r)
+    g += ice * (0.77 - g)
+    b += ice * (0.80 - b)
+    cloud = _smoothstep(0.46, 0.70, _fbm(3.1 * mx - 5.0, 3.1 * my + 2.0, 3.1 * mz - 1.0, 6))
+    r += cloud * (0.80 - r)
+    g += cloud * (0.80 - g)
+    b += cloud * (0.82 - b)
+    return r, g, b
+
+
+@jit
+def earth_albedo(p, texture, mx, my, mz):
+    """Albedo (RGB) at the body-frame outward unit normal m of Earth's surface."""
+    kind = int(p[P_TEXTURE])
+    if kind == TEX_UNIFORM:
+        a = p[P_ALBEDO]
+        return a, a, a
+    ex = p[P_R + 0] * mx + p[P_R + 1] * my + p[P_R + 2] * mz
+    ey = p[P_R + 3] * mx + p[P_R + 4] * my + p[P_R + 5] * mz
+    ez = p[P_R + 6] * mx + p[P_R + 7] * my + p[P_R + 8] * mz
+    s = p[P_TEX_SCALE]
+    if kind == TEX_PROCEDURAL:
+        r, g, b = procedural_albedo(ex, ey, ez)
+        return min(r * s, 1.0), min(g * s, 1.0), min(b * s, 1.0)
+    h = texture.shape[0]
+    w = texture.shape[1]
+    lon = math.atan2(ey, ex)
+    lat = math.asin(max(-1.0, min(1.0, ez)))
+    col = min(int((lon + math.pi) / (2.0 * math.pi) * w), w - 1)
+    row = min(int((0.5 * math.pi - lat) / math.pi * h), h - 1)
+    return texture[row, col, 0] * s, texture[row, col, 1] * s, texture[row, col, 2] * s
+
+
+@jit
+def earth_hit(p, ox, oy, oz, dx, dy, dz):
+    """Distance along the unit ray (o, d) to Earth's sphere, or -1 when it misses."""
+    if p[P_HAS_EARTH] == 0.0:
+        return -1.0
+    cx = p[P_DIST] * p[P_EX] - ox
+    cy = p[P_DIST] * p[P_EY] - oy
+    cz = p[P_DIST] * p[P_EZ] - oz
+    b = dx * cx + dy * cy + dz * cz  # projection of the centre on the ray
+    if b <= 0.0:
+        return -1.0
+    # squared distance of the centre from the ray, cancellation-free: |c × d|²
+    qx = cy * dz - cz * dy
+    qy = cz * dx - cx * dz
+    qz = cx * dy - cy * dx
+    q2 = qx * qx + qy * qy + qz * qz
+    r = p[P_RADIUS]
+    if q2 >= r * r:
+        return -1.0
+    return b - math.sqrt(r * r - q2)
+
+
+@jit
+def env_radiance(p, texture, ox, oy, oz, dx, dy, dz):
+    """Radiance (RGB) arriving at o from direction d (unit): Earth's where the ray meets it,
+    else the ambient sky [W/(m²·sr)]."""
+    t = earth_hit(p, ox, oy, oz, dx, dy, dz)
+    if t < 0.0:
+        a = p[P_AMBIENT]
+        return a, a, a
+    r = p[P_RADIUS]
+    mx = (ox + t * dx - p[P_DIST] * p[P_EX]) / r
+    my = (oy + t * dy - p[P_DIST] * p[P_EY]) / r
+    mz = (oz + t * dz - p[P_DIST] * p[P_EZ]) / r
+    mu = mx * p[P_SX] + my * p[P_SY] + mz * p[P_SZ]
+    if mu <= 0.0:
+        return 0.0, 0.0, 0.0
+    ar, ag, ab = earth_albedo(p, texture, mx, my, mz)
+    k = p[P_ESUN] * mu / math.pi
+    return ar * k, ag * k, ab * k
+
+
+# ---------------------------------------------------------------- octahedral direction cells
+@jit
+def oct_cell(dx, dy, dz, n):
+    """Cell index (row-major, n×n) of the unit direction d in the octahedral map
+    (Engelhardt & Dachsbacher 2008; equal-area enough for binning)."""
+    s = abs(dx) + abs(dy) + abs(dz)
+    x = dx / s
+    y = dy / s
+    if dz < 0.0:
+        x, y = (1.0 - abs(y)) * (1.0 if x >= 0.0 else -1.0), (1.0 - abs(x)) * (1.0 if y >= 0.0 else -1.0)
+    i = min(int((x + 1.0) * 0.5 * n), n - 1)
+    j = min(int((y + 1.0) * 0.5 * n), n - 1)
+    return j * n + i
+
+
+@jit
+def oct_direction(u, v):
+    """Unit direction of octahedral map coordinates (u, v) in [0, 1]²."""
+    x = 2.0 * u - 1.0
+    y = 2.0 * v - 1.0
+    z = 1.0 - abs(x) - abs(y)
+    if z < 0.0:
+        x, y = (1.0 - abs(y)) * (1.0 if x >= 0.0 else -1.0), (1.0 - abs(x)) * (1.0 if y >= 0.0 else -1.0)
+    n = math.sqrt(x * x + y * y + z * z)
+    return x / n, y / n, z / n
+
+
+@pjit
+def env_cells(p, texture, n, sub):
+    """Mean environment radiance (RGB) over each of the n×n octahedral cells, from sub×sub
+    directions per cell, seen from the body origin (Earth's parallax over a target is
+    < 1e-5 rad), shape (n·n, 3)."""
+    out = np.zeros((n * n, 3))
+    for c in numba.prange(n * n):
+        i = c % n
+        j = c // n
+        sr = 0.0
+        sg = 0.0
+        sb = 0.0
+        for a in range(sub):
+            for b in range(sub):
+                dx, dy, dz = oct_direction((i + (a + 0.5) / sub) / n, (j + (b + 0.5) / sub) / n)
+                r, g, bb = env_radiance(p, texture, 0.0, 0.0, 0.0, dx, dy, dz)
+                sr += r
+                sg += g
+                sb += bb
+        k = 1.0 / (sub * sub)
+        out[c, 0] = sr * k
+        out[c, 1] = sg * k
+        out[c, 2] = sb * k
+    return out

@@ -1,0 +1,187 @@
+"""The light of one frame, in the target's body frame: Sun, Earth and an ambient sky.
+
+The orbit layer computes these directions (Sun, Earth) and the Earth-shadow fraction ν; the
+renderer only sees unit vectors in the body frame and SI quantities.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import environment as env
+
+__all__ = ["EARTH_RADIUS_M", "SOLAR_CONSTANT_W_M2", "SUN_ANGULAR_DIAMETER_RAD", "Earth", "Lighting"]
+
+SOLAR_CONSTANT_W_M2 = 1361.0
+"""Total solar irradiance at 1 au (Kopp & Lean 2011, doi:10.1029/2010GL045777) [W/m²]."""
+EARTH_RADIUS_M = 6378137.0
+"""Earth's equatorial radius (WGS-84), as in :mod:`orbit.constants` [m]."""
+SUN_ANGULAR_DIAMETER_RAD = math.radians(0.533)
+"""Mean angular diameter of the Sun seen from Earth's distance [rad]."""
+
+EARTH_TEXTURES = ("uniform", "procedural")
+
+
+def _unit3(name: str, value) -> tuple:
+    v = np.asarray(value, dtype=np.float64).ravel()
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
+    n = float(np.linalg.norm(v))
+    if not 0.999 <= n <= 1.001:
+        raise ValueError(f"{name} must be a unit vector (norm within 1e-3 of 1), got norm {n:.6g}")
+    return tuple((v / n).tolist())
+
+
+def _finite(name: str, value, lo: float, hi: float = math.inf, lo_open: bool = False) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(x) or x < lo or x > hi or (lo_open and x == lo):
+        lo_txt = f"({lo:g}" if lo_open else f"[{lo:g}"
+        raise ValueError(f"{name} must be a finite number in {lo_txt}, {hi:g}], got {value!r}")
+    return x
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Earth:
+    """Earth as an extended light and a backdrop.
+
+    Attributes
+    ----------
+    earth_dir_body : tuple of 3 float
+        Unit vector from the target towards Earth's centre, body frame [-].
+    distance_m : float
+        Distance from the target to Earth's centre, > ``radius_m`` [m].
+    radius_m : float
+        Earth's radius [m].
+    albedo : float
+        Mean Lambertian albedo in [0, 1] [-] (0.3: Earth's Bond albedo).
+    texture : str or ndarray
+        ``"uniform"`` (albedo everywhere), ``"procedural"`` (oceans, land, ice, clouds with
+        mean ``albedo``) or an equirectangular linear-albedo image, shape (h, w, 3), in
+        Earth-fixed axes (column 0 at longitude −180°, row 0 at the north pole).
+    R_body_from_earth : ndarray, shape (3, 3)
+        Earth-fixed axes (z north, x Greenwich) in the body frame, for the texture [-].
+    """
+
+    earth_dir_body: tuple
+    distance_m: float
+    radius_m: float = EARTH_RADIUS_M
+    albedo: float = 0.3
+    texture: object = "uniform"
+    R_body_from_earth: object = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "earth_dir_body", _unit3("earth_dir_body", self.earth_dir_body))
+        r = _finite("earth radius_m", self.radius_m, 0.0, lo_open=True)
+        object.__setattr__(self, "radius_m", r)
+        object.__setattr__(self, "distance_m", _finite("earth distance_m", self.distance_m, r, lo_open=True))
+        object.__setattr__(self, "albedo", _finite("earth albedo", self.albedo, 0.0, 1.0))
+        R = np.eye(3) if self.R_body_from_earth is None else np.asarray(self.R_body_from_earth, dtype=np.float64)
+        if R.shape != (3, 3) or not np.all(np.isfinite(R)) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
+            raise ValueError("R_body_from_earth must be a 3x3 rotation matrix")
+        object.__setattr__(self, "R_body_from_earth", R)
+        tex = self.texture
+        if isinstance(tex, str):
+            if tex not in EARTH_TEXTURES:
+                raise ValueError(f"earth texture must be one of {', '.join(EARTH_TEXTURES)} or an image array, "
+                                 f"got {tex!r}")
+        else:
+            img = np.asarray(tex, dtype=np.float64)
+            if img.ndim != 3 or img.shape[2] != 3 or min(img.shape[:2]) < 2 or not np.all(np.isfinite(img)) \
+                    or img.min() < 0 or img.max() > 1:
+                raise ValueError("earth texture image must have shape (h, w, 3) with linear albedo in [0, 1]")
+            object.__setattr__(self, "texture", np.ascontiguousarray(img))
+
+    @property
+    def angular_radius_rad(self) -> float:
+        """Half-angle of Earth's disc seen from the target [rad]."""
+        return math.asin(self.radius_m / self.distance_m)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Lighting:
+    """Light of one frame, body frame.
+
+    Attributes
+    ----------
+    sun_dir_body : tuple of 3 float
+        Unit vector from the target towards the Sun [-].
+    sun_irradiance_W_m2 : float
+        Solar irradiance on a surface facing the Sun outside Earth's shadow [W/m²]; also
+        what lights Earth's day side.
+    shadow_fraction : float
+        ν in [0, 1]: the fraction of the solar disc visible from the target (1 sunlit, 0 in
+        umbra); the target's direct sunlight is ν·``sun_irradiance_W_m2`` [-].
+    sun_angular_diameter_rad : float
+        Apparent diameter of the solar disc, for soft shadows (``reference`` quality) [rad].
+    earth : Earth or None
+        Earth as a light and backdrop (None: no Earth).
+    ambient_radiance_W_m2_sr : float
+        Constant sky radiance from every direction Earth does not cover [W/(m²·sr)].
+    """
+
+    sun_dir_body: tuple
+    sun_irradiance_W_m2: float = SOLAR_CONSTANT_W_M2
+    shadow_fraction: float = 1.0
+    sun_angular_diameter_rad: float = SUN_ANGULAR_DIAMETER_RAD
+    earth: Earth | None = None
+    ambient_radiance_W_m2_sr: float = 0.0
+
+    def __post_init__(self):
+        object.__setattr__(self, "sun_dir_body", _unit3("sun_dir_body", self.sun_dir_body))
+        object.__setattr__(self, "sun_irradiance_W_m2", _finite("sun_irradiance_W_m2", self.sun_irradiance_W_m2, 0.0))
+        object.__setattr__(self, "shadow_fraction", _finite("shadow_fraction", self.shadow_fraction, 0.0, 1.0))
+        object.__setattr__(self, "sun_angular_diameter_rad",
+                           _finite("sun_angular_diameter_rad", self.sun_angular_diameter_rad, 0.0, 0.1))
+        object.__setattr__(self, "ambient_radiance_W_m2_sr",
+                           _finite("ambient_radiance_W_m2_sr", self.ambient_radiance_W_m2_sr, 0.0))
+        if self.earth is not None and not isinstance(self.earth, Earth):
+            raise ValueError(f"earth must be a raytrace.lighting.Earth or None, got {type(self.earth).__name__}")
+
+    @property
+    def sun_irradiance_at_target_W_m2(self) -> float:
+        """ν · E_sun: the direct solar irradiance on a surface facing the Sun [W/m²]."""
+        return self.shadow_fraction * self.sun_irradiance_W_m2
+
+    def packed(self) -> tuple[np.ndarray, np.ndarray]:
+        """The parameter vector and texture array the environment kernels take."""
+        p = np.zeros(env.N_PARAMS)
+        p[env.P_SX:env.P_SZ + 1] = self.sun_dir_body
+        p[env.P_ESUN] = self.sun_irradiance_W_m2
+        p[env.P_AMBIENT] = self.ambient_radiance_W_m2_sr
+        texture = np.zeros((1, 1, 3))
+        e = self.earth
+        if e is not None:
+            p[env.P_HAS_EARTH] = 1.0
+            p[env.P_EX:env.P_EZ + 1] = e.earth_dir_body
+            p[env.P_DIST] = e.distance_m
+            p[env.P_RADIUS] = e.radius_m
+            p[env.P_ALBEDO] = e.albedo
+            p[env.P_R:env.P_R + 9] = e.R_body_from_earth.T.ravel()  # R_earth_from_body
+            if isinstance(e.texture, str):
+                p[env.P_TEXTURE] = env.TEX_UNIFORM if e.texture == "uniform" else env.TEX_PROCEDURAL
+                p[env.P_TEX_SCALE] = e.albedo / _procedural_mean() if e.texture == "procedural" else 1.0
+            else:
+                p[env.P_TEXTURE] = env.TEX_IMAGE
+                p[env.P_TEX_SCALE] = 1.0
+                texture = e.texture
+        return p, texture
+
+
+@functools.cache
+def _procedural_mean() -> float:
+    """Mean luminance-weighted albedo of the unscaled procedural Earth (Fibonacci sphere)."""
+    n = 20000
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    phi = k * math.pi * (3.0 - math.sqrt(5.0))
+    r = np.sqrt(1.0 - z * z)
+    vals = np.array([env.procedural_albedo(r[i] * math.cos(phi[i]), r[i] * math.sin(phi[i]), z[i])
+                     for i in range(n)])
+    return float((vals @ np.array([0.2126, 0.7152, 0.0722])).mean())

@@ -1,0 +1,244 @@
+"""Explicit scenes from a JSON file: ``python cli.py render-scene SCENE.json --out DIR``.
+
+Schema (version 1; lengths in metres, directions unit vectors in the target's body frame)::
+
+    {
+      "meshes": [                                   # or "target": "cassini" (a built-in)
+        {"path": "parts/bus.ply", "unit_scale_m": 1.0, "albedo": [0.6, 0.6, 0.6]},
+        {"path": "parts/panel.obj", "unit_scale_m": 0.001, "material": "solar_cell"}
+      ],
+      "camera": {"K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], "width": 1280, "height": 960,
+                 "R_cam_from_body": [9 numbers, row-major] or 3×3, "t_cam_m": [x, y, z]},
+      "sun": {"sun_dir_body": [x, y, z], "sun_irradiance_W_m2": 1361.0,
+              "shadow_fraction": 1.0, "angular_diameter_deg": 0.533},
+      "earth": {"earth_dir_body": [x, y, z], "earth_distance_m": 6778137.0,
+                "radius_m": 6378137.0, "albedo": 0.3, "texture": "uniform"},      # optional
+      "ambient_radiance_W_m2_sr": 0.0,                                          # optional
+      "quality": "balanced", "samples": null, "seed": 0                        # optional
+    }
+
+Mesh paths are relative to the JSON file's folder. Each mesh file becomes one or more
+components (one per part, :func:`raytrace.meshio.load_mesh`), all shaded with the entry's
+``material`` (a preset of :data:`raytrace.materials.MATERIAL_PRESETS`) or its Lambertian
+``albedo`` (linear RGB, or one number for grey). Camera pixel coordinates follow OpenCV: x
+right, y down, z forward, integer coordinates at pixel centres.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .camera import Camera
+from .lighting import EARTH_RADIUS_M, SOLAR_CONSTANT_W_M2, Earth, Lighting
+from .model import MATERIALS, TargetModel
+
+__all__ = ["SceneSpec", "load_scene_file", "scene_to_dict"]
+
+_TOP_KEYS = {"meshes", "target", "camera", "sun", "earth", "ambient_radiance_W_m2_sr", "quality", "samples", "seed",
+             "version"}
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SceneSpec:
+    """A loaded scene file: everything :func:`raytrace.shade.render` needs."""
+
+    model: TargetModel
+    camera: Camera
+    R_cam_from_body: np.ndarray
+    t_cam_m: np.ndarray
+    lighting: Lighting
+    quality: str = "balanced"
+    samples: int | None = None
+    seed: int = 0
+
+
+def _err(msg: str) -> ValueError:
+    return ValueError(f"scene file: {msg}")
+
+
+def _numbers(name: str, value, n: int) -> np.ndarray:
+    try:
+        a = np.asarray(value, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise _err(f"{name} must be {n} numbers, got {value!r}") from None
+    if a.shape != (n,) or not np.all(np.isfinite(a)):
+        raise _err(f"{name} must be {n} finite numbers, got {value!r}")
+    return a
+
+
+def _section(data: dict, key: str, required: bool = True) -> dict | None:
+    v = data.get(key)
+    if v is None:
+        if required:
+            raise _err(f"missing required key {key!r}")
+        return None
+    if not isinstance(v, dict):
+        raise _err(f"{key} must be an object, got {type(v).__name__}")
+    return v
+
+
+def _model(data: dict, folder: str) -> TargetModel:
+    from .meshio import load_mesh
+    from .targets import BUILTIN_TARGETS, load_target
+    if ("meshes" in data) == ("target" in data):
+        raise _err("give exactly one of 'meshes' (a list of mesh files) or 'target' "
+                   f"(one of {', '.join(BUILTIN_TARGETS)})")
+    if "target" in data:
+        if data["target"] not in BUILTIN_TARGETS:
+            raise _err(f"target must be one of {', '.join(BUILTIN_TARGETS)}, got {data['target']!r}")
+        return load_target(data["target"])
+    meshes = data["meshes"]
+    if not isinstance(meshes, list) or not meshes:
+        raise _err("meshes must be a non-empty list of {path, unit_scale_m, material | albedo}")
+    comps = []
+    for i, m in enumerate(meshes):
+        if not isinstance(m, dict) or "path" not in m:
+            raise _err(f"meshes[{i}] must be an object with a 'path'")
+        unknown = set(m) - {"path", "unit_scale_m", "material", "albedo", "name"}
+        if unknown:
+            raise _err(f"meshes[{i}]: unknown keys {sorted(unknown)} (allowed: path, unit_scale_m, material, "
+                       "albedo, name)")
+        if ("material" in m) == ("albedo" in m):
+            raise _err(f"meshes[{i}] needs exactly one of 'material' (one of {', '.join(MATERIALS)}) or "
+                       "'albedo' (linear RGB in [0, 1])")
+        material = m.get("material", "white_paint")
+        if material not in MATERIALS:
+            raise _err(f"meshes[{i}].material must be one of {', '.join(MATERIALS)}, got {material!r}")
+        albedo = None
+        if "albedo" in m:
+            a = np.broadcast_to(_numbers(f"meshes[{i}].albedo", m["albedo"], np.size(m["albedo"])), (3,)) \
+                if np.size(m["albedo"]) in (1, 3) else None
+            if a is None or np.any(a < 0) or np.any(a > 1):
+                raise _err(f"meshes[{i}].albedo must be 1 or 3 numbers in [0, 1], got {m['albedo']!r}")
+            albedo = tuple(float(x) for x in a)
+        path = m["path"]
+        if not isinstance(path, str):
+            raise _err(f"meshes[{i}].path must be a string")
+        path = path if os.path.isabs(path) else os.path.join(folder, path)
+        try:
+            part, _ = load_mesh(path, unit_scale_m=m.get("unit_scale_m", 1.0), default_material=material,
+                                name=m.get("name"))
+        except ValueError as exc:
+            raise _err(f"meshes[{i}]: {exc}") from None
+        for c in part.components:
+            name = c.name if len(meshes) == 1 else f"m{i}_{c.name}"
+            comps.append(replace(c, name=name, material=material, albedo=albedo))
+    return TargetModel(os.path.basename(folder) or "scene", tuple(comps), "scene file")
+
+
+def _camera(cam: dict) -> tuple[Camera, np.ndarray, np.ndarray]:
+    for key in ("K", "width", "height", "R_cam_from_body", "t_cam_m"):
+        if key not in cam:
+            raise _err(f"camera.{key} is required")
+    K = _numbers("camera.K", cam["K"], 9).reshape(3, 3)
+    if not (K[0, 1] == 0 and K[1, 0] == 0 and K[2, 0] == 0 and K[2, 1] == 0 and K[2, 2] == 1):
+        raise _err("camera.K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew)")
+    for key in ("width", "height"):
+        v = cam[key]
+        if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 16384:
+            raise _err(f"camera.{key} must be an integer in [1, 16384], got {v!r}")
+    try:
+        camera = Camera(int(cam["width"]), int(cam["height"]), float(K[0, 0]), float(K[1, 1]), float(K[0, 2]),
+                        float(K[1, 2]))
+    except ValueError as exc:
+        raise _err(f"camera: {exc}") from None
+    R = _numbers("camera.R_cam_from_body", cam["R_cam_from_body"], 9).reshape(3, 3)
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise _err("camera.R_cam_from_body must be a rotation matrix (orthonormal, det +1) to 1e-6")
+    t = _numbers("camera.t_cam_m", cam["t_cam_m"], 3)
+    return camera, R, t
+
+
+def _lighting(data: dict) -> Lighting:
+    sun = _section(data, "sun")
+    unknown = set(sun) - {"sun_dir_body", "sun_irradiance_W_m2", "shadow_fraction", "angular_diameter_deg"}
+    if unknown:
+        raise _err(f"sun: unknown keys {sorted(unknown)}")
+    if "sun_dir_body" not in sun:
+        raise _err("sun.sun_dir_body is required (unit vector towards the Sun, body frame)")
+    earth = None
+    e = _section(data, "earth", required=False)
+    try:
+        if e is not None:
+            unknown = set(e) - {"earth_dir_body", "earth_distance_m", "radius_m", "albedo", "texture"}
+            if unknown:
+                raise _err(f"earth: unknown keys {sorted(unknown)}")
+            for key in ("earth_dir_body", "earth_distance_m"):
+                if key not in e:
+                    raise _err(f"earth.{key} is required")
+            earth = Earth(earth_dir_body=e["earth_dir_body"], distance_m=e["earth_distance_m"],
+                          radius_m=e.get("radius_m", EARTH_RADIUS_M), albedo=e.get("albedo", 0.3),
+                          texture=e.get("texture", "uniform"))
+        return Lighting(sun_dir_body=sun["sun_dir_body"],
+                        sun_irradiance_W_m2=sun.get("sun_irradiance_W_m2", SOLAR_CONSTANT_W_M2),
+                        shadow_fraction=sun.get("shadow_fraction", 1.0),
+                        sun_angular_diameter_rad=math.radians(float(sun.get("angular_diameter_deg", 0.533))),
+                        earth=earth, ambient_radiance_W_m2_sr=data.get("ambient_radiance_W_m2_sr", 0.0))
+    except ValueError as exc:
+        msg = str(exc)
+        raise (exc if msg.startswith("scene file:") else _err(msg)) from None
+
+
+def load_scene_file(path) -> SceneSpec:
+    """Read and validate a scene file (schema in the module docstring).
+
+    Raises
+    ------
+    ValueError
+        One line naming the key and what is allowed, for any missing, unknown or invalid entry,
+        or an unreadable file.
+    """
+    path = os.fspath(path)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = json.load(fh)
+    except OSError as exc:
+        raise _err(f"cannot read {path}: {exc.strerror}") from None
+    except json.JSONDecodeError as exc:
+        raise _err(f"{path} is not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    if not isinstance(data, dict):
+        raise _err("the top level must be an object")
+    unknown = set(data) - _TOP_KEYS
+    if unknown:
+        raise _err(f"unknown keys {sorted(unknown)} (allowed: {', '.join(sorted(_TOP_KEYS))})")
+    from .shade import QUALITIES
+    quality = data.get("quality", "balanced")
+    if quality not in QUALITIES:
+        raise _err(f"quality must be one of {', '.join(QUALITIES)}, got {quality!r}")
+    samples = data.get("samples")
+    if samples is not None and (isinstance(samples, bool) or not isinstance(samples, int) or samples < 1):
+        raise _err(f"samples must be a positive integer or null, got {samples!r}")
+    seed = data.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**31:
+        raise _err(f"seed must be an integer in [0, 2**31), got {seed!r}")
+    camera, R, t = _camera(_section(data, "camera"))
+    lighting = _lighting(data)
+    model = _model(data, os.path.dirname(os.path.abspath(path)))
+    return SceneSpec(model, camera, R, t, lighting, quality, samples, seed)
+
+
+def scene_to_dict(camera: Camera, R_cam_from_body, t_cam_m, lighting: Lighting, meshes: list,
+                  quality: str = "balanced", samples: int | None = None, seed: int = 0) -> dict:
+    """The JSON document of a scene (inverse of :func:`load_scene_file`); ``meshes`` is the
+    list of mesh entries ({path, unit_scale_m, material | albedo})."""
+    d = {"meshes": meshes,
+         "camera": {"K": camera.K.tolist(), "width": camera.width, "height": camera.height,
+                    "R_cam_from_body": np.asarray(R_cam_from_body, dtype=float).ravel().tolist(),
+                    "t_cam_m": np.asarray(t_cam_m, dtype=float).tolist()},
+         "sun": {"sun_dir_body": list(lighting.sun_dir_body), "sun_irradiance_W_m2": lighting.sun_irradiance_W_m2,
+                 "shadow_fraction": lighting.shadow_fraction,
+                 "angular_diameter_deg": math.degrees(lighting.sun_angular_diameter_rad)},
+         "ambient_radiance_W_m2_sr": lighting.ambient_radiance_W_m2_sr,
+         "quality": quality, "samples": samples, "seed": seed}
+    e = lighting.earth
+    if e is not None:
+        if not isinstance(e.texture, str):
+            raise ValueError("scene_to_dict: an Earth texture image cannot be written to a scene file")
+        d["earth"] = {"earth_dir_body": list(e.earth_dir_body), "earth_distance_m": e.distance_m,
+                      "radius_m": e.radius_m, "albedo": e.albedo, "texture": e.texture}
+    return d

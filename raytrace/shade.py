@@ -1,0 +1,417 @@
+"""Shading: linear radiance images of a target lit by the Sun, Earth and an ambient sky.
+
+:func:`render` returns a :class:`RenderFrame`: the geometric AOVs of the geometry pass (exact,
+per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qualities:
+
+``fast``
+    Exact direct sunlight (one shadow ray per lit pixel, point Sun), the Sun's specular
+    highlight exact; sky, Earth and inter-reflected light from the body-space radiance cache
+    (:mod:`raytrace.cache`), interpolated at the pixel's surface point; the specular
+    reflection of the environment and other parts along the mirror direction (one ray),
+    weighted by the lobe's directional albedo; anti-aliasing with 2×2 sub-pixel rays only
+    where neighbouring pixels disagree (silhouette, part, shadow and crease edges).
+``balanced``
+    As ``fast``, but the diffuse indirect light at each pixel is a final gather: N
+    cosine-weighted rays from the pixel's own surface point (exact occlusion, Earth and sky
+    evaluated exactly along each ray; other parts' outgoing radiance from the cache, all
+    bounces). The cache's interpolated value serves as a control variate: only the
+    difference (gather − cache) is filtered, by an edge-avoiding à-trous filter guided by the
+    exact id, normal and depth AOVs, so the filter removes noise, not detail. 3×3 AA.
+``reference``
+    Unbiased path tracing (:mod:`raytrace.pathtrace`): every sample jittered over the pixel
+    (box filter), the solar disc sampled for soft shadows, BRDF-sampled bounces with Russian
+    roulette. It converges to the full solution and is the yardstick for the other two.
+
+Depth, normals and ids are never supersampled: they stay exact at the pixel centre.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _shading as K
+from .brdf import split_sum_table
+from .camera import Camera
+from .lighting import Lighting
+from .scene import GeometryFrame, Scene, _check_pose
+
+__all__ = ["QUALITIES", "Quality", "RenderFrame", "quality_preset", "render"]
+
+QUALITIES = ("fast", "balanced", "reference")
+
+
+@dataclass(frozen=True, slots=True)
+class Quality:
+    """Settings of a quality preset (see module notes).
+
+    Attributes
+    ----------
+    name : str
+    gather_rays : int
+        Final-gather rays per pixel (0: the cache alone) [-].
+    filter_passes : int
+        À-trous passes on the gathered residual (pass k has holes of 2^k pixels) [-].
+    aa_grid : int
+        Edge pixels get aa_grid² stratified sub-pixel rays [-].
+    spp : int
+        Samples per pixel of the path tracer (``reference``) [-].
+    """
+
+    name: str
+    gather_rays: int = 0
+    filter_passes: int = 0
+    aa_grid: int = 2
+    spp: int = 0
+
+
+_PRESETS = {
+    "fast": Quality("fast", gather_rays=0, filter_passes=0, aa_grid=2),
+    "balanced": Quality("balanced", gather_rays=8, filter_passes=3, aa_grid=3),
+    "reference": Quality("reference", spp=1024),
+}
+
+
+def quality_preset(name: str, samples: int | None = None) -> Quality:
+    """The preset ``name`` (one of :data:`QUALITIES`); ``samples`` overrides its main sample
+    count: gather rays per pixel for ``balanced`` (fewer filter passes as it grows), samples
+    per pixel for ``reference``, sub-pixel grid side for ``fast``."""
+    if name not in _PRESETS:
+        raise ValueError(f"quality must be one of {', '.join(QUALITIES)}; got {name!r}")
+    q = _PRESETS[name]
+    if samples is None:
+        return q
+    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or not 1 <= samples <= 1 << 20:
+        raise ValueError(f"samples must be an integer in [1, 1048576], got {samples!r}")
+    samples = int(samples)
+    if name == "balanced":
+        passes = 3 if samples <= 8 else (2 if samples <= 32 else (1 if samples <= 128 else 0))
+        return Quality(name, gather_rays=samples, filter_passes=passes, aa_grid=3)
+    if name == "reference":
+        return Quality(name, spp=samples)
+    return Quality(name, aa_grid=max(1, min(samples, 16)))
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class RenderFrame:
+    """One rendered frame.
+
+    Attributes
+    ----------
+    geometry : GeometryFrame
+        Exact per-pixel-centre AOVs (depth, normals, ids, mask).
+    radiance : ndarray, shape (H, W, 3), float32
+        Linear RGB radiance reaching the camera through each pixel, box-filtered over the
+        pixel where anti-aliased [W/(m²·sr)].
+    quality : Quality
+    timings_s : dict
+        Seconds per stage.
+    """
+
+    geometry: GeometryFrame
+    radiance: np.ndarray
+    quality: Quality
+    timings_s: dict = field(default_factory=dict)
+
+
+class _Context:
+    """Per-frame constants the kernels need."""
+
+    def __init__(self, scene: Scene, lighting: Lighting, cache_options: dict):
+        self.scene = scene
+        self.lighting = lighting
+        mats = scene.materials
+        self.diff = np.array([m.diffuse for m in mats], dtype=np.float64)
+        self.f0 = np.array([m.f0 for m in mats], dtype=np.float64)
+        self.alpha = np.array([m.roughness for m in mats], dtype=np.float64)
+        self.specular = self.f0.max(axis=1) > 0.0
+        self.table = split_sum_table()
+        self.eps = 2e-5 * max(scene.scale_m, 1e-3)
+        self.p, self.tex = lighting.packed()
+        self.p_background = self.p.copy()
+        self.p_background[K.env.P_AMBIENT] = 0.0  # the sky lights the target but is not drawn
+        self.cache = scene.radiance_cache(**cache_options)
+        self.cf = self.cache.solve(lighting)
+        self.sun = np.array([*lighting.sun_dir_body, lighting.sun_irradiance_at_target_W_m2])
+
+    def surfaces(self, O, D, face):
+        n = len(D)
+        out = {k: np.empty((n, 3)) for k in ("P", "NS", "NG", "WO")}
+        out["B"] = np.empty((n, 2))
+        out["SIDE"] = np.empty(n, dtype=np.int64)
+        out["face"] = face
+        out["comp"] = self.scene.component_of_face[face]
+        K.surfaces(O, D, face, self.scene.vertices, self.scene.faces, self.scene.face_normal,
+                   self.scene.corner_normal, out["P"], out["NS"], out["NG"], out["WO"], out["B"], out["SIDE"])
+        return out
+
+    def direct(self, s, E_point, mirror_out=None):
+        """Sunlight (exact, shadowed) and the cheap specular term of everything else
+        (:func:`raytrace._shading.add_mirror`; ``E_point`` the points' cache irradiance):
+        radiance (n, 3), lit (n,). The specular term alone is also written to ``mirror_out``."""
+        n = len(s["P"])
+        L = np.zeros((n, 3))
+        lit = np.zeros(n, dtype=bool)
+        light = self.lighting
+        e_sun = light.sun_irradiance_at_target_W_m2
+        sx, sy, sz = light.sun_dir_body
+        if e_sun > 0.0 and n:
+            want = np.empty(n, dtype=bool)
+            o = np.empty((n, 3))
+            K.sun_rays(s["P"], s["NS"], s["NG"], sx, sy, sz, self.eps, want, o)
+            idx = np.flatnonzero(want)
+            if len(idx):
+                blocked = self.scene.occluded(o[idx], np.broadcast_to(np.float32([sx, sy, sz]), (len(idx), 3)))
+                lit[idx[~blocked]] = True
+            K.shade_sun(s["NS"], s["WO"], s["comp"], self.diff, self.f0, self.alpha, sx, sy, sz, e_sun, lit, L)
+        spec = self.specular[s["comp"]]
+        if spec.any():
+            o = np.empty((n, 3))
+            d = np.empty((n, 3))
+            K.mirror_rays(s["NS"], s["NG"], s["WO"], s["P"], self.eps, spec, o, d)
+            idx = np.flatnonzero(spec)
+            if len(idx):
+                h = self.scene.intersect(o[idx], d[idx])
+                M = np.zeros((n, 3)) if mirror_out is None else mirror_out
+                K.add_mirror(idx, o[idx], d[idx], h["geomID"], h["primID"], h["u"].astype(np.float64),
+                             h["v"].astype(np.float64), s["NS"], s["WO"], s["comp"], E_point, *self._lookup(), M)
+                L += M
+        return L, lit
+
+    def lobe(self, s, n_rays: int, pix: np.ndarray, seed: int):
+        """Specular reflection of everything but the Sun, sampled over each glossy point's GGX
+        lobe with n_rays rays: radiance (n, 3) (0 at non-glossy points)."""
+        n = len(s["P"])
+        out = np.zeros((n, 3))
+        idx = np.flatnonzero(self.specular[s["comp"]])
+        if len(idx) == 0:
+            return out
+        m = len(idx) * n_rays
+        o = np.empty((m, 3))
+        d = np.empty((m, 3))
+        w = np.empty((m, 3))
+        K.lobe_rays(idx, s["P"], s["NS"], s["NG"], s["WO"], s["comp"], self.f0, self.alpha, n_rays, seed, pix,
+                    self.eps, o, d, w)
+        h = self.scene.intersect(o, d)
+        val = np.empty((len(idx), 3))
+        K.lobe_sum(n_rays, o, d, w, h["geomID"], h["primID"], h["u"].astype(np.float64), h["v"].astype(np.float64),
+                   *self._lookup(), val)
+        out[idx] = val
+        return out
+
+    def cache_E(self, s):
+        E = np.empty((len(s["P"]), 3))
+        c = self.cache
+        K.cache_irradiance(self.cf.indirect_W_m2, c.valid, c.face_s, c.lat_start, c.lat_ids, s["face"], s["B"],
+                           s["SIDE"], E)
+        return E
+
+    def gather_E(self, s, n_rays: int, pix: np.ndarray, seed: int):
+        n = len(s["P"])
+        o = np.empty((n * n_rays, 3))
+        d = np.empty((n * n_rays, 3))
+        K.gather_rays(s["P"], s["NS"], s["NG"], n_rays, seed, pix, self.eps, o, d)
+        h = self.scene.intersect(o, d)
+        E = np.empty((n, 3))
+        K.gather_sum(n_rays, o, d, s["NG"], h["geomID"], h["primID"], h["u"].astype(np.float64),
+                     h["v"].astype(np.float64), *self._lookup(), E)
+        return E
+
+    def _lookup(self):
+        """Arguments of :func:`raytrace._shading.incoming` after the ray."""
+        sc, c = self.scene, self.cache
+        return (sc.face_offset, sc.face_normal, sc.corner_normal, sc.component_of_face, self.diff, self.f0,
+                self.alpha, self.table, self.sun, self.cf.irradiance_W_m2, self.cf.sun_irradiance_W_m2, c.valid,
+                c.face_s, c.lat_start, c.lat_ids, self.p, self.tex)
+
+    def add_diffuse(self, s, E, L):
+        K.add_diffuse(E, s["comp"], self.diff, L)
+
+
+def _check_finite(stage: str, a: np.ndarray) -> None:
+    if not np.all(np.isfinite(a)):
+        raise FloatingPointError(f"non-finite radiance after {stage}: please report this scene")
+
+
+def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lighting, *,
+           quality: str = "balanced", samples: int | None = None, seed: int = 0,
+           geometry: GeometryFrame | None = None, cache_options: dict | None = None) -> RenderFrame:
+    """Render one frame: geometric AOVs and linear radiance.
+
+    Parameters
+    ----------
+    scene : Scene
+    camera : Camera
+    R_cam_from_body : array_like, shape (3, 3)
+        ``p_cam = R p_body + t`` [-].
+    t_cam_m : array_like, shape (3,)
+        Target origin in the camera frame [m].
+    lighting : Lighting
+        Sun, Earth and sky in the body frame.
+    quality : {"fast", "balanced", "reference"}, keyword-only
+    samples : int, optional, keyword-only
+        Overrides the preset's sample count (:func:`quality_preset`).
+    seed : int, keyword-only
+        Seed of the frame's sample pattern: the same seed gives the same image bit for bit.
+    geometry : GeometryFrame, optional, keyword-only
+        The geometry pass of this pose, if already cast.
+    cache_options : dict, optional, keyword-only
+        Options of the radiance cache (:class:`raytrace.cache.RadianceCache`).
+
+    Returns
+    -------
+    RenderFrame
+    """
+    if not isinstance(scene, Scene):
+        raise ValueError(f"scene must be a raytrace.scene.Scene, got {type(scene).__name__}")
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a raytrace.camera.Camera, got {type(camera).__name__}")
+    if not isinstance(lighting, Lighting):
+        raise ValueError(f"lighting must be a raytrace.lighting.Lighting, got {type(lighting).__name__}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**31:
+        raise ValueError(f"seed must be an integer in [0, 2**31), got {seed!r}")
+    q = quality_preset(quality, samples)
+    R, t = _check_pose(R_cam_from_body, t_cam_m)
+    timings = {}
+    t0 = time.perf_counter()
+    geo = geometry if geometry is not None else scene.render_geometry(camera, R, t)
+    timings["geometry"] = time.perf_counter() - t0
+    if q.name == "reference":
+        from .pathtrace import render_reference
+        t0 = time.perf_counter()
+        rad = render_reference(scene, camera, R, t, lighting, geo, spp=q.spp, seed=int(seed))
+        timings["path_trace"] = time.perf_counter() - t0
+        _check_finite("path tracing", rad)
+        return RenderFrame(geo, rad.astype(np.float32), q, timings)
+
+    t0 = time.perf_counter()
+    ctx = _Context(scene, lighting, cache_options or {})
+    timings["cache"] = time.perf_counter() - t0
+    H, W = camera.height, camera.width
+    R_bc = np.ascontiguousarray(R.T)
+    o_body = -R_bc @ t
+    rad = np.zeros((H * W, 3))
+    lit_img = np.zeros(H * W, dtype=bool)
+
+    # ---- pixel centres on the target
+    t0 = time.perf_counter()
+    pix = np.flatnonzero(geo.instance.ravel() > 0)
+    u = (pix % W).astype(np.float64)
+    v = (pix // W).astype(np.float64)
+    D_cam = np.column_stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones(len(pix))])
+    D = np.ascontiguousarray(D_cam @ R_bc.T)
+    O = np.ascontiguousarray(np.broadcast_to(o_body, D.shape))
+    face = geo.face_index.ravel()[pix].astype(np.int64)
+    s = ctx.surfaces(O, D, face)
+    mirror = np.zeros((len(pix), 3))
+    E = ctx.cache_E(s)
+    L, lit = ctx.direct(s, E, mirror)
+    lit_img[pix] = lit
+    timings["direct"] = time.perf_counter() - t0
+    _check_finite("direct light", L)
+    t0 = time.perf_counter()
+    if q.gather_rays > 0 and len(pix):
+        # final gather and glossy lobe sampling; their cache-based counterparts are control
+        # variates, so only the (noisy) differences are filtered
+        pix64 = pix.astype(np.int64)
+        dE = ctx.gather_E(s, q.gather_rays, pix64, int(seed)) - E
+        dS = ctx.lobe(s, q.gather_rays, pix64, int(seed)) - mirror
+        normal = geo.normal_cam.astype(np.float64)
+        depth = np.where(np.isfinite(geo.depth_m), geo.depth_m, 0.0).astype(np.float64)
+        filtered = []
+        for diff in (dE, dS):
+            res = np.zeros((H * W, 3))
+            res[pix] = diff
+            res = res.reshape(H, W, 3)
+            tmp = np.empty_like(res)
+            for k in range(q.filter_passes):
+                tmp[:] = 0.0
+                K.atrous(res, geo.instance, normal, depth, camera.fx, camera.fy, camera.cx, camera.cy, 1 << k, tmp)
+                res, tmp = tmp, res
+            filtered.append(res.reshape(-1, 3)[pix])
+        E = E + filtered[0]
+        L += filtered[1]
+    ctx.add_diffuse(s, E, L)
+    rad[pix] = L
+    timings["indirect"] = time.perf_counter() - t0
+    _check_finite("indirect light", rad)
+
+    # ---- Earth behind the target, then anti-aliasing where neighbours disagree
+    t0 = time.perf_counter()
+    earth_px = np.zeros((H, W), dtype=bool)
+    if lighting.earth is not None and _earth_may_be_in_view(camera, R, lighting):
+        K.earth_mask(o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, ctx.p, np.array([0, 0, W, H]),
+                     earth_px)
+        bg = np.flatnonzero(earth_px.ravel() & (geo.instance.ravel() == 0))
+        out = np.empty((len(bg), 3))
+        K.background(bg, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, 1, ctx.p_background,
+                     ctx.tex, out)
+        rad[bg] = out
+        check = np.array([0, 0, W, H])
+    else:
+        u0, v0, u1, v1 = geo.cast_rect
+        check = np.array([max(u0 - 1, 0), max(v0 - 1, 0), min(u1 + 1, W), min(v1 + 1, H)])
+    if q.aa_grid > 1 and check[2] > check[0] and check[3] > check[1]:
+        edges = np.zeros((H, W), dtype=bool)
+        K.edge_pixels(geo.instance, lit_img.reshape(H, W), geo.normal_cam, geo.depth_m, earth_px, check, edges)
+        epix = np.flatnonzero(edges.ravel())
+        if len(epix):
+            sub_rays = 0 if q.gather_rays == 0 else max(2, q.gather_rays // 4)
+            rad[epix] = _supersample(ctx, scene, camera, R, R_bc, o_body, geo, epix, q.aa_grid, sub_rays, int(seed))
+    timings["antialias"] = time.perf_counter() - t0
+    rad = rad.reshape(H, W, 3)
+    _check_finite("anti-aliasing", rad)
+    return RenderFrame(geo, rad.astype(np.float32), q, timings)
+
+
+def _earth_may_be_in_view(camera: Camera, R, lighting: Lighting) -> bool:
+    """Earth's disc can overlap the field of view (cone test, conservative)."""
+    e_cam = R @ np.asarray(lighting.earth.earth_dir_body)
+    half_diag = math.atan(math.hypot(max(camera.cx + 0.5, camera.width - 0.5 - camera.cx) / camera.fx,
+                                     max(camera.cy + 0.5, camera.height - 0.5 - camera.cy) / camera.fy))
+    angle = math.acos(max(-1.0, min(1.0, float(e_cam[2]))))
+    return angle <= half_diag + lighting.earth.angular_radius_rad + 1e-6
+
+
+def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, R_bc, o_body, geo, epix, n_grid,
+                 gather_rays: int, seed: int):
+    """Box-filtered radiance of the listed pixels from n_grid² stratified sub-pixel rays, each
+    shaded like a ``fast`` pixel, or with ``gather_rays`` final-gather rays (unfiltered) when
+    > 0; misses see Earth or black space."""
+    S = n_grid * n_grid
+    W = camera.width
+    D = np.empty((len(epix) * S, 3))
+    K.subpixel_rays(epix.astype(np.int64), W, n_grid, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, D)
+    p_hull = scene.hull_vertices @ R.T + (-(R @ o_body))
+    z0 = 0.0 if geo.camera_inside_hull else scene._near_plane(p_hull)
+    h = scene.intersect(o_body + z0 * D, D)
+    hit = h["geomID"] >= 0
+    L = np.zeros((len(D), 3))
+    idx = np.flatnonzero(hit)
+    if len(idx):
+        face = (scene.face_offset[h["geomID"][idx]] + h["primID"][idx]).astype(np.int64)
+        Dh = np.ascontiguousarray(D[idx])
+        s = ctx.surfaces(np.ascontiguousarray(np.broadcast_to(o_body, Dh.shape)), Dh, face)
+        E = ctx.cache_E(s)
+        if gather_rays:
+            keys = (np.repeat(epix, S)[idx] * S + idx % S).astype(np.int64)
+            mirror = np.zeros((len(idx), 3))
+            Ls, _ = ctx.direct(s, E, mirror)
+            Ls += ctx.lobe(s, gather_rays, keys, seed) - mirror
+            E = ctx.gather_E(s, gather_rays, keys, seed)
+        else:
+            Ls, _ = ctx.direct(s, E)
+            E = ctx.cache_E(s)
+        ctx.add_diffuse(s, E, Ls)
+        L[idx] = Ls
+    miss = np.flatnonzero(~hit)
+    if len(miss) and ctx.lighting.earth is not None:
+        Dm = D[miss] / np.linalg.norm(D[miss], axis=1, keepdims=True)
+        out = np.empty((len(miss), 3))
+        K.env_along(o_body, np.ascontiguousarray(Dm), ctx.p_background, ctx.tex, out)
+        L[miss] = out
+    return L.reshape(len(epix), S, 3).mean(axis=1)
+

@@ -1,0 +1,102 @@
+"""convolve_image against scipy.ndimage.convolve, and delta images against their PSF."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from scipy import ndimage
+
+from degrade import convolve_image, psf
+
+RNG = np.random.default_rng(20240601)
+
+
+def reference(img, kernel, mode):
+    """scipy.ndimage.convolve per channel in float64 (kernel (K1, K2) or (C, K1, K2))."""
+    img = img.astype(np.float64)
+    if img.ndim == 2:
+        return ndimage.convolve(img, kernel, mode=mode)
+    kernels = kernel if kernel.ndim == 3 else [kernel] * img.shape[2]
+    return np.stack([ndimage.convolve(img[..., c], kernels[c], mode=mode) for c in range(img.shape[2])], -1)
+
+
+@pytest.mark.parametrize("method", ["direct", "fft", "auto"])
+@pytest.mark.parametrize("mode", ["reflect", "mirror"])
+@pytest.mark.parametrize("shape", [(37, 52), (41, 36, 3)])
+@pytest.mark.parametrize("kshape", [(3, 5), (9, 7), (1, 1)])
+def test_matches_ndimage(method, mode, shape, kshape):
+    img = RNG.random(shape, dtype=np.float32)
+    kernel = RNG.random(kshape)  # asymmetric: catches a flipped (correlation) kernel
+    kernel /= kernel.sum()
+    out = convolve_image(img, kernel, mode=mode, method=method)
+    assert out.dtype == np.float32 and out.shape == img.shape
+    assert_allclose(out, reference(img, kernel, mode), rtol=0, atol=2e-6)
+
+
+@pytest.mark.parametrize("method", ["direct", "fft"])
+def test_per_channel_kernels(method):
+    img = RNG.random((30, 44, 3), dtype=np.float32)
+    kernels = RNG.random((3, 5, 7))
+    kernels /= kernels.sum(axis=(1, 2), keepdims=True)
+    out = convolve_image(img, kernels, method=method)
+    assert_allclose(out, reference(img, kernels, "reflect"), rtol=0, atol=2e-6)
+
+
+def test_kernel_larger_than_image_mirror():
+    img = RNG.random((6, 5), dtype=np.float32)
+    kernel = psf.motion_psf(15.0, 30.0)  # 19×19 on a 6×5 image
+    for mode in ("reflect", "mirror"):
+        for method in ("direct", "fft"):
+            assert_allclose(convolve_image(img, kernel, mode=mode, method=method),
+                            reference(img, kernel, mode), atol=2e-6)
+
+
+@pytest.mark.parametrize("method", ["direct", "fft"])
+def test_delta_image_returns_the_psf(method):
+    h = psf.compose(psf.airy_psf(1e-3, 600e-9, 4e-3, 3.45e-6), psf.defocus_psf(2.2), psf.motion_psf(8.0, 30.0))
+    img = np.zeros((41, 45), np.float32)
+    img[20, 22] = 1.0
+    out = convolve_image(img, h, method=method)
+    r = h.shape[0] // 2
+    assert_allclose(out[20 - r:20 + r + 1, 22 - r:22 + r + 1], h, atol=1e-6)
+    assert_allclose(out.sum(), 1.0, atol=1e-5)
+
+
+def test_fft_output_stays_nonnegative():
+    img = np.zeros((64, 64, 3), np.float32)
+    img[10:20, 30:40] = 1.0  # large zero areas: FFT round-off would dip below 0
+    out = convolve_image(img, psf.compose(psf.gaussian_psf(3.0), psf.motion_psf(20.0, 10.0)), method="fft")
+    assert out.min() >= 0.0
+
+
+def test_float64_input_gives_float32_and_input_untouched():
+    img = RNG.random((20, 21, 3))
+    before = img.copy()
+    out = convolve_image(img, psf.gaussian_psf(1.0))
+    assert out.dtype == np.float32
+    np.testing.assert_array_equal(img, before)
+
+
+@pytest.mark.parametrize("bad, match", [
+    (np.full((8, 8), np.nan, np.float32), "image must be finite"),
+    (np.full((8, 8), np.inf, np.float32), "image must be finite"),
+    (-np.ones((8, 8), np.float32), "image must be >= 0"),
+    (np.ones((8, 8), np.uint8), "image must be a float array"),
+    (np.ones((8, 8, 3, 2), np.float32), "image must have 2 or 3 dimensions"),
+])
+def test_bad_images_raise(bad, match):
+    with pytest.raises(ValueError, match=match):
+        convolve_image(bad, np.ones((3, 3)) / 9)
+
+
+def test_bad_kernels_and_options_raise():
+    img = np.ones((8, 8, 3), np.float32)
+    with pytest.raises(ValueError, match="odd"):
+        convolve_image(img, np.ones((2, 3)))
+    with pytest.raises(ValueError, match="kernel must have shape"):
+        convolve_image(img, np.ones((2, 3, 3)))
+    with pytest.raises(ValueError, match="kernel must be finite"):
+        convolve_image(img, np.full((3, 3), np.nan))
+    with pytest.raises(ValueError, match="mode must be one of"):
+        convolve_image(img, np.ones((3, 3)), mode="wrap")
+    with pytest.raises(ValueError, match="method must be one of"):
+        convolve_image(img, np.ones((3, 3)), method="magic")

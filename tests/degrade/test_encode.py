@@ -1,0 +1,71 @@
+"""sRGB curve against the float64 IEC 61966-2-1 formulas; quantisation round trips."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from degrade import dequantise, quantise, srgb_decode, srgb_encode
+
+
+def iec_encode(x):
+    """IEC 61966-2-1:1999 §5.2 in float64."""
+    x = np.minimum(np.asarray(x, np.float64), 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def iec_decode(v):
+    v = np.asarray(v, np.float64)
+    return np.where(v <= 0.04045, v / 12.92, np.power((v + 0.055) / 1.055, 2.4))
+
+
+X = np.concatenate([np.linspace(0, 1, 100_001), np.geomspace(1e-8, 1, 5001), [0.0031308, 1.5, 7.0]])
+
+
+def test_encode_matches_iec_formula():
+    out = srgb_encode(X.astype(np.float32))
+    assert out.dtype == np.float32
+    assert_allclose(out, iec_encode(X.astype(np.float32)), rtol=0, atol=1e-6)
+    assert out[-1] == 1.0 and out[0] == 0.0
+
+
+def test_decode_matches_iec_formula_and_round_trips():
+    v = np.linspace(0, 1, 100_001).astype(np.float32)
+    lin = srgb_decode(v)
+    assert lin.dtype == np.float32
+    assert_allclose(lin, iec_decode(v), rtol=2e-6, atol=1e-9)
+    assert_allclose(srgb_encode(lin), v, atol=2e-6)
+
+
+def test_known_points():
+    assert_allclose(srgb_encode(np.array([0.0031308, 0.18, 1.0], np.float32)),
+                    [0.04045, 0.46135612, 1.0], atol=2e-6)  # 18 % grey → 0.4614 (IEC curve)
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+def test_encode_with_bits_equals_quantise_dequantise(bits):
+    x = np.random.default_rng(1).random((64, 80, 3), dtype=np.float32)
+    enc = srgb_encode(x, bits=bits)
+    assert_array_equal(enc, dequantise(quantise(srgb_encode(x), bits), bits))
+    codes = quantise(enc, bits)
+    assert codes.dtype == (np.uint8 if bits == 8 else np.uint16)
+    assert_array_equal(dequantise(codes, bits), enc)
+
+
+def test_quantise_rounds_and_saturates():
+    assert_array_equal(quantise(np.array([0.0, 0.25, 0.5, 0.75, 1.0, 3.0]), 1), [0, 0, 0, 1, 1, 1])  # half to even
+    assert_array_equal(quantise(np.array([0.5, 0.999]), 2), [2, 3])
+    assert_array_equal(quantise(np.array([0.0, 1.0, 3.0]), 8), [0, 255, 255])
+    assert quantise(np.array([1.0]), 12)[0] == 4095
+
+
+def test_errors_name_the_parameter():
+    with pytest.raises(ValueError, match="image_linear must be >= 0"):
+        srgb_encode(np.array([-0.1], np.float32))
+    with pytest.raises(ValueError, match="image_srgb must be <= 1"):
+        srgb_decode(np.array([1.1], np.float32))
+    with pytest.raises(ValueError, match="bits"):
+        srgb_encode(np.zeros(3, np.float32).reshape(1, 3), bits=17)
+    with pytest.raises(ValueError, match="codes must lie in"):
+        dequantise(np.array([300]), 8)
+    with pytest.raises(ValueError, match="codes must be an integer array"):
+        dequantise(np.array([0.5]), 8)
