@@ -5,7 +5,7 @@
     python benchmarks/bench_degrade.py --quick    # fewer repeats
 
 Three tables, every entry the median of interleaved repeats (round-robin, so machine noise
-hits all methods alike):
+hits all methods alike); wall time and process CPU time (all threads) where it helps:
 
 1. Physical chain (degrade.degrade, default configs) per stage and whole, on two frames:
    a textured target on black covering 25 % of the frame (the usual render) and the same
@@ -85,17 +85,20 @@ def reference_paper(img8: np.ndarray, group: str, seed: int) -> np.ndarray:
     return out
 
 
-def run_interleaved(cases: dict, repeats: int) -> dict[str, float]:
-    """Median wall time [s] of each zero-argument callable, run round-robin."""
+def run_interleaved(cases: dict, repeats: int) -> dict[str, tuple[float, float]]:
+    """Median wall time and median process CPU time (all threads) [s] of each zero-argument
+    callable, run round-robin. On a busy machine the CPU time is the steadier figure."""
     for fn in cases.values():  # warm-up: JIT caches, page faults, lru caches
         fn()
-    times = {name: [] for name in cases}
+    wall = {name: [] for name in cases}
+    cpu = {name: [] for name in cases}
     for _ in range(repeats):
         for name, fn in cases.items():
-            t0 = time.perf_counter()
+            c0, t0 = time.process_time(), time.perf_counter()
             fn()
-            times[name].append(time.perf_counter() - t0)
-    return {name: statistics.median(ts) for name, ts in times.items()}
+            wall[name].append(time.perf_counter() - t0)
+            cpu[name].append(time.process_time() - c0)
+    return {name: (statistics.median(wall[name]), statistics.median(cpu[name])) for name in cases}
 
 
 def physical_table(repeats: int) -> list[str]:
@@ -122,22 +125,26 @@ def physical_table(repeats: int) -> list[str]:
         }
         for name, t in run_interleaved(cases, repeats).items():
             rows.setdefault(name, []).append(t)
-    lines = [f"| stage | {' | '.join(f'{k} [ms]' for k in frames)} |", "|---|" + "---:|" * len(frames)]
-    lines += [f"| {name} | {' | '.join(f'{1e3 * t:.1f}' for t in ts)} |" for name, ts in rows.items()]
+    head = " | ".join(f"{k}: wall / CPU [ms]" for k in frames)
+    lines = [f"| stage | {head} |", "|---|" + "---:|" * len(frames)]
+    lines += [f"| {name} | {' | '.join(f'{1e3 * w:.1f} / {1e3 * c:.1f}' for w, c in ts)} |"
+              for name, ts in rows.items()]
     return lines
 
 
 def paper_table(repeats: int) -> list[str]:
     img8 = np.rint(srgb_encode(frame(0.25), bits=8) * 255).astype(np.float32) / 255  # an 8-bit render
-    lines = ["| group | ours [ms] | ndimage + random_noise [ms] | speed-up |", "|---|---:|---:|---:|"]
+    lines = ["| group | ours: wall / CPU [ms] | ndimage + random_noise: wall / CPU [ms] | speed-up (wall) |",
+             "|---|---:|---:|---:|"]
     cases = {}
     for group in ("D1", "D2", "D3", "D4"):
         cases[f"ours {group}"] = lambda g=group: paper_degrade(img8, g, rng=5)
         cases[f"ref {group}"] = lambda g=group: reference_paper(img8, g, 5)
     t = run_interleaved(cases, repeats)
     for group in ("D1", "D2", "D3", "D4"):
-        ours, ref = t[f"ours {group}"], t[f"ref {group}"]
-        lines.append(f"| {group} | {1e3 * ours:.1f} | {1e3 * ref:.1f} | {ref / ours:.1f}× |")
+        (ours, ours_cpu), (ref, ref_cpu) = t[f"ours {group}"], t[f"ref {group}"]
+        lines.append(f"| {group} | {1e3 * ours:.1f} / {1e3 * ours_cpu:.1f} | {1e3 * ref:.1f} / {1e3 * ref_cpu:.1f} | "
+                     f"{ref / ours:.1f}× |")
 
     # identity: the noise steps on the same 8-bit blurred image, and the blur itself
     ours_b = paper_blur(img8)
@@ -169,7 +176,7 @@ def convolution_table(repeats: int) -> list[str]:
             "pd": lambda p=per_channel: convolve_image(img, p, method="direct"),
             "pf": lambda p=per_channel: convolve_image(img, p, method="fft"),
         }
-        t = run_interleaved(cases, repeats)
+        t = {name: wall for name, (wall, _) in run_interleaved(cases, repeats).items()}
         lines.append(f"| {k}×{k} | {k * k} | {1e3 * t['sd']:.1f} | {1e3 * t['sf']:.1f} | "
                      f"{1e3 * t['pd']:.1f} | {1e3 * t['pf']:.1f} |")
     lines += ["", (f"`method=\"auto\"` convolves directly up to {DIRECT_MAX_TAPS['shared']} nonzero taps "

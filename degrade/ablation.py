@@ -215,19 +215,20 @@ def run_ablation(images, targets=None, *, seed: int = 0, paper: PaperConfig = _P
     else:
         raise ValueError(f"lpips must be 'auto', None or a callable, got {lpips!r}")
 
+    n = len(imgs)
     paper_root, physical_root = np.random.SeedSequence(seed).spawn(2)
-    results: dict[tuple[str, str], list[tuple[float, float, float]]] = {}
-    for group, group_seq in zip(PAPER_GROUPS, paper_root.spawn(len(PAPER_GROUPS))):
-        results["paper", group] = [
-            _metrics(img, paper_degrade(img, group, paper, rng=np.random.default_rng(s)), lpips_fn)
-            for img, s in zip(imgs, group_seq.spawn(len(imgs)))]
-    if physical is not None:
-        stages = physical_stage_configs(physical)
-        linear = [srgb_decode(img) for img in imgs]
-        for (stage, cfg), stage_seq in zip(stages.items(), physical_root.spawn(len(stages))):
-            results["physical", stage] = [
-                _metrics(img, degrade(lin, cfg, rng=np.random.default_rng(s)), lpips_fn)
-                for img, lin, s in zip(imgs, linear, stage_seq.spawn(len(imgs)))]
+    seeds = {("paper", g): seq.spawn(n) for g, seq in zip(PAPER_GROUPS, paper_root.spawn(len(PAPER_GROUPS)))}
+    stages = {} if physical is None else physical_stage_configs(physical)
+    seeds |= {("physical", s): seq.spawn(n) for s, seq in zip(stages, physical_root.spawn(len(stages)))}
+    results: dict[tuple[str, str], list[tuple[float, float, float]]] = {key: [] for key in seeds}
+    for i, img in enumerate(imgs):  # one image at a time: memory stays flat for long lists
+        for group in PAPER_GROUPS:
+            rng = np.random.default_rng(seeds["paper", group][i])
+            results["paper", group].append(_metrics(img, paper_degrade(img, group, paper, rng=rng), lpips_fn))
+        linear = srgb_decode(img) if stages else None
+        for stage, cfg in stages.items():
+            rng = np.random.default_rng(seeds["physical", stage][i])
+            results["physical", stage].append(_metrics(img, degrade(linear, cfg, rng=rng), lpips_fn))
 
     order = ["all"] + list(dict.fromkeys(t for t in labels if t is not None))
     rows = []

@@ -276,14 +276,16 @@ def paper_degrade(image, group: str = "D4", config: PaperConfig = PaperConfig(),
     steps = PAPER_GROUPS[_checks.one_of("group", group, PAPER_GROUPS)]
     img = _paper_input(image)
     _checks.instance("config", config, PaperConfig)
-    rng_poisson, rng_gauss = np.random.default_rng(rng).spawn(2)
+    rng = np.random.default_rng(rng)
+    if steps == ("blur",):  # deterministic: no streams spawned
+        blurred = _blur(img, config)
+        _requantise(blurred, blurred)
+        return blurred
+    rng_poisson, rng_gauss = rng.spawn(2)
     noise = None
     if "gaussian" in steps:  # independent of everything else: sample while we blur
         noise = pool().submit(rng_gauss.normal, 0.0, config.gaussian_var ** 0.5, img.shape)
     blurred = _blur(img, config)
-    if steps == ("blur",):
-        _requantise(blurred, blurred)
-        return blurred
     codes = np.empty(img.shape, np.uint8)
     _codes8(blurred, codes)
     out = blurred  # reused as the output buffer
