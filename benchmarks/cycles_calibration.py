@@ -23,10 +23,10 @@ vs analytic radiance [W/(m^2 sr)] with relative errors:
                    shadow the sun (eclipse is shadow_fraction's job): rho/pi (E + L pi cos^2 b)
 * shadow_with_earth  a plate shadowed by a second mesh still is with the Earth present
 
-Run:  /work/bpyenv/bin/python benchmarks/cycles_calibration.py [--spp 1024] [--threads 2]
+Run:  .bpyenv/bin/python benchmarks/cycles_calibration.py [--spp 1024] [--threads 2]
       [--keep DIR] [--only plate sphere projection earth] [--timing [--repeats 3]]
 (about 5 min at 1024 spp on 2 cores; BPY_PYTHON names the Blender venv's python if it is
-not /work/bpyenv/bin/python)
+not .bpyenv/bin/python)
 --timing also renders a 1280x960 scene (sphere + panel + Earth + ambient) at 1, 16, 64, 256 spp
 (--repeats times, interleaved) and prints render_s per run.
 Reads EXRs with OpenImageIO if importable, else with bpy. Needs numpy and trimesh.
@@ -46,7 +46,8 @@ import trimesh
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 RENDER = os.path.join(HERE, "cycles_render.py")
-BPY_PYTHON = os.environ.get("BPY_PYTHON", "/work/bpyenv/bin/python")
+BPY_PYTHON = os.environ.get(
+    "BPY_PYTHON", os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), ".bpyenv", "bin", "python"))
 E_SUN = 1361.0
 R_EARTH = 6371008.8
 D_EARTH = 6778137.0

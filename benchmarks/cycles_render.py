@@ -3,7 +3,7 @@
 Run in the separate Blender venv, never in the project's (bpy is an optional benchmark
 dependency; this file imports nothing from the repo)::
 
-    /work/bpyenv/bin/python benchmarks/cycles_render.py SCENE.json --spp 256 --out OUT.exr \
+    .bpyenv/bin/python benchmarks/cycles_render.py SCENE.json --spp 256 --out OUT.exr \
         [--threads 2] [--seed 0]
 
 Writes OUT.exr (float32 RGB, H x W, row 0 = image top, linear radiance [W/(m^2 sr)]) and
