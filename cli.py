@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Command line: ``python cli.py --target cassini --pattern spiral``.
 
-Until the renderer lands, the main job samples a relative orbit of the requested pattern
-around the target, propagates it with Clohessy–Wiltshire, places it on the reference orbit,
+``python cli.py render-scene SCENE.json --out DIR`` renders one frame of an explicit scene.
+Until the sequence pipeline lands (issue 6), the main job samples a relative orbit of the
+requested pattern around the target, propagates it with Clohessy–Wiltshire, places it on the reference orbit,
 and prints per frame the relative state in LVLH and the visibility flags (line of sight,
 Earth in the background, Sun clear of the lens, Earth shadow, illuminated fraction ν).
 ``--json`` prints the same as one JSON document (keys as in the dataset's scenario.json and

@@ -37,6 +37,40 @@ def make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, v0, w, h, z0, out_o, 
 
 
 @jit_exact
+def moller_trumbore(ox, oy, oz, dx, dy, dz, V, F, f):
+    """Float64 Möller–Trumbore of the ray o + t·d with triangle f: (t, b1, b2, ok); ok is
+    False when the ray lies in the triangle's plane (|det| ≤ 1e-12·|e1||e2||d|)."""
+    i0 = F[f, 0]
+    i1 = F[f, 1]
+    i2 = F[f, 2]
+    e1x = V[i1, 0] - V[i0, 0]
+    e1y = V[i1, 1] - V[i0, 1]
+    e1z = V[i1, 2] - V[i0, 2]
+    e2x = V[i2, 0] - V[i0, 0]
+    e2y = V[i2, 1] - V[i0, 1]
+    e2z = V[i2, 2] - V[i0, 2]
+    px = dy * e2z - dz * e2y
+    py = dz * e2x - dx * e2z
+    pz = dx * e2y - dy * e2x
+    det = e1x * px + e1y * py + e1z * pz
+    scale = math.sqrt((e1x * e1x + e1y * e1y + e1z * e1z) * (e2x * e2x + e2y * e2y + e2z * e2z)) * \
+        math.sqrt(dx * dx + dy * dy + dz * dz)
+    if not abs(det) > 1e-12 * scale:
+        return -1.0, 1.0 / 3.0, 1.0 / 3.0, False
+    sx = ox - V[i0, 0]
+    sy = oy - V[i0, 1]
+    sz = oz - V[i0, 2]
+    inv = 1.0 / det
+    b1 = (sx * px + sy * py + sz * pz) * inv
+    qx = sy * e1z - sz * e1y
+    qy = sz * e1x - sx * e1z
+    qz = sx * e1y - sy * e1x
+    b2 = (dx * qx + dy * qy + dz * qz) * inv
+    t = (e2x * qx + e2y * qy + e2z * qz) * inv
+    return t, b1, b2, True
+
+
+@jit_exact
 def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0, w, h, z0,
                 geom_id, prim_id, tfar, V, F, face_offset, face_normal, corner_normal,
                 depth, ray_dist, n_shade, n_geom, inst, face_idx, want_dist, want_geom):
@@ -60,33 +94,8 @@ def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0
             dy = R_body_from_cam[1, 0] * x + R_body_from_cam[1, 1] * y + R_body_from_cam[1, 2]
             dz = R_body_from_cam[2, 0] * x + R_body_from_cam[2, 1] * y + R_body_from_cam[2, 2]
             f = face_offset[g] + prim_id[k]
-            i0 = F[f, 0]
-            i1 = F[f, 1]
-            i2 = F[f, 2]
-            e1x = V[i1, 0] - V[i0, 0]
-            e1y = V[i1, 1] - V[i0, 1]
-            e1z = V[i1, 2] - V[i0, 2]
-            e2x = V[i2, 0] - V[i0, 0]
-            e2y = V[i2, 1] - V[i0, 1]
-            e2z = V[i2, 2] - V[i0, 2]
-            px = dy * e2z - dz * e2y
-            py = dz * e2x - dx * e2z
-            pz = dx * e2y - dy * e2x
-            det = e1x * px + e1y * py + e1z * pz
-            sx = o_body[0] - V[i0, 0]
-            sy = o_body[1] - V[i0, 1]
-            sz = o_body[2] - V[i0, 2]
-            scale = math.sqrt((e1x * e1x + e1y * e1y + e1z * e1z) * (e2x * e2x + e2y * e2y + e2z * e2z)) * \
-                math.sqrt(dx * dx + dy * dy + dz * dz)
-            if abs(det) > 1e-12 * scale:
-                inv = 1.0 / det
-                b1 = (sx * px + sy * py + sz * pz) * inv
-                qx = sy * e1z - sz * e1y
-                qy = sz * e1x - sx * e1z
-                qz = sx * e1y - sy * e1x
-                b2 = (dx * qx + dy * qy + dz * qz) * inv
-                t = (e2x * qx + e2y * qy + e2z * qz) * inv
-            else:  # ray in the triangle's plane: keep Embree's answer
+            t, b1, b2, ok = moller_trumbore(o_body[0], o_body[1], o_body[2], dx, dy, dz, V, F, f)
+            if not ok:  # ray in the triangle's plane: keep Embree's answer
                 t = float(tfar[k]) + z0
                 b1 = 1.0 / 3.0
                 b2 = b1

@@ -13,39 +13,9 @@ import numba
 
 from . import environment as env
 from ._jit import jit, pjit
-from .brdf import brdf_cos, onb, sample_brdf, specular_albedo
+from ._kernels import moller_trumbore
+from .brdf import brdf_cos, cosine_direction, sample_brdf, specular_albedo
 from .cache import _hash01, interpolate_rows, lattice_rows
-
-
-@jit
-def intersect_face(ox, oy, oz, dx, dy, dz, V, F, f):
-    """Float64 Möller–Trumbore of ray (o, d) with triangle f: (t, b1, b2); t = −1 if parallel."""
-    i0 = F[f, 0]
-    i1 = F[f, 1]
-    i2 = F[f, 2]
-    e1x = V[i1, 0] - V[i0, 0]
-    e1y = V[i1, 1] - V[i0, 1]
-    e1z = V[i1, 2] - V[i0, 2]
-    e2x = V[i2, 0] - V[i0, 0]
-    e2y = V[i2, 1] - V[i0, 1]
-    e2z = V[i2, 2] - V[i0, 2]
-    px = dy * e2z - dz * e2y
-    py = dz * e2x - dx * e2z
-    pz = dx * e2y - dy * e2x
-    det = e1x * px + e1y * py + e1z * pz
-    if det == 0.0:
-        return -1.0, 1.0 / 3.0, 1.0 / 3.0
-    inv = 1.0 / det
-    sx = ox - V[i0, 0]
-    sy = oy - V[i0, 1]
-    sz = oz - V[i0, 2]
-    b1 = (sx * px + sy * py + sz * pz) * inv
-    qx = sy * e1z - sz * e1y
-    qy = sz * e1x - sx * e1z
-    qz = sx * e1y - sy * e1x
-    b2 = (dx * qx + dy * qy + dz * qz) * inv
-    t = (e2x * qx + e2y * qy + e2z * qz) * inv
-    return t, b1, b2
 
 
 @pjit
@@ -65,7 +35,7 @@ def surfaces(O, D, face, V, F, face_normal, corner_normal, P, NS, NG, WO, B, SID
         dy /= dn
         dz /= dn
         f = face[k]
-        _t, b1, b2 = intersect_face(ox, oy, oz, dx, dy, dz, V, F, f)
+        _t, b1, b2, _ok = moller_trumbore(ox, oy, oz, dx, dy, dz, V, F, f)
         b1 = min(max(b1, 0.0), 1.0)
         b2 = min(max(b2, 0.0), 1.0 - b1)
         b0 = 1.0 - b1 - b2
@@ -258,24 +228,16 @@ def _strata(n):
 @pjit
 def gather_rays(P, NS, NG, n_rays, seed, pix, eps, out_o, out_d):
     """n_rays cosine-weighted directions about the shading normal per point, stratified in
-    (radius², azimuth) on an exact gx × gy grid and rotated per pixel and seed."""
+    (radius², azimuth) on an exact gx × gy grid, jittered per pixel and seed."""
     gx = _strata(n_rays)
     gy = n_rays // gx
     for k in numba.prange(P.shape[0]):
-        tx, ty, tz, bx, by, bz = onb(NS[k, 0], NS[k, 1], NS[k, 2])
         key = pix[k] * 1009 + seed
         for j in range(n_rays):  # jittered: an independent point in every stratum
             u1 = ((j % gx) + _hash01(key, 2 * j + 11)) / gx
             u2 = ((j // gx) + _hash01(key, 2 * j + 12)) / gy
-            r = math.sqrt(u1)
-            phi = 2.0 * math.pi * u2
-            lx = r * math.cos(phi)
-            ly = r * math.sin(phi)
-            lz = math.sqrt(max(0.0, 1.0 - u1))
             m = k * n_rays + j
-            out_d[m, 0] = lx * tx + ly * bx + lz * NS[k, 0]
-            out_d[m, 1] = lx * ty + ly * by + lz * NS[k, 1]
-            out_d[m, 2] = lx * tz + ly * bz + lz * NS[k, 2]
+            out_d[m, 0], out_d[m, 1], out_d[m, 2] = cosine_direction(NS[k, 0], NS[k, 1], NS[k, 2], u1, u2)
             for a in range(3):
                 out_o[m, a] = P[k, a] + eps * NG[k, a]
 
@@ -387,7 +349,7 @@ def edge_pixels(inst, lit_img, normal, depth, earth_px, rect, out):
 
 
 @pjit
-def subpixel_rays(pix, W, n_grid, o_body, R_body_from_cam, fx, fy, cx, cy, out_d):
+def subpixel_rays(pix, W, n_grid, R_body_from_cam, fx, fy, cx, cy, out_d):
     """n_grid² stratified sub-pixel ray directions (body frame, z_cam = 1) per edge pixel."""
     S = n_grid * n_grid
     for k in numba.prange(pix.shape[0]):
@@ -459,7 +421,7 @@ def env_along(o_body, D, p, tex, out):
 @pjit
 def lobe_rays(idx, P, NS, NG, WO, comp, mat_f0, mat_alpha, n_rays, seed, pix, eps, out_o, out_d, out_w):
     """n_rays directions per listed point drawn from its GGX lobe (visible normals, stratified,
-    rotated per pixel), with weights f_spec·cos/pdf (RGB; 0 where the draw fails or goes
+    jittered per pixel), with weights f_spec·cos/pdf (RGB; 0 where the draw fails or goes
     under the geometric surface)."""
     gx = _strata(n_rays)
     gy = n_rays // gx

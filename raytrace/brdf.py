@@ -50,6 +50,19 @@ def onb(nx, ny, nz):
 
 
 @jit
+def cosine_direction(nx, ny, nz, u1, u2):
+    """Cosine-weighted unit direction about the unit normal n from two uniforms (u1 sets the
+    squared radius on the unit disc, u2 the azimuth; Malley's method)."""
+    tx, ty, tz, bx, by, bz = onb(nx, ny, nz)
+    r = math.sqrt(u1)
+    phi = 2.0 * math.pi * u2
+    lx = r * math.cos(phi)
+    ly = r * math.sin(phi)
+    lz = math.sqrt(max(0.0, 1.0 - u1))
+    return lx * tx + ly * bx + lz * nx, lx * ty + ly * by + lz * ny, lx * tz + ly * bz + lz * nz
+
+
+@jit
 def _lambda(mu, a2):
     mu2 = mu * mu
     if mu2 >= 1.0:

@@ -46,7 +46,7 @@ import scipy.sparse as sp
 
 from . import environment as env
 from ._jit import jit, pjit
-from .brdf import bounce_albedo
+from .brdf import bounce_albedo, cosine_direction
 
 __all__ = ["CacheFrame", "RadianceCache"]
 
@@ -130,23 +130,11 @@ def _cache_rays(rows, pos, nrm, eps, gx, gy, out_o, out_d):
         nx = sgn * nrm[i, 0]
         ny = sgn * nrm[i, 1]
         nz = sgn * nrm[i, 2]
-        sign = 1.0 if nz >= 0.0 else -1.0
-        a = -1.0 / (sign + nz)
-        b = nx * ny * a
-        tx, ty, tz = 1.0 + sign * nx * nx * a, sign * b, -sign * nx
-        bx, by, bz = b, sign + ny * ny * a, -ny
         for k in range(G):  # jittered: an independent point in every stratum
             u1 = ((k % gx) + _hash01(row, 2 * k + 1)) / gx
             u2 = ((k // gx) + _hash01(row, 2 * k + 2)) / gy
-            rr = math.sqrt(u1)
-            phi = 2.0 * math.pi * u2
-            lx = rr * math.cos(phi)
-            ly = rr * math.sin(phi)
-            lz = math.sqrt(max(0.0, 1.0 - u1))
             j = r * G + k
-            out_d[j, 0] = lx * tx + ly * bx + lz * nx
-            out_d[j, 1] = lx * ty + ly * by + lz * ny
-            out_d[j, 2] = lx * tz + ly * bz + lz * nz
+            out_d[j, 0], out_d[j, 1], out_d[j, 2] = cosine_direction(nx, ny, nz, u1, u2)
             out_o[j, 0] = pos[i, 0] + eps * nx
             out_o[j, 1] = pos[i, 1] + eps * ny
             out_o[j, 2] = pos[i, 2] + eps * nz

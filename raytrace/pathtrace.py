@@ -24,7 +24,7 @@ import numpy as np
 from . import environment as env
 from ._jit import jit, pjit
 from ._shading import background, surfaces
-from .brdf import brdf_cos, sample_brdf
+from .brdf import brdf_cos, onb, sample_brdf
 
 _PHI2 = 1.324717957244746
 _A1 = 1.0 / _PHI2
@@ -101,12 +101,7 @@ def _vertex(pix_of, s, seed, depth, P, NS, NG, WO, comp, mat_diff, mat_f0, mat_a
             ct = 1.0 - u1 * (1.0 - cos_half)
             st = math.sqrt(max(0.0, 1.0 - ct * ct))
             phi = 2.0 * math.pi * u2
-            # basis about the Sun direction
-            sign = 1.0 if sz >= 0.0 else -1.0
-            a_ = -1.0 / (sign + sz)
-            b_ = sx * sy * a_
-            tx, ty, tz = 1.0 + sign * sx * sx * a_, sign * b_, -sign * sx
-            bx, by, bz = b_, sign + sy * sy * a_, -sy
+            tx, ty, tz, bx, by, bz = onb(sx, sy, sz)  # basis about the Sun direction
             lx = st * math.cos(phi) * tx + st * math.sin(phi) * bx + ct * sx
             ly = st * math.cos(phi) * ty + st * math.sin(phi) * by + ct * sy
             lz = st * math.cos(phi) * tz + st * math.sin(phi) * bz + ct * sz

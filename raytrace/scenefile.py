@@ -111,11 +111,13 @@ def _model(data: dict, folder: str) -> TargetModel:
             raise _err(f"meshes[{i}].material must be one of {', '.join(MATERIALS)}, got {material!r}")
         albedo = None
         if "albedo" in m:
-            a = np.broadcast_to(_numbers(f"meshes[{i}].albedo", m["albedo"], np.size(m["albedo"])), (3,)) \
-                if np.size(m["albedo"]) in (1, 3) else None
-            if a is None or np.any(a < 0) or np.any(a > 1):
+            a = np.ravel(m["albedo"])
+            if a.size == 1:
+                a = np.repeat(a, 3)
+            a = _numbers(f"meshes[{i}].albedo", a, 3)
+            if np.any(a < 0) or np.any(a > 1):
                 raise _err(f"meshes[{i}].albedo must be 1 or 3 numbers in [0, 1], got {m['albedo']!r}")
-            albedo = tuple(float(x) for x in a)
+            albedo = tuple(a.tolist())
         path = m["path"]
         if not isinstance(path, str):
             raise _err(f"meshes[{i}].path must be a string")

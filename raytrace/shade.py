@@ -360,7 +360,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         epix = np.flatnonzero(edges.ravel())
         if len(epix):
             sub_rays = 0 if q.gather_rays == 0 else max(2, q.gather_rays // 4)
-            rad[epix] = _supersample(ctx, scene, camera, R, R_bc, o_body, geo, epix, q.aa_grid, sub_rays, int(seed))
+            rad[epix] = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, sub_rays, int(seed))
     timings["antialias"] = time.perf_counter() - t0
     rad = rad.reshape(H, W, 3)
     _check_finite("anti-aliasing", rad)
@@ -376,7 +376,7 @@ def _earth_may_be_in_view(camera: Camera, R, lighting: Lighting) -> bool:
     return angle <= half_diag + lighting.earth.angular_radius_rad + 1e-6
 
 
-def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, R_bc, o_body, geo, epix, n_grid,
+def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid,
                  gather_rays: int, seed: int):
     """Box-filtered radiance of the listed pixels from n_grid² stratified sub-pixel rays, each
     shaded like a ``fast`` pixel, or with ``gather_rays`` final-gather rays (unfiltered) when
@@ -384,9 +384,9 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, R_bc, o_body, g
     S = n_grid * n_grid
     W = camera.width
     D = np.empty((len(epix) * S, 3))
-    K.subpixel_rays(epix.astype(np.int64), W, n_grid, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, D)
-    p_hull = scene.hull_vertices @ R.T + (-(R @ o_body))
-    z0 = 0.0 if geo.camera_inside_hull else scene._near_plane(p_hull)
+    K.subpixel_rays(epix.astype(np.int64), W, n_grid, np.ascontiguousarray(R.T), camera.fx, camera.fy, camera.cx,
+                    camera.cy, D)
+    z0 = 0.0 if geo.camera_inside_hull else scene._near_plane(scene.hull_vertices @ R.T + t)
     h = scene.intersect(o_body + z0 * D, D)
     hit = h["geomID"] >= 0
     L = np.zeros((len(D), 3))
