@@ -14,7 +14,7 @@ import numba
 from . import environment as env
 from ._jit import jit, pjit
 from ._kernels import moller_trumbore
-from .brdf import brdf_cos, cosine_direction, sample_brdf, specular_albedo
+from .brdf import brdf_cos, cosine_direction, onb, sample_brdf, specular_albedo
 from .cache import _hash01, interpolate_rows, lattice_rows
 
 
@@ -86,18 +86,39 @@ def sun_rays(P, NS, NG, sx, sy, sz, eps, want, out_o):
 
 
 @pjit
-def shade_sun(NS, WO, comp, mat_diff, mat_f0, mat_alpha, sx, sy, sz, e_sun, lit, out):
-    """out += f·cosθ·E_sun where lit (radiance, RGB)."""
+def sun_disc_dirs(keys, n_strata, seed, sx, sy, sz, cos_half, out_d):
+    """Directions uniform over the solar disc (the cone of half-angle acos(cos_half) about
+    the Sun's centre direction): point m takes stratum m % n_strata of an exact gx × gy grid in
+    (1 − cos θ, φ), jittered from a hash of (keys[m], seed)."""
+    gx = _strata(n_strata)
+    gy = n_strata // gx
+    tx, ty, tz, bx, by, bz = onb(sx, sy, sz)
+    for m in numba.prange(keys.shape[0]):
+        j = m % n_strata
+        u1 = ((j % gx) + _hash01(keys[m], 4 * seed + 21)) / gx
+        u2 = ((j // gx) + _hash01(keys[m], 4 * seed + 22)) / gy
+        ct = 1.0 - u1 * (1.0 - cos_half)
+        st = math.sqrt(max(0.0, 1.0 - ct * ct))
+        c = st * math.cos(2.0 * math.pi * u2)
+        d = st * math.sin(2.0 * math.pi * u2)
+        out_d[m, 0] = c * tx + d * bx + ct * sx
+        out_d[m, 1] = c * ty + d * by + ct * sy
+        out_d[m, 2] = c * tz + d * bz + ct * sz
+
+
+@pjit
+def shade_sun(NS, WO, comp, mat_diff, mat_f0, mat_alpha, sx, sy, sz, e_sun, vis, out):
+    """out += V·f·cosθ·E_sun with V the visible fraction of the solar disc (radiance, RGB)."""
     for k in numba.prange(NS.shape[0]):
-        if not lit[k]:
+        if vis[k] <= 0.0:
             continue
         c = comp[k]
         r, g, b = brdf_cos(NS[k, 0], NS[k, 1], NS[k, 2], WO[k, 0], WO[k, 1], WO[k, 2], sx, sy, sz,
                            mat_diff[c, 0], mat_diff[c, 1], mat_diff[c, 2], mat_f0[c, 0], mat_f0[c, 1],
                            mat_f0[c, 2], mat_alpha[c])
-        out[k, 0] += r * e_sun
-        out[k, 1] += g * e_sun
-        out[k, 2] += b * e_sun
+        out[k, 0] += r * e_sun * vis[k]
+        out[k, 1] += g * e_sun * vis[k]
+        out[k, 2] += b * e_sun * vis[k]
 
 
 @pjit
@@ -138,12 +159,16 @@ def mirror_rays(NS, NG, WO, P, eps, want, out_o, out_d):
 
 @jit
 def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_normal, corner_normal, comp_of_face,
-             mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex):
+             mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+             vis_sun):
     """Radiance arriving along a traced ray (o, d): the environment where it escaped; where it
     hit a surface, that surface's radiance towards the ray from the cache: diffuse ρ_d/π·E,
-    the exact specular reflection of the Sun towards −d (its shadowing from the cache) and
-    the specular albedo times the rest of its irradiance over π. ``sun`` = (s_x, s_y, s_z,
-    ν·E_sun)."""
+    the exact specular reflection of the Sun towards −d and the specular albedo times the
+    rest of its irradiance over π. ``sun`` = (s_x, s_y, s_z, ν·E_sun). The Sun's visibility at
+    the hit comes from the cache when ``vis_sun`` < 0, else it is ``vis_sun`` (a shadow ray
+    cast from the hit): then the hit's sunlight is exact and only its indirect light comes
+    from the cache, so shadows finer than the cache's lattice are not blurred into the light
+    bounced off them."""
     dn = math.sqrt(dx * dx + dy * dy + dz * dz)
     dx /= dn
     dy /= dn
@@ -156,26 +181,30 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
     er = w0 * E_tot[r0, 0] + w1 * E_tot[r1, 0] + w2 * E_tot[r2, 0]
     eg = w0 * E_tot[r0, 1] + w1 * E_tot[r1, 1] + w2 * E_tot[r2, 1]
     eb = w0 * E_tot[r0, 2] + w1 * E_tot[r1, 2] + w2 * E_tot[r2, 2]
+    es = w0 * E_sun[r0] + w1 * E_sun[r1] + w2 * E_sun[r2]
     c = comp_of_face[f]
+    b0 = 1.0 - hu - hv
+    sgn = 1.0 if side == 0 else -1.0
+    nx = sgn * (b0 * corner_normal[f, 0, 0] + hu * corner_normal[f, 1, 0] + hv * corner_normal[f, 2, 0])
+    ny = sgn * (b0 * corner_normal[f, 0, 1] + hu * corner_normal[f, 1, 1] + hv * corner_normal[f, 2, 1])
+    nz = sgn * (b0 * corner_normal[f, 0, 2] + hu * corner_normal[f, 1, 2] + hv * corner_normal[f, 2, 2])
+    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+    nx /= nn
+    ny /= nn
+    nz /= nn
+    cs = nx * sun[0] + ny * sun[1] + nz * sun[2]
+    if vis_sun >= 0.0:  # exact sunlight replaces the cache's
+        ex = vis_sun * sun[3] * cs if cs > 0.0 else 0.0
+        er = max(er - es, 0.0) + ex
+        eg = max(eg - es, 0.0) + ex
+        eb = max(eb - es, 0.0) + ex
+        es = ex
     lr = mat_diff[c, 0] / math.pi * er
     lg = mat_diff[c, 1] / math.pi * eg
     lb = mat_diff[c, 2] / math.pi * eb
     if mat_f0[c, 0] > 0.0 or mat_f0[c, 1] > 0.0 or mat_f0[c, 2] > 0.0:
-        b1 = hu
-        b2 = hv
-        b0 = 1.0 - b1 - b2
-        sgn = 1.0 if side == 0 else -1.0
-        nx = sgn * (b0 * corner_normal[f, 0, 0] + b1 * corner_normal[f, 1, 0] + b2 * corner_normal[f, 2, 0])
-        ny = sgn * (b0 * corner_normal[f, 0, 1] + b1 * corner_normal[f, 1, 1] + b2 * corner_normal[f, 2, 1])
-        nz = sgn * (b0 * corner_normal[f, 0, 2] + b1 * corner_normal[f, 1, 2] + b2 * corner_normal[f, 2, 2])
-        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-        nx /= nn
-        ny /= nn
-        nz /= nn
         mu = -(nx * dx + ny * dy + nz * dz)
         if mu > 0.0:
-            es = w0 * E_sun[r0] + w1 * E_sun[r1] + w2 * E_sun[r2]
-            cs = nx * sun[0] + ny * sun[1] + nz * sun[2]
             if es > 0.0 and cs > 0.0 and sun[3] > 0.0:
                 vis = min(es / (sun[3] * cs), 1.0)
                 sr, sg, sb = brdf_cos(nx, ny, nz, -dx, -dy, -dz, sun[0], sun[1], sun[2], 0.0, 0.0, 0.0,
@@ -202,7 +231,7 @@ def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset
         k = idx[j]
         r, g, b = incoming(geom[j], prim[j], hu[j], hv[j], O[j, 0], O[j, 1], O[j, 2], D[j, 0], D[j, 1], D[j, 2],
                            face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, table,
-                           sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex)
+                           sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0)
         c = comp[k]
         t = min(max((mat_alpha[c] - 0.05) / 0.3, 0.0), 1.0)
         r = (1.0 - t) * r + t * E_point[k, 0] / math.pi
@@ -243,9 +272,34 @@ def gather_rays(P, NS, NG, n_rays, seed, pix, eps, out_o, out_d):
 
 
 @pjit
+def bounce_sun_rays(O, D, tfar, geom, prim, face_offset, face_normal, sx, sy, sz, eps, want, out_o):
+    """Shadow rays towards the Sun from the hits of traced rays (o + t·d, offset along the
+    geometric normal on the side the ray arrived from), wanted where that side faces the Sun."""
+    for m in numba.prange(D.shape[0]):
+        want[m] = False
+        if geom[m] < 0:
+            continue
+        f = face_offset[geom[m]] + prim[m]
+        nx = face_normal[f, 0]
+        ny = face_normal[f, 1]
+        nz = face_normal[f, 2]
+        if nx * D[m, 0] + ny * D[m, 1] + nz * D[m, 2] > 0.0:
+            nx, ny, nz = -nx, -ny, -nz
+        if nx * sx + ny * sy + nz * sz <= 0.0:
+            continue
+        want[m] = True
+        t = tfar[m]
+        out_o[m, 0] = O[m, 0] + t * D[m, 0] + eps * nx
+        out_o[m, 1] = O[m, 1] + t * D[m, 1] + eps * ny
+        out_o[m, 2] = O[m, 2] + t * D[m, 2] + eps * nz
+
+
+@pjit
 def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
-               mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, out):
-    """Irradiance estimate π/N Σ L_in per point (rays under the geometric surface count 0)."""
+               mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis,
+               out):
+    """Irradiance estimate π/N Σ L_in per point (rays under the geometric surface count 0);
+    ``vis[m]`` the Sun's visibility at ray m's hit (< 0: from the cache)."""
     for k in numba.prange(out.shape[0]):
         sr = 0.0
         sg = 0.0
@@ -256,7 +310,8 @@ def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, c
                 continue
             r, g, b = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
                                D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
-                               mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex)
+                               mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+                               vis[m])
             sr += r
             sg += g
             sb += b
@@ -349,15 +404,18 @@ def edge_pixels(inst, lit_img, normal, depth, earth_px, rect, out):
 
 
 @pjit
-def subpixel_rays(pix, W, n_grid, R_body_from_cam, fx, fy, cx, cy, out_d):
-    """n_grid² stratified sub-pixel ray directions (body frame, z_cam = 1) per edge pixel."""
+def subpixel_rays(pix, W, n_grid, seed, R_body_from_cam, fx, fy, cx, cy, out_d):
+    """n_grid² jittered-stratified sub-pixel ray directions (body frame, z_cam = 1) per edge
+    pixel: one uniform point in each cell of an n_grid × n_grid grid over the pixel, from a
+    hash of (seed, pixel, cell), so the box-filter estimate is unbiased for any content."""
     S = n_grid * n_grid
     for k in numba.prange(pix.shape[0]):
         v = pix[k] // W
         u = pix[k] % W
         for j in range(S):
-            du = ((j % n_grid) + 0.5) / n_grid - 0.5
-            dv = ((j // n_grid) + 0.5) / n_grid - 0.5
+            key = (pix[k] * S + j) & 0x7FFFFFFF
+            du = ((j % n_grid) + _hash01(key, 2 * seed + 11)) / n_grid - 0.5
+            dv = ((j // n_grid) + _hash01(key, 2 * seed + 12)) / n_grid - 0.5
             x = (u + du - cx) / fx
             y = (v + dv - cy) / fy
             m = k * S + j
@@ -465,7 +523,7 @@ def lobe_sum(n_rays, O, D, Wt, geom, prim, hu, hv, face_offset, face_normal, cor
                 continue
             a, b, c = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
                                D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
-                               mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex)
+                               mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0)
             sr += Wt[m, 0] * a
             sg += Wt[m, 1] * b
             sb += Wt[m, 2] * c

@@ -7,9 +7,13 @@ cone, one shadow ray: soft shadows), then a new direction drawn from the BRDF mi
 environment (Earth, ambient sky; the Sun is reached only through next-event estimation, so it
 is never counted twice). Russian roulette from the fourth vertex on; at most 32 vertices.
 
-Sample patterns: the pixel jitter and the first bounce use rank-1 lattices (the R2 sequence,
-Roberts 2018) shifted per pixel (Cranley–Patterson rotation), later dimensions a hash of
-(seed, pixel, sample, dimension), so the image depends only on the seed, not on threads.
+Sample patterns: the pixel jitter uses a rank-1 lattice (the R2 sequence, Roberts 2018)
+shifted per pixel (Cranley–Patterson rotation); every other dimension is a hash of (seed,
+pixel, sample, dimension), so the image depends only on the seed, not on threads. (A second
+R2 pair for the first bounce, as used before, is the same lattice shifted: the bounce
+direction was then a fixed function of the sub-pixel position, and pixels whose content
+varies across the pixel — silhouettes, shadow edges — converged to a seed-dependent wrong
+value.)
 
 The path tracer is a wavefront: numba kernels build and shade ray batches, Embree traces them.
 """
@@ -118,11 +122,8 @@ def _vertex(pix_of, s, seed, depth, P, NS, NG, WO, comp, mat_diff, mat_f0, mat_a
                 sh_d[k, 1] = ly
                 sh_d[k, 2] = lz
         # --- next direction
-        if depth == 0:
-            u1, u2 = _r2(seed, q, s, 1)
-        else:
-            u1 = _rand(seed, q, s, dim + 2)
-            u2 = _rand(seed, q, s, dim + 3)
+        u1 = _rand(seed, q, s, dim + 2)
+        u2 = _rand(seed, q, s, dim + 3)
         u0 = _rand(seed, q, s, dim + 4)
         lx, ly, lz, wr, wg, wb, ok = sample_brdf(nsx, nsy, nsz, ox, oy, oz, mat_diff[c, 0], mat_diff[c, 1],
                                                  mat_diff[c, 2], mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2],

@@ -4,19 +4,25 @@
 per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qualities:
 
 ``fast``
-    Exact direct sunlight (one shadow ray per lit pixel, point Sun), the Sun's specular
+    Direct sunlight with one shadow ray per lit pixel towards the Sun's centre, and where a
+    penumbra can be wider than a quarter pixel (a distant occluder: the shadow of a thin
+    mast 20 m away has no umbra at all) the visible fraction of the 0.53° solar disc from 4
+    stratified shadow rays (16–64 for ``balanced``); the Sun's specular
     highlight exact; sky, Earth and inter-reflected light from the body-space radiance cache
     (:mod:`raytrace.cache`), interpolated at the pixel's surface point; the specular
     reflection of the environment and other parts along the mirror direction (one ray),
-    weighted by the lobe's directional albedo; anti-aliasing with 2×2 sub-pixel rays only
-    where neighbouring pixels disagree (silhouette, part, shadow and crease edges).
+    weighted by the lobe's directional albedo; anti-aliasing with 2×2 jittered-stratified
+    sub-pixel rays (an unbiased box filter) only where neighbouring pixels disagree
+    (silhouette, part, shadow and crease edges).
 ``balanced``
     As ``fast``, but the diffuse indirect light at each pixel is a final gather: N
     cosine-weighted rays from the pixel's own surface point (exact occlusion, Earth and sky
     evaluated exactly along each ray; other parts' outgoing radiance from the cache, all
     bounces). The cache's interpolated value serves as a control variate: only the
     difference (gather − cache) is filtered, by an edge-avoiding à-trous filter guided by the
-    exact id, normal and depth AOVs, so the filter removes noise, not detail. 3×3 AA.
+    exact id, normal and depth AOVs, so the filter removes noise, not detail. Edge pixels get
+    3×3 to 8×8 jittered sub-pixel rays as N grows (coverage error falls with the grid), shaded
+    like ``fast`` plus their pixel centre's filtered gather correction.
 ``reference``
     Unbiased path tracing (:mod:`raytrace.pathtrace`): every sample jittered over the pixel
     (box filter), the solar disc sampled for soft shadows, BRDF-sampled bounces with Russian
@@ -59,6 +65,9 @@ class Quality:
         Edge pixels get aa_grid² stratified sub-pixel rays [-].
     spp : int
         Samples per pixel of the path tracer (``reference``) [-].
+    sun_rays : int
+        Shadow rays over the solar disc where a penumbra can be wider than a quarter pixel
+        (1: a point Sun everywhere) [-].
     """
 
     name: str
@@ -66,11 +75,12 @@ class Quality:
     filter_passes: int = 0
     aa_grid: int = 2
     spp: int = 0
+    sun_rays: int = 1
 
 
 _PRESETS = {
-    "fast": Quality("fast", gather_rays=0, filter_passes=0, aa_grid=2),
-    "balanced": Quality("balanced", gather_rays=8, filter_passes=3, aa_grid=3),
+    "fast": Quality("fast", gather_rays=0, filter_passes=0, aa_grid=2, sun_rays=4),
+    "balanced": Quality("balanced", gather_rays=8, filter_passes=3, aa_grid=3, sun_rays=16),
     "reference": Quality("reference", spp=1024),
 }
 
@@ -89,10 +99,11 @@ def quality_preset(name: str, samples: int | None = None) -> Quality:
     samples = int(samples)
     if name == "balanced":
         passes = 3 if samples <= 8 else (2 if samples <= 32 else (1 if samples <= 128 else 0))
-        return Quality(name, gather_rays=samples, filter_passes=passes, aa_grid=3)
+        aa = 3 if samples <= 8 else (4 if samples <= 32 else (6 if samples <= 128 else 8))
+        return Quality(name, gather_rays=samples, filter_passes=passes, aa_grid=aa, sun_rays=max(16, min(samples, 64)))
     if name == "reference":
         return Quality(name, spp=samples)
-    return Quality(name, aa_grid=max(1, min(samples, 16)))
+    return Quality(name, aa_grid=max(1, min(samples, 16)), sun_rays=4)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -148,13 +159,16 @@ class _Context:
                    self.scene.corner_normal, out["P"], out["NS"], out["NG"], out["WO"], out["B"], out["SIDE"])
         return out
 
-    def direct(self, s, E_point, mirror_out=None):
-        """Sunlight (exact, shadowed) and the cheap specular term of everything else
+    def direct(self, s, E_point, mirror_out=None, *, sun_dirs=None, occluder_t=None):
+        """Sunlight (shadowed) and the cheap specular term of everything else
         (:func:`raytrace._shading.add_mirror`; ``E_point`` the points' cache irradiance):
-        radiance (n, 3), lit (n,). The specular term alone is also written to ``mirror_out``."""
+        radiance (n, 3) and the Sun's visibility (n,) in {0, 1}. The shadow ray goes towards the
+        Sun's centre, or along ``sun_dirs`` (one solar-disc sample per point); ``occluder_t``,
+        when given, receives the distance to the occluder of every blocked point. The specular
+        term alone is also written to ``mirror_out``."""
         n = len(s["P"])
         L = np.zeros((n, 3))
-        lit = np.zeros(n, dtype=bool)
+        vis = np.zeros(n)
         light = self.lighting
         e_sun = light.sun_irradiance_at_target_W_m2
         sx, sy, sz = light.sun_dir_body
@@ -164,9 +178,15 @@ class _Context:
             K.sun_rays(s["P"], s["NS"], s["NG"], sx, sy, sz, self.eps, want, o)
             idx = np.flatnonzero(want)
             if len(idx):
-                blocked = self.scene.occluded(o[idx], np.broadcast_to(np.float32([sx, sy, sz]), (len(idx), 3)))
-                lit[idx[~blocked]] = True
-            K.shade_sun(s["NS"], s["WO"], s["comp"], self.diff, self.f0, self.alpha, sx, sy, sz, e_sun, lit, L)
+                d = np.broadcast_to(np.float32([sx, sy, sz]), (len(idx), 3)) if sun_dirs is None else sun_dirs[idx]
+                if occluder_t is None:
+                    blocked = self.scene.occluded(o[idx], d)
+                else:
+                    h = self.scene.intersect(o[idx], d)
+                    blocked = h["geomID"] >= 0
+                    occluder_t[idx[blocked]] = h["tfar"][blocked]
+                vis[idx[~blocked]] = 1.0
+            K.shade_sun(s["NS"], s["WO"], s["comp"], self.diff, self.f0, self.alpha, sx, sy, sz, e_sun, vis, L)
         spec = self.specular[s["comp"]]
         if spec.any():
             o = np.empty((n, 3))
@@ -179,7 +199,42 @@ class _Context:
                 K.add_mirror(idx, o[idx], d[idx], h["geomID"], h["primID"], h["u"].astype(np.float64),
                              h["v"].astype(np.float64), s["NS"], s["WO"], s["comp"], E_point, *self._lookup(), M)
                 L += M
-        return L, lit
+        return L, vis
+
+    def soft_shadows(self, s, L, vis, occ_t, footprint_m, pix, H, W, n_rays, seed):
+        """Replace the point-Sun visibility by the visible fraction of the solar disc (n_rays
+        stratified shadow rays) wherever a penumbra can be wider than a quarter pixel: at
+        blocked points whose occluder is far enough (penumbra half-width t·tan(θ☉/2) on the
+        receiver) and at lit points within that width of them (a max filter in the image).
+        Elsewhere the point Sun is exact to within a quarter pixel. Updates L and vis."""
+        light = self.lighting
+        half = 0.5 * light.sun_angular_diameter_rad
+        e_sun = light.sun_irradiance_at_target_W_m2
+        if half <= 0.0 or e_sun <= 0.0 or n_rays <= 1 or not len(pix):
+            return
+        w_px = np.zeros(H * W)
+        blocked = np.isfinite(occ_t)
+        w_px[pix[blocked]] = np.minimum(occ_t[blocked] * math.tan(half) / footprint_m[blocked], 8.0)
+        reach = math.ceil(w_px.max())
+        if w_px.max() <= 0.25:
+            return
+        from scipy.ndimage import maximum_filter
+        near = maximum_filter(w_px.reshape(H, W), size=2 * reach + 1, mode="constant").ravel()[pix] > 0.25
+        sx, sy, sz = light.sun_dir_body
+        facing = ((s["NS"] @ np.array([sx, sy, sz]) > 0.0) & (s["NG"] @ np.array([sx, sy, sz]) > 0.0))
+        cand = np.flatnonzero(near & facing)
+        if not len(cand):
+            return
+        keys = (np.repeat(pix[cand].astype(np.int64), n_rays) * n_rays + np.tile(np.arange(n_rays), len(cand)))
+        d = np.empty((len(keys), 3))
+        K.sun_disc_dirs(keys, n_rays, seed, sx, sy, sz, math.cos(half), d)
+        o = np.repeat(s["P"][cand] + self.eps * s["NG"][cand], n_rays, axis=0)
+        v = 1.0 - self.scene.occluded(o, d).reshape(len(cand), n_rays).mean(axis=1)
+        full = np.zeros((len(cand), 3))
+        K.shade_sun(s["NS"][cand], s["WO"][cand], s["comp"][cand], self.diff, self.f0, self.alpha, sx, sy, sz,
+                    e_sun, np.ones(len(cand)), full)
+        L[cand] += (v - vis[cand])[:, None] * full
+        vis[cand] = v
 
     def lobe(self, s, n_rays: int, pix: np.ndarray, seed: int):
         """Specular reflection of everything but the Sun, sampled over each glossy point's GGX
@@ -215,10 +270,30 @@ class _Context:
         d = np.empty((n * n_rays, 3))
         K.gather_rays(s["P"], s["NS"], s["NG"], n_rays, seed, pix, self.eps, o, d)
         h = self.scene.intersect(o, d)
+        vis = self._bounce_sun(o, d, h)
         E = np.empty((n, 3))
         K.gather_sum(n_rays, o, d, s["NG"], h["geomID"], h["primID"], h["u"].astype(np.float64),
-                     h["v"].astype(np.float64), *self._lookup(), E)
+                     h["v"].astype(np.float64), *self._lookup(), vis, E)
         return E
+
+    def _bounce_sun(self, o, d, h):
+        """The Sun's visibility (0/1) at the hits of rays (o, d) from one shadow ray each; −1 at
+        misses (the environment needs none)."""
+        vis = np.full(len(d), -1.0)
+        light = self.lighting
+        if light.sun_irradiance_at_target_W_m2 <= 0.0 or not len(d):
+            return vis
+        sx, sy, sz = light.sun_dir_body
+        want = np.empty(len(d), dtype=bool)
+        so = np.empty((len(d), 3))
+        K.bounce_sun_rays(o, d, h["tfar"].astype(np.float64), h["geomID"], h["primID"], self.scene.face_offset,
+                          self.scene.face_normal, sx, sy, sz, self.eps, want, so)
+        vis[h["geomID"] >= 0] = 0.0
+        idx = np.flatnonzero(want)
+        if len(idx):
+            blocked = self.scene.occluded(so[idx], np.broadcast_to(np.float32([sx, sy, sz]), (len(idx), 3)))
+            vis[idx[~blocked]] = 1.0
+        return vis
 
     def _lookup(self):
         """Arguments of :func:`raytrace._shading.incoming` after the ray."""
@@ -293,7 +368,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     H, W = camera.height, camera.width
     R_bc = np.ascontiguousarray(R.T)
     o_body = -R_bc @ t
-    rad = np.zeros((H * W, 3))
+    rad = np.zeros((H * W, 3), dtype=np.float32)
     lit_img = np.zeros(H * W, dtype=bool)
 
     # ---- pixel centres on the target
@@ -308,11 +383,15 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     s = ctx.surfaces(O, D, face)
     mirror = np.zeros((len(pix), 3))
     E = ctx.cache_E(s)
-    L, lit = ctx.direct(s, E, mirror)
-    lit_img[pix] = lit
+    occ_t = np.full(len(pix), np.inf)
+    L, vis = ctx.direct(s, E, mirror, occluder_t=occ_t)
+    footprint_m = geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx
+    ctx.soft_shadows(s, L, vis, occ_t, footprint_m, pix, H, W, q.sun_rays, int(seed))
+    lit_img[pix] = vis >= 0.5
     timings["direct"] = time.perf_counter() - t0
     _check_finite("direct light", L)
     t0 = time.perf_counter()
+    residual = None
     if q.gather_rays > 0 and len(pix):
         # final gather and glossy lobe sampling; their cache-based counterparts are control
         # variates, so only the (noisy) differences are filtered
@@ -321,7 +400,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         dS = ctx.lobe(s, q.gather_rays, pix64, int(seed)) - mirror
         normal = geo.normal_cam.astype(np.float64)
         depth = np.where(np.isfinite(geo.depth_m), geo.depth_m, 0.0).astype(np.float64)
-        filtered = []
+        residual = []
         for diff in (dE, dS):
             res = np.zeros((H * W, 3))
             res[pix] = diff
@@ -331,13 +410,13 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
                 tmp[:] = 0.0
                 K.atrous(res, geo.instance, normal, depth, camera.fx, camera.fy, camera.cx, camera.cy, 1 << k, tmp)
                 res, tmp = tmp, res
-            filtered.append(res.reshape(-1, 3)[pix])
-        E = E + filtered[0]
-        L += filtered[1]
+            residual.append(res.reshape(-1, 3))
+        E = E + residual[0][pix]
+        L += residual[1][pix]
     ctx.add_diffuse(s, E, L)
+    _check_finite("indirect light", L)
     rad[pix] = L
     timings["indirect"] = time.perf_counter() - t0
-    _check_finite("indirect light", rad)
 
     # ---- Earth behind the target, then anti-aliasing where neighbours disagree
     t0 = time.perf_counter()
@@ -349,6 +428,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         out = np.empty((len(bg), 3))
         K.background(bg, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, 1, ctx.p_background,
                      ctx.tex, out)
+        _check_finite("background", out)
         rad[bg] = out
         check = np.array([0, 0, W, H])
     else:
@@ -357,14 +437,15 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     if q.aa_grid > 1 and check[2] > check[0] and check[3] > check[1]:
         edges = np.zeros((H, W), dtype=bool)
         K.edge_pixels(geo.instance, lit_img.reshape(H, W), geo.normal_cam, geo.depth_m, earth_px, check, edges)
+        edges |= _corner_edges(scene, camera, R, t, o_body, geo)
         epix = np.flatnonzero(edges.ravel())
         if len(epix):
-            sub_rays = 0 if q.gather_rays == 0 else max(2, q.gather_rays // 4)
-            rad[epix] = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, sub_rays, int(seed))
+            sub_rays = max(2, q.gather_rays // 4)
+            sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual, sub_rays)
+            _check_finite("anti-aliasing", sub)
+            rad[epix] = sub
     timings["antialias"] = time.perf_counter() - t0
-    rad = rad.reshape(H, W, 3)
-    _check_finite("anti-aliasing", rad)
-    return RenderFrame(geo, rad.astype(np.float32), q, timings)
+    return RenderFrame(geo, rad.reshape(H, W, 3), q, timings)
 
 
 def _earth_may_be_in_view(camera: Camera, R, lighting: Lighting) -> bool:
@@ -376,16 +457,44 @@ def _earth_may_be_in_view(camera: Camera, R, lighting: Lighting) -> bool:
     return angle <= half_diag + lighting.earth.angular_radius_rad + 1e-6
 
 
-def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid,
-                 gather_rays: int, seed: int):
-    """Box-filtered radiance of the listed pixels from n_grid² stratified sub-pixel rays, each
-    shaded like a ``fast`` pixel, or with ``gather_rays`` final-gather rays (unfiltered) when
-    > 0; misses see Earth or black space."""
+def _corner_edges(scene: Scene, camera: Camera, R, t, o_body, geo) -> np.ndarray:
+    """Pixels containing geometry their centre ray missed: one extra ray through every pixel
+    corner of the cast rectangle (shared by four pixels, so about one ray per pixel); a pixel
+    whose corners see another part than its centre holds a sub-pixel feature (a mast, a gap
+    between panels, a thin wing seen edge-on) and must be supersampled. Features wider than
+    0.71 px are always caught; thinner ones only where they cross a corner."""
+    from ._kernels import make_rays
+    H, W = geo.instance.shape
+    u0, v0, u1, v1 = geo.cast_rect
+    out = np.zeros((H, W), dtype=bool)
+    w, h = u1 - u0 + 1, v1 - v0 + 1
+    if u1 <= u0 or v1 <= v0:
+        return out
+    z0 = 0.0 if geo.camera_inside_hull else scene._near_plane(scene.hull_vertices @ R.T + t)
+    o32 = np.empty((h * w, 3), dtype=np.float32)
+    d32 = np.empty((h * w, 3), dtype=np.float32)
+    make_rays(o_body, np.ascontiguousarray(R.T), camera.fx, camera.fy, camera.cx + 0.5, camera.cy + 0.5, u0, v0, w,
+              h, z0, o32, d32)
+    corner = (scene.intersect(o32, d32)["geomID"] + 1).reshape(h, w)
+    centre = geo.instance[v0:v1, u0:u1].astype(corner.dtype)
+    out[v0:v1, u0:u1] = ((corner[:-1, :-1] != centre) | (corner[:-1, 1:] != centre) | (corner[1:, :-1] != centre)
+                         | (corner[1:, 1:] != centre))
+    return out
+
+
+def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,
+                 residual=None, gather_rays: int = 0):
+    """Box-filtered radiance of the listed pixels from n_grid² jittered-stratified sub-pixel
+    rays. Each sub-sample is shaded like a ``fast`` pixel (exact Sun, cache, mirror term); with
+    ``residual`` (the filtered final-gather and lobe corrections of every pixel, ``balanced``)
+    a sub-sample on the same part as its pixel centre also gets that pixel's corrections, so
+    edge pixels carry the same indirect light as their neighbours. Misses see Earth or black
+    space."""
     S = n_grid * n_grid
     W = camera.width
     D = np.empty((len(epix) * S, 3))
-    K.subpixel_rays(epix.astype(np.int64), W, n_grid, np.ascontiguousarray(R.T), camera.fx, camera.fy, camera.cx,
-                    camera.cy, D)
+    K.subpixel_rays(epix.astype(np.int64), W, n_grid, seed, np.ascontiguousarray(R.T), camera.fx, camera.fy,
+                    camera.cx, camera.cy, D)
     z0 = 0.0 if geo.camera_inside_hull else scene._near_plane(scene.hull_vertices @ R.T + t)
     h = scene.intersect(o_body + z0 * D, D)
     hit = h["geomID"] >= 0
@@ -396,15 +505,30 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
         Dh = np.ascontiguousarray(D[idx])
         s = ctx.surfaces(np.ascontiguousarray(np.broadcast_to(o_body, Dh.shape)), Dh, face)
         E = ctx.cache_E(s)
-        if gather_rays:
-            keys = (np.repeat(epix, S)[idx] * S + idx % S).astype(np.int64)
-            mirror = np.zeros((len(idx), 3))
-            Ls, _ = ctx.direct(s, E, mirror)
-            Ls += ctx.lobe(s, gather_rays, keys, seed) - mirror
-            E = ctx.gather_E(s, gather_rays, keys, seed)
-        else:
-            Ls, _ = ctx.direct(s, E)
-            E = ctx.cache_E(s)
+        sun_dirs = None
+        if ctx.lighting.sun_angular_diameter_rad > 0.0 and S > 1:
+            # one solar-disc sample per sub-sample, stratified over the pixel's S sub-samples
+            sun_dirs = np.empty((len(idx), 3))
+            sx, sy, sz = ctx.lighting.sun_dir_body
+            K.sun_disc_dirs((np.repeat(epix, S)[idx] * S + idx % S).astype(np.int64), S, seed, sx, sy, sz,
+                            math.cos(0.5 * ctx.lighting.sun_angular_diameter_rad), sun_dirs)
+        Ls, _ = ctx.direct(s, E, sun_dirs=sun_dirs)
+        if residual is not None:
+            # same part as the pixel centre: the centre's filtered corrections; another part:
+            # its own (unfiltered) final gather and lobe samples
+            centre = np.repeat(epix, S)[idx]
+            same = geo.instance.ravel()[centre].astype(np.int64) - 1 == s["comp"]
+            j = np.flatnonzero(same)
+            E[j] += residual[0][centre[j]]
+            Ls[j] += residual[1][centre[j]]
+            j = np.flatnonzero(~same)
+            if len(j):
+                sj = {k: v[j] for k, v in s.items()}
+                keys = (centre[j] * S + idx[j] % S).astype(np.int64)
+                mirror = np.zeros((len(j), 3))
+                ctx.direct(sj, E[j], mirror, sun_dirs=None if sun_dirs is None else sun_dirs[j])
+                Ls[j] += ctx.lobe(sj, gather_rays, keys, seed) - mirror
+                E[j] = ctx.gather_E(sj, gather_rays, keys, seed)
         ctx.add_diffuse(s, E, Ls)
         L[idx] = Ls
     miss = np.flatnonzero(~hit)
@@ -414,4 +538,3 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
         K.env_along(o_body, np.ascontiguousarray(Dm), ctx.p_background, ctx.tex, out)
         L[miss] = out
     return L.reshape(len(epix), S, 3).mean(axis=1)
-

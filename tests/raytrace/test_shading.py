@@ -110,7 +110,7 @@ def _form_factor_to_floor(y, z):
 
 
 @pytest.mark.parametrize("quality,samples,tol", [("fast", None, 0.10), ("balanced", 32, 0.05),
-                                                 ("reference", 256, 0.03)])
+                                                 ("reference", 1024, 0.03)])
 def test_perpendicular_plates_first_bounce_matches_form_factor(quality, samples, tol):
     rho_a, rho_b, e = 1.0, 0.1, 1000.0  # B dark: light bouncing back to A is < 2 % of A's
     scene = _plates(rho_a, rho_b)

@@ -1,0 +1,273 @@
+"""Time against error: our quality presets and Blender Cycles on the same scenes.
+
+    python benchmarks/bench_time_error.py --out bench_out/time_error [--width 1280]
+        [--targets tiangong spacedragon icesat cassini] [--ref-spp 512] [--cycles-spp 1 4 16 64 256]
+        [--no-cycles] [--repeats 3]
+
+Scenes: each built-in target with a Lambertian stand-in albedo per part (diffuse + F0 of its
+material preset, capped at 0.9, because the Cycles bridge takes albedo meshes only), written
+as per-part PLY files and one ``SCENE.json`` per viewpoint (``raytrace/scenefile.py`` schema),
+so both renderers read exactly the same input. Three viewpoints per target, at 1.1× the
+distance at which the target fills a 40° field:
+
+* ``sunlit``   oblique view of the sunlit side, looking away from Earth (out of view);
+* ``earth``    looking down towards Earth (nadir), which fills the background; Sun from the side;
+* ``backlit``  from below, looking away from Earth, with the Sun behind the target: what the
+  camera sees is lit mostly by Earth (behind the camera) and by light bouncing between parts.
+
+Lighting: Sun 1361 W/m² (0.533° disc), Earth (uniform albedo 0.3, true size at 400 km) and a
+1 W/(m²·sr) ambient sky (lights the target, not drawn).
+
+Reference: our path tracer (``quality="reference"``), ``--ref-spp`` samples per pixel, twice
+with two seeds. Their mean is the yardstick; half their difference estimates its own noise,
+which is removed in quadrature from every measured error ("corrected"). The path tracer
+agrees with Cycles' analytic calibration scenes (``benchmarks/cycles_calibration.py``); here
+Cycles at its highest spp is a second, independent check of the yardstick.
+
+Error: relative RMS over target pixels (mask of the exact geometry pass), all channels:
+‖I − I_ref‖₂ / ‖I_ref‖₂. Time: median seconds per frame over ``--repeats`` runs after a
+warm-up, both renderers on the same 2 threads, run one after the other in this process
+(side by side). For Cycles the time is ``bpy.ops.render.render`` (scene sync + BVH + render).
+
+Writes ``results.json``, ``table.md`` and ``time_error.png`` (log–log curves) into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from orbit.pose import look_at
+from raytrace.camera import Camera
+from raytrace.lighting import Earth, Lighting
+from raytrace.materials import material_of
+from raytrace.scene import Scene
+from raytrace.scenefile import load_scene_file, scene_to_dict
+from raytrace.shade import render
+from raytrace.targets import BUILTIN_TARGETS, load_target
+
+PRESETS = [("fast", None), ("balanced", 8), ("balanced", 16), ("balanced", 64), ("balanced", 256)]
+EARTH_DISTANCE_M = 6378137.0 + 400e3
+
+
+def viewpoints():
+    """(name, direction from target to camera, Sun direction, Earth direction), body frame."""
+    earth = np.array([-1.0, 0.0, 0.0])
+    return [
+        ("sunlit", np.array([-0.4, -1.0, 0.3]), np.array([0.5, -0.5, 0.70710678]), earth),
+        ("earth", np.array([1.0, -0.35, 0.25]), np.array([0.2, 0.6, 0.77459667]), earth),
+        ("backlit", np.array([-0.6, -0.7, -0.4]), np.array([0.3, 0.8, 0.52]), earth),
+    ]
+
+
+def write_scene(target: str, folder: Path, width: int) -> list[tuple[str, Path]]:
+    """Per-part PLYs and one SCENE.json per viewpoint; returns [(viewpoint, path)]."""
+    model = load_target(target)
+    parts = folder / "parts"
+    parts.mkdir(parents=True, exist_ok=True)
+    meshes = []
+    for k, comp in enumerate(model.components):
+        m = material_of(comp)
+        albedo = np.minimum(np.asarray(m.diffuse) + np.asarray(m.f0), 0.9)
+        path = parts / f"{k:02d}_{comp.name}.ply"
+        comp.mesh.export(path)
+        meshes.append({"path": f"parts/{path.name}", "unit_scale_m": 1.0,
+                       "albedo": [round(float(a), 4) for a in albedo]})
+    H = width * 3 // 4
+    f = width / 1280 * 4e-3 / 3.45e-6
+    cam = Camera(width, H, f, f, (width - 1) / 2, (H - 1) / 2)
+    dist = 1.1 * model.bounding_radius_m / math.tan(math.radians(20))
+    out = []
+    for name, rho_dir, sun, earth in viewpoints():
+        rho = rho_dir / np.linalg.norm(rho_dir) * dist
+        R = look_at(rho)
+        t = -R @ rho
+        light = Lighting(sun_dir_body=tuple(sun / np.linalg.norm(sun)),
+                         earth=Earth(tuple(earth), EARTH_DISTANCE_M, albedo=0.3), ambient_radiance_W_m2_sr=1.0)
+        doc = scene_to_dict(cam, R, t, light, meshes)
+        path = folder / f"{name}.json"
+        path.write_text(json.dumps(doc, indent=1) + "\n")
+        out.append((name, path))
+    return out
+
+
+def rel_err(a: np.ndarray, b: np.ndarray, m: np.ndarray) -> float:
+    return float(np.sqrt(((a[m] - b[m]) ** 2).sum() / (b[m] ** 2).sum()))
+
+
+def read_exr(path: str) -> np.ndarray:
+    import OpenImageIO as oiio
+    buf = oiio.ImageBuf(path)
+    return np.asarray(buf.get_pixels(oiio.FLOAT))[:, :, :3].astype(np.float64)
+
+
+def cycles(scene_path: Path, spp: int, out_exr: Path, python: str) -> tuple[float, np.ndarray]:
+    cmd = [python, str(ROOT / "benchmarks" / "cycles_render.py"), str(scene_path), "--spp", str(spp),
+           "--out", str(out_exr), "--threads", "2"]
+    res = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if res.returncode != 0:
+        raise RuntimeError(f"cycles_render failed: {res.stderr.strip().splitlines()[-1:]}")
+    info = json.loads(res.stdout.strip().splitlines()[-1])
+    return float(info["render_s"]), read_exr(str(out_exr))
+
+
+def bpy_python() -> str | None:
+    env = os.environ.get("BPY_PYTHON")
+    if env:
+        return env
+    cand = ROOT / ".bpyenv" / "bin" / "python"
+    return str(cand) if cand.exists() else None
+
+
+def plot(results: list[dict], path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(8, 5.5), dpi=110)
+    series = {}
+    for r in results:
+        key = "Cycles" if r["renderer"] == "cycles" else ("fast" if r["preset"] == "fast" else "balanced")
+        series.setdefault(key, {}).setdefault(r["samples"] or 0, []).append(r)
+    style = {"fast": ("C0", "s"), "balanced": ("C0", "o"), "Cycles": ("C3", "^")}
+    for key, by_n in series.items():
+        ns = sorted(by_n)
+        t = [statistics.median(x["s_per_frame"] for x in by_n[n]) for n in ns]
+        e = [100 * statistics.median(x["err_corrected"] for x in by_n[n]) for n in ns]
+        c, mk = style[key]
+        ax.loglog(t, e, marker=mk, color=c, ls="-" if key != "fast" else "", label=key, ms=7)
+        for ti, ei, n in zip(t, e, ns, strict=True):
+            if n:
+                ax.annotate(str(n), (ti, ei), textcoords="offset points", xytext=(4, 4), fontsize=8, color=c)
+    for g, lbl in ((2.0, "2 %"), (1.0, "1 %")):
+        ax.axhline(g, color="0.7", lw=0.8, ls=":")
+        ax.annotate(lbl, (0.0, g), xycoords=("axes fraction", "data"), xytext=(3, 2), textcoords="offset points",
+                    fontsize=8, color="0.4")
+    ax.set_xlabel("seconds per 1280×960 frame (median over scenes, 2 cores)")
+    ax.set_ylabel("relative RMS error on target pixels [%] (median over scenes)")
+    ax.set_title("Time against error: orbitsynth presets vs Blender Cycles 5.0 (same scenes)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--width", type=int, default=1280)
+    ap.add_argument("--targets", nargs="*", default=list(BUILTIN_TARGETS))
+    ap.add_argument("--views", nargs="*", default=[v[0] for v in viewpoints()])
+    ap.add_argument("--ref-spp", type=int, default=512)
+    ap.add_argument("--cycles-spp", type=int, nargs="*", default=[1, 4, 16, 64, 256])
+    ap.add_argument("--no-cycles", action="store_true")
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    py = None if args.no_cycles else bpy_python()
+    if not args.no_cycles and py is None:
+        print("# Cycles skipped: no .bpyenv/bin/python and BPY_PYTHON unset (see benchmarks/README_cycles.md)")
+    results = []
+    for target in args.targets:
+        for view, spath in write_scene(target, out / target, args.width):
+            if view not in args.views:
+                continue
+            spec = load_scene_file(str(spath))
+            scene = Scene(spec.model)
+            cam, R, t, light = spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting
+            t0 = time.perf_counter()
+            scene.radiance_cache()
+            build_s = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            r1 = render(scene, cam, R, t, light, quality="reference", samples=args.ref_spp, seed=1)
+            ref_s = time.perf_counter() - t0
+            r2 = render(scene, cam, R, t, light, quality="reference", samples=args.ref_spp, seed=2)
+            mask = r1.geometry.mask
+            a, b = r1.radiance.astype(np.float64), r2.radiance.astype(np.float64)
+            ref = (a + b) / 2
+            noise = rel_err(a, b, mask) / 2
+            head = {"target": target, "view": view, "coverage": float(mask.mean()), "ref_noise": noise}
+            print(f"# {target}/{view}: cover {100 * mask.mean():.1f} %, reference {args.ref_spp} spp x2 in "
+                  f"{ref_s:.1f} s each, its noise {100 * noise:.2f} %, cache build {build_s:.2f} s", flush=True)
+
+            def record(renderer, preset, n, times, img, ref=ref, mask=mask, head=head, noise=noise, target=target,
+                       view=view):
+                e = rel_err(img, ref, mask)
+                row = dict(head, renderer=renderer, preset=preset, samples=n, s_per_frame=statistics.median(times),
+                           err=e, err_corrected=math.sqrt(max(e * e - noise * noise, 0.0)))
+                results.append(row)
+                print(f"{target:12s} {view:8s} {renderer:9s} {preset:9s} {n or '-':>5} "
+                      f"{row['s_per_frame']:8.3f} s  {100 * e:6.2f} %  corrected {100 * row['err_corrected']:6.2f} %",
+                      flush=True)
+
+            for q, n in PRESETS:
+                render(scene, cam, R, t, light, quality=q, samples=n, seed=0)  # warm-up (JIT, cache)
+                times = []
+                for k in range(args.repeats):
+                    t0 = time.perf_counter()
+                    img = render(scene, cam, R, t, light, quality=q, samples=n, seed=k).radiance
+                    times.append(time.perf_counter() - t0)
+                record("orbitsynth", q, n, times, img.astype(np.float64))
+            if py is not None:
+                for n in args.cycles_spp:
+                    reps = args.repeats if n <= 16 else 1
+                    times, img = [], None
+                    for _ in range(reps):
+                        s, img = cycles(spath, n, out / target / f"{view}_cycles_{n}.exr", py)
+                        times.append(s)
+                    record("cycles", "cycles", n, times, img)
+            (out / "results.json").write_text(json.dumps(results, indent=1) + "\n")
+    write_table(results, out / "table.md")
+    plot(results, out / "time_error.png")
+    print((out / "table.md").read_text())
+
+
+def write_table(results: list[dict], path: Path) -> None:
+    """Median over scenes of time and corrected error, per renderer and sample count; then the
+    speed-up at equal error (log-log interpolation of the Cycles curve)."""
+    groups = {}
+    for r in results:
+        groups.setdefault((r["renderer"], r["preset"], r["samples"] or 0), []).append(r)
+    lines = ["| renderer | preset | samples | s / frame (median) | error (median, corrected) | error (max) |",
+             "|---|---|---|---|---|---|"]
+    cyc = []
+    for (ren, preset, n), rows in sorted(groups.items(), key=lambda kv: (kv[0][0] != "orbitsynth", kv[0][1], kv[0][2])):
+        t = statistics.median(r["s_per_frame"] for r in rows)
+        e = statistics.median(r["err_corrected"] for r in rows)
+        emax = max(r["err_corrected"] for r in rows)
+        lines.append(f"| {ren} | {preset} | {n or '-'} | {t:.3f} | {100 * e:.2f} % | {100 * emax:.2f} % |")
+        if ren == "cycles":
+            cyc.append((e, t))
+    if len(cyc) >= 2:
+        cyc.sort()
+        lines += ["", "| preset | samples | error | Cycles time at that error | speed-up |", "|---|---|---|---|---|"]
+        le = np.log([c[0] for c in cyc])  # ascending error
+        lt = np.log([c[1] for c in cyc])
+        for (ren, preset, n), rows in sorted(groups.items()):
+            if ren != "orbitsynth":
+                continue
+            t = statistics.median(r["s_per_frame"] for r in rows)
+            e = statistics.median(r["err_corrected"] for r in rows)
+            if e <= 0 or not (le.min() <= math.log(e) <= le.max()):
+                note = "outside Cycles' range"
+                lines.append(f"| {preset} | {n or '-'} | {100 * e:.2f} % | {note} | |")
+                continue
+            tc = float(np.exp(np.interp(math.log(e), le, lt)))
+            lines.append(f"| {preset} | {n or '-'} | {100 * e:.2f} % | {tc:.2f} s | {tc / t:.1f}× |")
+    path.write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
