@@ -1,16 +1,29 @@
 #!/usr/bin/env python3
-"""Command line: ``python cli.py --target cassini --pattern spiral``.
+"""Command line and pipeline: orbit → pose → raytrace → degrade → files.
 
-``python cli.py render-scene SCENE.json --out DIR`` renders one frame of an explicit scene.
-Until the sequence pipeline lands (issue 6), the main job samples a relative orbit of the
-requested pattern around the target, propagates it with Clohessy–Wiltshire, places it on the reference orbit,
-and prints per frame the relative state in LVLH and the visibility flags (line of sight,
-Earth in the background, Sun clear of the lens, Earth shadow, illuminated fraction ν).
-``--json`` prints the same as one JSON document (keys as in the dataset's scenario.json and
-labels.json, SI units).
+``python cli.py --target cassini --pattern spiral`` renders one sequence into
+``output/cassini_spiral/`` (or ``--out``): clean and degraded RGB, instance masks, depth,
+normals and per-frame labels, with a progress bar and a one-line summary. Every option of the
+lower layers is a flag and a key of ``--config FILE.toml`` (flags override the file); the
+resolved configuration is written with the output (``config.toml``, ``scenario.json``).
+``--dry-run`` prints the per-frame states and visibility flags instead of rendering, ``--json``
+prints them as one JSON document (keys as in ``scenario.json`` and ``labels.json``, SI units).
+
+Other commands:
+
+* ``python cli.py dataset`` — the paper's dataset in one command (4 targets × 500 frames,
+  ``--patterns`` for all four patterns per target), one progress bar, a table of counts;
+* ``python cli.py ablation --target T[,T..] --frames N`` — degradation ablation on clean renders;
+* ``python cli.py render-scene SCENE.json --out DIR`` — one frame of an explicit scene.
+
+Frames are independent and seeded per frame (``SeedSequence(seed).spawn``): the output is
+byte-identical for 1 worker, N worker processes (``--workers``), shards (``--shard K/N``) or a
+dask cluster (``--scheduler ADDRESS``). Files are written under temporary names and renamed;
+a frame is complete when its manifest record (``.manifest/NNNNNN.json``, with checksums) is
+written, and a rerun skips complete frames.
 
 Errors in the arguments print one line naming the parameter and what is allowed, and exit
-with status 2.
+with status 2, leaving nothing behind.
 """
 
 from __future__ import annotations
@@ -21,13 +34,33 @@ import math
 import os
 import sys
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
+from orbit.attitude import ATTITUDE_MODES
+from orbit.epoch import DEFAULT_EPOCH_UTC
 from orbit.patterns import PATTERNS
 from raytrace.targets import BUILTIN_TARGETS as TARGETS
 
 PROG = "cli.py"
+
+DEFAULT_FRAMES = 48
+"""Frames of the main job: it finishes in under a minute on 2 cores at 1280×960 (README)."""
+DATASET_FRAMES = 500
+MODALITIES = ("rgb", "rgb_degraded", "mask", "depth", "normal", "hdr")
+"""Per-frame image files a sequence can hold (folder names)."""
+DATASET_MODALITIES = ("rgb", "mask", "depth", "normal")
+DEGRADE_PRESETS = ("none", "paper", "physical")
+EXPOSURE_MODES = ("fixed", "auto")
+EARTH_TEXTURES = ("procedural", "uniform", "none")
+QUALITIES = ("fast", "balanced", "reference")
+PAPER_GROUP_NAMES = ("D1", "D2", "D3", "D4")
+SOLAR_CONSTANT_W_M2 = 1361.0
+_WHITE_BALANCE_M = 530e-9
+"""Photon energy used for every channel in the camera equation: a white-balanced sensor (a grey
+surface gives equal R, G, B signals) [m]."""
+_EXT = {"rgb": ".png", "rgb_degraded": ".png", "mask": ".png", "depth": ".exr", "normal": ".exr", "hdr": ".exr"}
 
 
 class CLIError(Exception):
@@ -41,6 +74,7 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{PROG}: error: {message}\n")
 
 
+# --------------------------------------------------------------------------- value parsers
 def _int_in(lo: int, hi: int):
     def parse(text: str) -> int:
         try:
@@ -67,6 +101,54 @@ def _float_in(lo: float, hi: float, *, lo_open: bool = False, unit: str = ""):
     return parse
 
 
+def _floats(n: int, lo: float, hi: float, *, unit: str = "", nonzero: bool = False):
+    def parse(text: str) -> list:
+        what = f"{n} comma-separated finite numbers in [{lo:g}, {hi:g}]{(' ' + unit) if unit else ''}"
+        try:
+            values = [float(v) for v in str(text).split(",")]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}") from None
+        if len(values) != n or not all(math.isfinite(v) and lo <= v <= hi for v in values):
+            raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}")
+        if nonzero and not any(values):
+            raise argparse.ArgumentTypeError(f"must be a non-zero vector, got {text!r}")
+        return values
+    return parse
+
+
+def _choice(allowed):
+    def parse(text: str) -> str:
+        if text not in allowed:
+            raise argparse.ArgumentTypeError(f"must be one of {', '.join(allowed)}; got {text!r}")
+        return text
+    return parse
+
+
+def _subset(allowed):
+    def parse(text: str) -> list:
+        items = [s.strip() for s in str(text).split(",") if s.strip()]
+        bad = [s for s in items if s not in allowed]
+        if not items or bad:
+            raise argparse.ArgumentTypeError(f"must be a comma-separated list of {', '.join(allowed)}; "
+                                             f"got {text!r}")
+        return [a for a in allowed if a in items]  # canonical order, no repeats
+    return parse
+
+
+def _bool(text: str) -> bool:
+    if str(text).lower() in ("true", "1", "yes"):
+        return True
+    if str(text).lower() in ("false", "0", "no"):
+        return False
+    raise argparse.ArgumentTypeError(f"must be true or false, got {text!r}")
+
+
+def _path(text: str) -> str:
+    if not str(text):
+        raise argparse.ArgumentTypeError("must be a file path, got ''")
+    return str(text)
+
+
 def _utc(text: str) -> str:
     from orbit.epoch import to_unix_seconds
     from orbit.sun import VALID_UTC_RANGE_S
@@ -80,73 +162,418 @@ def _utc(text: str) -> str:
     return text
 
 
+def _shard(text: str) -> tuple:
+    try:
+        k, n = (int(v) for v in text.split("/"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be K/N with integers 1 <= K <= N, got {text!r}") from None
+    if not 1 <= k <= n:
+        raise argparse.ArgumentTypeError(f"must be K/N with integers 1 <= K <= N, got {text!r}")
+    return k, n
+
+
+# --------------------------------------------------------------------------- the options
+@dataclass(frozen=True, slots=True)
+class _Opt:
+    """One scenario option: a flag, a key of a TOML table, a parser and a default."""
+
+    flag: str
+    section: str
+    parse: object
+    default: object
+    help: str
+    metavar: str | None = None
+    switch: bool = False  # a store_true flag
+
+    @property
+    def key(self) -> str:
+        return self.flag[2:].replace("-", "_")
+
+
+def _options() -> tuple:
+    O = _Opt
+    deg = "deg"
+    return (
+        # [sequence]
+        O("--target", "sequence", _choice(TARGETS), "cassini", "built-in target"),
+        O("--mesh", "sequence", _path, None, "render this mesh file (glb/gltf/obj/ply/stl/off) instead of --target; "
+          "body frame = the file's frame (raytrace.meshio.load_mesh)", "FILE"),
+        O("--mesh-unit-m", "sequence", _float_in(0.0, 1e3, lo_open=True, unit="m"), 1.0,
+          "metres per mesh-file unit (0.001 for millimetres)"),
+        O("--pattern", "sequence", _choice(PATTERNS), "spiral", "relative-motion pattern"),
+        O("--frames", "sequence", _int_in(1, 1_000_000), DEFAULT_FRAMES,
+          "number of frames, evenly spaced over the window"),
+        O("--seed", "sequence", _int_in(0, 2**63 - 1), 0,
+          "seed of the pattern draw and of every frame's noise; same seed, same bytes"),
+        O("--window-s", "sequence", _float_in(0.0, 1e7, lo_open=True, unit="s"), None,
+          "window length [s] (default: one period for elliptical, half for spiral and drip-drop, "
+          "80 m of drift for drift, scaled with the target)"),
+        # [pattern]
+        O("--amplitude-m", "pattern", _float_in(0.0, 1e6, lo_open=True, unit="m"), None,
+          "radial semi-amplitude A [m]; with --kappa sets the pattern instead of drawing it from --seed"),
+        O("--kappa", "pattern", _float_in(-1e3, 1e3), None, "kappa = x_l / A (0 elliptical, "
+          "|kappa| < 0.2896 spiral, < 1 drip-drop, >= 1 drift)"),
+        O("--gamma-m", "pattern", _float_in(-1e7, 1e7, unit="m"), None,
+          "along-track position at the characteristic point [m] (default: centre the window on the target)"),
+        O("--z-amp-m", "pattern", _float_in(0.0, 1e6, unit="m"), None, "out-of-plane amplitude [m] (default 0)"),
+        O("--z-phase-deg", "pattern", _float_in(-360.0, 360.0, unit=deg), None,
+          "out-of-plane phase at t = 0 [deg] (default 0)"),
+        O("--tau0-deg", "pattern", _float_in(-360.0, 360.0, unit=deg), None,
+          "in-plane phase after the characteristic point at t = 0 [deg] (default 0)"),
+        # [orbit]
+        O("--altitude-km", "orbit", _float_in(100.0, 1e6, unit="km"), 400.0, "altitude above the equatorial radius [km]"),
+        O("--inclination-deg", "orbit", _float_in(0.0, 180.0, unit=deg), 51.6, "inclination [deg]"),
+        O("--raan-deg", "orbit", _float_in(-360.0, 360.0, unit=deg), 0.0, "right ascension of the ascending node [deg]"),
+        O("--arg-lat-deg", "orbit", _float_in(-360.0, 360.0, unit=deg), 0.0, "argument of latitude at the epoch [deg]"),
+        O("--epoch", "orbit", _utc, DEFAULT_EPOCH_UTC, "UTC epoch of frame 0, ISO 8601"),
+        O("--sun-margin-deg", "orbit", _float_in(0.0, 90.0, unit=deg), 20.0,
+          "stray-light margin added to the Sun's radius for the Sun-in-lens test [deg]"),
+        # [attitude]
+        O("--attitude", "attitude", _choice(ATTITUDE_MODES), "lvlh-fixed", "target attitude law (orbit.attitude)"),
+        O("--attitude-ypr-deg", "attitude", _floats(3, -360.0, 360.0, unit=deg), [0.0, 0.0, 0.0],
+          "initial attitude w.r.t. LVLH as z-y-x Euler angles yaw,pitch,roll [deg]", "Y,P,R"),
+        O("--spin-axis", "attitude", _floats(3, -1e6, 1e6, nonzero=True), [0.0, 0.0, 1.0],
+          "spin axis in body axes (spin mode)", "X,Y,Z"),
+        O("--spin-rate-deg-s", "attitude", _float_in(-3600.0, 3600.0, unit="deg/s"), 0.0, "spin rate [deg/s]"),
+        O("--omega0-deg-s", "attitude", _floats(3, -3600.0, 3600.0, unit="deg/s"), [0.0, 0.0, 0.0],
+          "initial body rate for tumble [deg/s]", "X,Y,Z"),
+        O("--inertia-kg-m2", "attitude", _floats(3, 1e-9, 1e12, unit="kg m2"), [1.0, 1.0, 1.0],
+          "principal moments of inertia Jxx,Jyy,Jzz along the body axes for tumble [kg m^2]", "JX,JY,JZ"),
+        # [camera]
+        O("--width", "camera", _int_in(1, 65535), 1280, "image width [px]"),
+        O("--height", "camera", _int_in(1, 65535), 960, "image height [px]"),
+        O("--focal-length-mm", "camera", _float_in(0.0, 1e4, lo_open=True, unit="mm"), 4.0, "focal length [mm]"),
+        O("--pixel-pitch-um", "camera", _float_in(0.0, 1e3, lo_open=True, unit="um"), 3.45, "pixel pitch [um]"),
+        # [render]
+        O("--quality", "render", _choice(QUALITIES), "fast", "shading preset (raytrace.shade)"),
+        O("--samples", "render", _int_in(1, 1 << 20), None, "overrides the preset's sample count"),
+        O("--exposure", "render", _choice(EXPOSURE_MODES), "fixed",
+          "clean RGB exposure: fixed (a white Lambertian surface facing the Sun = 1.0) or auto (per frame)"),
+        O("--earth-texture", "render", _choice(EARTH_TEXTURES), "procedural", "Earth as light and backdrop"),
+        O("--earth-albedo", "render", _float_in(0.0, 1.0), 0.3, "Earth's mean albedo"),
+        O("--ambient-W-m2-sr", "render", _float_in(0.0, 1e4, unit="W/(m2 sr)"), 0.0, "constant sky radiance"),
+        # [degrade]
+        O("--degrade", "degrade", _choice(DEGRADE_PRESETS), "physical",
+          "degradation of rgb_degraded: none, paper (SPEC §10 groups) or physical (optics + sensor chain)"),
+        O("--paper-group", "degrade", _choice(PAPER_GROUP_NAMES), "D4", "paper preset: D1 blur ... D4 blur+Poisson+Gaussian"),
+        O("--f-number", "degrade", _float_in(0.5, 64.0), 4.0, "physical preset: f-number N (aperture = f / N)"),
+        O("--exposure-us", "degrade", _float_in(0.0, 1e7, lo_open=True, unit="us"), 20.0,
+          "physical preset: exposure time [us]"),
+        O("--quantum-efficiency", "degrade", _float_in(0.0, 1.0, lo_open=True), 0.6, "physical preset: QE"),
+        O("--full-well-e", "degrade", _float_in(0.0, 1e9, lo_open=True, unit="e-"), 10000.0, "physical preset: full well"),
+        O("--read-noise-e", "degrade", _float_in(0.0, 1e6, unit="e-"), 5.0, "physical preset: read noise sigma"),
+        O("--bit-depth", "degrade", _int_in(1, 16), 12, "physical preset: ADC bits"),
+        O("--aberration-sigma-px", "degrade", _float_in(0.0, 100.0, unit="px"), 0.0,
+          "physical preset: Gaussian aberration sigma [px]"),
+        O("--motion-blur-px", "degrade", _float_in(0.0, 1000.0, unit="px"), 0.0,
+          "physical preset: motion-blur length [px] (constant over the sequence)"),
+        O("--motion-angle-deg", "degrade", _float_in(-360.0, 360.0, unit=deg), 0.0,
+          "physical preset: motion-blur direction, counter-clockwise from +column [deg]"),
+        # [output]
+        O("--modalities", "output", _subset(MODALITIES), None,
+          f"files per frame, from {','.join(MODALITIES)} (default: all but hdr; no rgb_degraded with --degrade none)",
+          "LIST"),
+        O("--only-visible", "output", _bool, False,
+          "drop frames whose flags say the target cannot be seen (default: render them, flags in labels)",
+          switch=True),
+    )
+
+
+OPTIONS = _options()
+SECTIONS = tuple(dict.fromkeys(o.section for o in OPTIONS))
+_BY_KEY = {(o.section, o.key): o for o in OPTIONS}
+
+
+def _add_options(p: argparse.ArgumentParser, defaults: dict, skip=()) -> None:
+    groups = {}
+    for o in OPTIONS:
+        if o.key in skip:
+            continue
+        g = groups.get(o.section) or groups.setdefault(o.section, p.add_argument_group(f"[{o.section}]"))
+        d = defaults.get(o.key, o.default)
+        shown = "" if o.switch else f" (default: {_show(d)})"
+        if o.switch:
+            g.add_argument(o.flag, dest=o.key, action="store_true", default=None, help=o.help)
+        else:
+            g.add_argument(o.flag, dest=o.key, type=o.parse, default=None, metavar=o.metavar, help=o.help + shown)
+
+
+def _show(value) -> str:
+    if value is None:
+        return "automatic"
+    if isinstance(value, (list, tuple)):
+        return ",".join(_show(v) for v in value)
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _add_exec(p: argparse.ArgumentParser, *, out_help: str) -> None:
+    g = p.add_argument_group("execution (not part of the scenario)")
+    g.add_argument("--config", type=_path, default=None, metavar="FILE.toml",
+                   help="options as TOML tables (as in a sequence's config.toml); flags override")
+    g.add_argument("--out", type=_path, default=None, metavar="DIR", help=out_help)
+    g.add_argument("--workers", type=_int_in(1, 4096), default=None,
+                   help="worker processes (default: all cores of this machine)")
+    g.add_argument("--shard", type=_shard, default=None, metavar="K/N",
+                   help="render only frames i with i %% N == K - 1 (e.g. one task of a job array)")
+    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="render on a dask.distributed cluster (tcp://host:8786) instead of local processes")
+    g.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the main job."""
-    p = _Parser(prog=PROG, description="Relative-orbit image generator for spacecraft vision-based navigation. "
-                "Samples a relative orbit of the requested pattern around the target and prints the "
-                "per-frame relative state and visibility flags.")
-    p.add_argument("--target", choices=TARGETS, default="cassini", help="built-in target (default: cassini)")
-    p.add_argument("--pattern", choices=PATTERNS, default="spiral",
-                   help="relative-motion pattern (default: spiral)")
-    p.add_argument("--frames", type=_int_in(1, 1_000_000), default=100,
-                   help="number of frames, evenly spaced over the window (default: 100)")
-    p.add_argument("--seed", type=_int_in(0, 2**63 - 1), default=0,
-                   help="seed of the pattern draw; same seed, same output (default: 0)")
-    p.add_argument("--window-s", type=_float_in(0.0, 1e7, lo_open=True, unit="s"), default=None,
-                   help="window length [s] (default: one period for elliptical, half for spiral and "
-                        "drip-drop, 80 m of drift for drift, scaled with the target)")
-    g = p.add_argument_group("reference orbit (circular)")
-    g.add_argument("--altitude-km", type=_float_in(100.0, 1e6, unit="km"), default=400.0,
-                   help="altitude above the equatorial radius [km] (default: 400)")
-    g.add_argument("--inclination-deg", type=_float_in(0.0, 180.0, unit="deg"),
-                   default=51.6, help="inclination [deg] (default: 51.6)")
-    g.add_argument("--raan-deg", type=_float_in(-360.0, 360.0, unit="deg"), default=0.0,
-                   help="right ascension of the ascending node [deg] (default: 0)")
-    g.add_argument("--arg-lat-deg", type=_float_in(-360.0, 360.0, unit="deg"), default=0.0,
-                   help="argument of latitude at the epoch [deg] (default: 0)")
-    g.add_argument("--epoch", type=_utc, default=None, help="UTC epoch of frame 0, ISO 8601 (default: 2026-03-20T12:00:00Z)")
-    g.add_argument("--sun-margin-deg", type=_float_in(0.0, 90.0, unit="deg"), default=20.0,
-                   help="stray-light margin added to the Sun's radius for the Sun-in-lens test [deg] (default: 20)")
-    p.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
+    p = _Parser(prog=PROG, description="Relative-orbit image generator for spacecraft vision-based navigation: "
+                "renders one sequence of the requested pattern around the target (clean and degraded RGB, "
+                "mask, depth, normals, labels). Other commands: dataset, ablation, render-scene "
+                "(`python cli.py COMMAND --help`).")
+    _add_options(p, {})
+    p.add_argument("--dry-run", action="store_true", help="print the per-frame states and flags; render nothing")
+    p.add_argument("--json", action="store_true", help="print the states and flags as one JSON document; render nothing")
+    _add_exec(p, out_help="sequence folder (default: output/TARGET_PATTERN)")
     return p
 
 
-def run_orbit_job(args: argparse.Namespace) -> dict:
-    """Sample, propagate and evaluate one sequence; returns plain-Python results."""
+# --------------------------------------------------------------------------- configuration
+def _toml_text(value) -> str:
+    """A TOML value as the text a flag would take (so one parser validates both)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, list):
+        return ",".join(_toml_text(v) for v in value)
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, (int, str)):
+        return str(value)
+    raise argparse.ArgumentTypeError(f"has an unsupported TOML type {type(value).__name__}")
+
+
+def read_config(path: str) -> dict:
+    """Read a TOML configuration; returns {section: {key: value}} validated like the flags.
+
+    Raises
+    ------
+    CLIError
+        Unreadable or invalid TOML, an unknown table or key, or a value a flag would reject.
+    """
+    import tomllib
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except OSError as exc:
+        raise CLIError(f"--config: cannot read {path} ({exc.strerror})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise CLIError(f"--config: {path} is not valid TOML ({exc})") from None
+    out = {}
+    for section, table in data.items():
+        if section not in SECTIONS or not isinstance(table, dict):
+            raise CLIError(f"--config: {path}: unknown table [{section}]; allowed tables are "
+                           f"{', '.join(f'[{s}]' for s in SECTIONS)}")
+        for key, value in table.items():
+            opt = _BY_KEY.get((section, key))
+            if opt is None:
+                keys = ", ".join(o.key for o in OPTIONS if o.section == section)
+                raise CLIError(f"--config: {path}: unknown key {key!r} in [{section}]; allowed: {keys}")
+            try:
+                out.setdefault(section, {})[key] = opt.parse(_toml_text(value))
+            except argparse.ArgumentTypeError as exc:
+                raise CLIError(f"--config: {path}: [{section}] {key} {exc}") from None
+    return out
+
+
+def resolve_config(args: argparse.Namespace, defaults: dict | None = None) -> tuple[dict, set]:
+    """Resolved scenario options {section: {key: value}}: flags, then the config file, then
+    defaults. Also returns the keys set explicitly (by a flag or the file)."""
+    defaults = defaults or {}
+    file_cfg = read_config(args.config) if getattr(args, "config", None) else {}
+    cfg, given = {s: {} for s in SECTIONS}, set()
+    for o in OPTIONS:
+        value = getattr(args, o.key, None)
+        if value is None and o.key in file_cfg.get(o.section, {}):
+            value = file_cfg[o.section][o.key]
+        if value is not None:
+            given.add(o.key)
+        else:
+            value = defaults.get(o.key, o.default)
+        cfg[o.section][o.key] = list(value) if isinstance(value, (list, tuple)) else value
+    d = cfg["degrade"]
+    out = cfg["output"]
+    if out["modalities"] is None:
+        mods = defaults.get("modalities") or [m for m in MODALITIES if m != "hdr"]
+        out["modalities"] = [m for m in mods if not (m == "rgb_degraded" and d["degrade"] == "none")]
+    elif "rgb_degraded" in out["modalities"] and d["degrade"] == "none":
+        raise CLIError("argument --modalities: rgb_degraded needs --degrade paper or physical, got --degrade none")
+    if cfg["sequence"]["mesh"] is not None:
+        cfg["sequence"]["mesh"] = os.path.abspath(cfg["sequence"]["mesh"])
+    return cfg, given
+
+
+def config_toml(cfg: dict) -> str:
+    """The resolved configuration as TOML (automatic values are comments)."""
+    lines = ["# orbitsynth: resolved options of this sequence. `python cli.py --config config.toml --out DIR`",
+             "# renders the same bytes (execution options such as --workers are not recorded).", ""]
+    for section in SECTIONS:
+        lines.append(f"[{section}]")
+        for key, value in cfg[section].items():
+            if value is None:
+                lines.append(f"# {key} = automatic")
+            else:
+                lines.append(f"{key} = {_toml_value(value)}")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {value!r} as TOML")
+
+
+# --------------------------------------------------------------------------- planning (orbit → pose → light)
+def _load_model(spec: tuple):
+    """The target model of a model spec: ("builtin", name) or ("mesh", path, unit_scale_m)."""
+    if spec[0] == "builtin":
+        from raytrace.targets import load_target
+        return load_target(spec[1])
+    from raytrace.meshio import load_mesh
+    model, _report = load_mesh(spec[1], unit_scale_m=spec[2])
+    return model
+
+
+def _gmst_rad(unix_s: np.ndarray) -> np.ndarray:
+    """Greenwich mean sidereal time (IAU 1982, UT1 ≈ UTC) [rad]: orients the Earth texture only."""
+    T = (np.asarray(unix_s) / 86400.0 + 2440587.5 - 2451545.0) / 36525.0
+    sec = 67310.54841 + (876600.0 * 3600.0 + 8640184.812866) * T + 0.093104 * T**2 - 6.2e-6 * T**3
+    return np.mod(sec, 86400.0) * (2.0 * math.pi / 86400.0)
+
+
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def _explicit_pattern(cfg: dict, given: set, n: float, band, radius_m: float):
+    """Initial state from --amplitude-m/--kappa (and optional γ, B, phases) instead of a draw."""
+    from orbit import cw
+    from orbit.patterns import parameters, state_from_kappa
+    from orbit.sampling import default_window_s
+    p, seq = cfg["pattern"], cfg["sequence"]
+    if p["amplitude_m"] is None or p["kappa"] is None:
+        missing = "--amplitude-m" if p["amplitude_m"] is None else "--kappa"
+        raise CLIError(f"argument {missing}: explicit pattern parameters need both --amplitude-m and --kappa")
+    A, kappa = p["amplitude_m"], p["kappa"]
+    z_amp = p["z_amp_m"] or 0.0
+    z_phase = math.radians(p["z_phase_deg"] or 0.0)
+    tau0 = math.radians(p["tau0_deg"] or 0.0)
+    x_l = kappa * A
+    beta = 1.5 * n * x_l
+    window = seq["window_s"] or default_window_s(_class_of(kappa), n, x_l_m=x_l, scale=band.scale)
+    gamma = p["gamma_m"] if p["gamma_m"] is not None else beta * (window / 2.0 + tau0 / n)
+    s0 = state_from_kappa(A, kappa, gamma, n, z_amp=z_amp, z_phase=z_phase, tau0=tau0)
+    params = parameters(s0, n)
+    if "pattern" in given and params.pattern != seq["pattern"]:
+        raise CLIError(f"argument --kappa: amplitude {A:g} m and kappa {kappa:g} make the pattern {params.pattern}, "
+                       f"not {seq['pattern']} (spiral: 0 < |kappa| < 0.2896, drip-drop: < 1, drift: >= 1)")
+    frames = seq["frames"]
+    t_s = np.linspace(0.0, window, frames) if frames > 1 else np.zeros(1)
+    r = np.linalg.norm(cw.propagate(s0, n, np.concatenate([t_s, np.linspace(0, window, 1024)]))[:, :3], axis=1)
+    if r.min() <= radius_m:
+        raise CLIError(f"argument --amplitude-m: with these pattern parameters the camera comes within {r.min():.3g} m "
+                       f"of the target centre, inside its bounding radius {radius_m:.3g} m; use a larger amplitude, "
+                       "|kappa| or --gamma-m")
+    draws = {"A_m": A, "kappa": kappa, "x_l_m": x_l, "beta_m_s": beta, "gamma_m": gamma, "tau0_rad": tau0,
+             "z_amp_m": z_amp, "z_phase_rad": z_phase}
+    return s0, t_s, window, params, draws, 0, (float(r.min()), float(r.max()))
+
+
+def _class_of(kappa: float) -> str:
+    from orbit.patterns import classify
+    c = classify(1.0, kappa)
+    return c if c in PATTERNS else "elliptical"
+
+
+def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
+    """Sample (or set), propagate and evaluate one sequence: everything but the pixels.
+
+    Returns a dict: ``result`` (plain-Python scenario and per-frame labels without image
+    quantities, the ``--json`` document), ``model``, ``model_spec``, ``camera`` and per-frame
+    ``lights`` (Sun, Earth and ν in the body frame)."""
     from orbit import cw, pose, visibility
     from orbit.attitude import TargetAttitude
-    from orbit.epoch import DEFAULT_EPOCH_UTC, to_iso_utc
+    from orbit.epoch import to_iso_utc
     from orbit.reference import ReferenceOrbit
-    from orbit.sampling import sample_pattern
+    from orbit.rotations import rot_z
+    from orbit.sampling import range_band, sample_pattern
     from orbit.sun import sun_position_eci
-    from raytrace.targets import load_target
+    from raytrace.camera import Camera
 
-    radius_m = load_target(args.target).bounding_radius_m  # measured on the built-in mesh
-    ref = ReferenceOrbit(altitude_m=args.altitude_km * 1e3, inclination_rad=math.radians(args.inclination_deg),
-                         raan_rad=math.radians(args.raan_deg), arg_lat_rad=math.radians(args.arg_lat_deg),
-                         epoch_utc=args.epoch if args.epoch is not None else DEFAULT_EPOCH_UTC)
+    seq, orb, att, cam = cfg["sequence"], cfg["orbit"], cfg["attitude"], cfg["camera"]
+    if seq["mesh"] is not None:
+        spec = ("mesh", seq["mesh"], seq["mesh_unit_m"])
+        try:
+            model = _load_model(spec)
+        except ValueError as exc:
+            raise CLIError(f"argument --mesh: {exc}") from None
+        target = model.name
+    else:
+        spec = ("builtin", seq["target"])
+        model = _load_model(spec)
+        target = seq["target"]
+    try:
+        from raytrace.scene import Scene
+        Scene(model)  # validates the mesh (e.g. zero-area triangles) before anything is written
+    except ValueError as exc:
+        raise CLIError(f"argument --mesh: {exc}") from None
+    radius_m = model.bounding_radius_m
+    camera = Camera.from_focal(cam["focal_length_mm"] * 1e-3, cam["pixel_pitch_um"] * 1e-6, cam["width"], cam["height"])
+    ref = ReferenceOrbit(altitude_m=orb["altitude_km"] * 1e3, inclination_rad=math.radians(orb["inclination_deg"]),
+                         raan_rad=math.radians(orb["raan_deg"]), arg_lat_rad=math.radians(orb["arg_lat_deg"]),
+                         epoch_utc=orb["epoch"])
     n = ref.n_rad_s
-    sample = sample_pattern(args.pattern, n, target_radius_m=radius_m,
-                            n_frames=args.frames, rng=args.seed, window_s=args.window_s)
-    t_s = np.asarray(sample.t_s)
-    s_lvlh = cw.propagate(sample.s0_lvlh, n, t_s)
+    band = range_band(radius_m)
+    explicit = cfg["pattern"]["amplitude_m"] is not None or cfg["pattern"]["kappa"] is not None
+    if explicit:
+        s0, t_s, window_s, params, draws, attempts, range_m = _explicit_pattern(cfg, given, n, band, radius_m)
+        pattern = params.pattern
+    else:
+        sample = sample_pattern(seq["pattern"], n, target_radius_m=radius_m, n_frames=seq["frames"],
+                                rng=seq["seed"], window_s=seq["window_s"])
+        s0, t_s, window_s, params = sample.s0_lvlh, np.asarray(sample.t_s), sample.window_s, sample.params
+        draws, attempts, range_m, pattern = dict(sample.draws), sample.attempts, sample.range_m, seq["pattern"]
+    s_lvlh = cw.propagate(s0, n, t_s)
     r_obs_eci, _ = ref.observer_state_eci(s_lvlh, t_s)
     r_tgt_eci, _ = ref.target_state_eci(t_s)
     unix_s = ref.unix_s(t_s)
     r_sun_eci = sun_position_eci(unix_s)
-    vis = visibility.visibility(r_obs_eci, r_tgt_eci, r_sun_eci, sun_margin_rad=math.radians(args.sun_margin_deg))
+    vis = visibility.visibility(r_obs_eci, r_tgt_eci, r_sun_eci, sun_margin_rad=math.radians(orb["sun_margin_deg"]))
 
+    attitude = TargetAttitude.from_euler_zyx_deg(
+        att["attitude"], *att["attitude_ypr_deg"], spin_axis_body=att["spin_axis"],
+        spin_rate_rad_s=math.radians(att["spin_rate_deg_s"]), omega0_body_rad_s=np.radians(att["omega0_deg_s"]),
+        inertia_body_kg_m2=np.diag(att["inertia_kg_m2"]))
+    R_lvlh_from_body = attitude.R_lvlh_from_body(t_s, n)
     R_cam_from_lvlh = pose.look_at(s_lvlh[:, :3])
-    R_lvlh_from_body = TargetAttitude(mode="lvlh-fixed").R_lvlh_from_body(t_s, n)
     R_cam_from_body, t_cam_m = pose.pose_from_relative(s_lvlh[:, :3], R_lvlh_from_body, R_cam_from_lvlh)
     labels = pose.pose_labels(R_cam_from_body, t_cam_m)
-    R_cam_from_eci = R_cam_from_lvlh @ np.swapaxes(ref.R_eci_from_lvlh(t_s), -1, -2)
-    sun_dir_cam = (R_cam_from_eci @ (r_sun_eci - r_obs_eci)[:, :, None])[:, :, 0]
-    sun_dir_cam /= np.linalg.norm(sun_dir_cam, axis=1, keepdims=True)
-    earth_dir_cam = (R_cam_from_eci @ -r_obs_eci[:, :, None])[:, :, 0]
-    earth_dir_cam /= np.linalg.norm(earth_dir_cam, axis=1, keepdims=True)
+    R_lvlh_from_eci = np.swapaxes(ref.R_eci_from_lvlh(t_s), -1, -2)
+    R_cam_from_eci = R_cam_from_lvlh @ R_lvlh_from_eci
+    # directions seen from the camera (labels) ...
+    sun_dir_cam = _unit_rows((R_cam_from_eci @ (r_sun_eci - r_obs_eci)[:, :, None])[:, :, 0])
+    earth_dir_cam = _unit_rows((R_cam_from_eci @ -r_obs_eci[:, :, None])[:, :, 0])
+    # ... and from the target, in its body frame (the renderer's light)
+    R_body_from_eci = np.swapaxes(R_lvlh_from_body, -1, -2) @ R_lvlh_from_eci
+    sun_dir_body = _unit_rows((R_body_from_eci @ (r_sun_eci - r_tgt_eci)[:, :, None])[:, :, 0])
+    earth_dir_body = _unit_rows((R_body_from_eci @ -r_tgt_eci[:, :, None])[:, :, 0])
+    earth_distance_m = np.linalg.norm(r_tgt_eci, axis=1)
+    R_body_from_earth = R_body_from_eci @ rot_z(_gmst_rad(unix_s))  # Earth-fixed axes (texture)
 
-    frames = []
+    frames, lights = [], []
     for i in range(t_s.size):
         frames.append({
             "frame": i,
@@ -160,6 +587,8 @@ def run_orbit_job(args: argparse.Namespace) -> dict:
             "t_cam_m": [float(v) for v in t_cam_m[i]],
             "sun_dir_cam": [float(v) for v in sun_dir_cam[i]],
             "earth_dir_cam": [float(v) for v in earth_dir_cam[i]],
+            "sun_dir_body": [float(v) for v in sun_dir_body[i]],
+            "earth_dir_body": [float(v) for v in earth_dir_body[i]],
             "line_of_sight": bool(vis.line_of_sight[i]),
             "earth_in_background": bool(vis.earth_in_background[i]),
             "sun_angle_deg": float(np.degrees(vis.sun_angle_rad[i])),
@@ -168,24 +597,31 @@ def run_orbit_job(args: argparse.Namespace) -> dict:
             "shadow_fraction": float(vis.illuminated_fraction[i]),
             "visible": bool(vis.visible[i]),
         })
-    return {
-        "target": args.target,
+        lights.append({"sun_dir_body": sun_dir_body[i].tolist(), "shadow_fraction": float(vis.illuminated_fraction[i]),
+                       "earth_dir_body": earth_dir_body[i].tolist(), "earth_distance_m": float(earth_distance_m[i]),
+                       "R_body_from_earth": R_body_from_earth[i].tolist()})
+    result = {
+        "target": target,
         "target_bounding_radius_m": radius_m,
-        "pattern": args.pattern,
-        "seed": args.seed,
+        "pattern": pattern,
+        "seed": seq["seed"],
         "reference_orbit": {"altitude_m": ref.altitude_m, "inclination_rad": ref.inclination_rad,
                             "raan_rad": ref.raan_rad, "arg_lat_rad": ref.arg_lat_rad, "epoch_utc": ref.epoch_utc,
                             "a_m": ref.a_m, "period_s": ref.period_s},
         "n": n,
-        "s0_lvlh": [float(v) for v in sample.s0_lvlh],
-        "window_s": sample.window_s,
-        "range_band_m": [sample.band.r_min_m, sample.band.r_max_m],
-        "pattern_parameters": sample.params.to_dict(),
-        "sampled": dict(sample.draws),
-        "attempts": sample.attempts,
+        "s0_lvlh": [float(v) for v in s0],
+        "window_s": float(window_s),
+        "range_band_m": [band.r_min_m, band.r_max_m],
+        "range_m": [float(v) for v in range_m],
+        "pattern_parameters": params.to_dict(),
+        "pattern_source": "explicit" if explicit else "sampled",
+        "sampled": draws,
+        "attempts": attempts,
         "t_s": [float(v) for v in t_s],
         "frames": frames,
     }
+    return {"result": result, "model": model, "model_spec": spec, "camera": camera, "lights": lights,
+            "cfg": cfg, "name": f"{target}_{pattern}"}
 
 
 def _num(value) -> str:
@@ -221,27 +657,571 @@ def _print_table(result: dict, out) -> None:
     w(f"# {n_vis} of {len(result['frames'])} frames visible (line of sight, Sun clear of the lens, target lit)\n")
 
 
+# --------------------------------------------------------------------------- one frame (runs in a worker)
+_SCENES: dict = {}
+_SCENE_LOCK = None
+
+
+def _scene(spec: tuple):
+    """The Scene of a model spec, built once per process (Embree BVH and radiance cache)."""
+    global _SCENE_LOCK
+    import threading
+    if _SCENE_LOCK is None:
+        _SCENE_LOCK = threading.Lock()
+    with _SCENE_LOCK:
+        scene = _SCENES.get(spec)
+        if scene is None:
+            from raytrace.scene import Scene
+            scene = Scene(_load_model(spec))
+            scene.embree  # noqa: B018 - build now, under the lock
+            _SCENES[spec] = scene
+        return scene
+
+
+def _worker_init(threads: int) -> None:
+    """Process-pool initializer: share the cores between the workers."""
+    try:
+        import numba
+        numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    except Exception as exc:  # noqa: BLE001 - a thread count is an optimisation, never an error
+        sys.stderr.write(f"{PROG}: warning: could not set the worker's thread count ({exc})\n")
+
+
+def frame_seeds(seed: int, frame: int) -> tuple:
+    """(render seed, degradation SeedSequence) of a frame: child ``frame`` of
+    ``SeedSequence(seed).spawn(...)``; the render seed is its first word mod 2³¹, the
+    degradation stream its first child."""
+    child = np.random.SeedSequence(seed, spawn_key=(frame,))
+    return int(child.generate_state(1)[0] % 2**31), np.random.SeedSequence(seed, spawn_key=(frame, 0))
+
+
+def _lighting(light: dict, r: dict):
+    from raytrace.lighting import Earth, Lighting
+    earth = None
+    if r["earth_texture"] != "none":
+        earth = Earth(light["earth_dir_body"], light["earth_distance_m"], albedo=r["earth_albedo"],
+                      texture=r["earth_texture"], R_body_from_earth=light["R_body_from_earth"])
+    return Lighting(sun_dir_body=light["sun_dir_body"], sun_irradiance_W_m2=SOLAR_CONSTANT_W_M2,
+                    shadow_fraction=light["shadow_fraction"], earth=earth,
+                    ambient_radiance_W_m2_sr=r["ambient_W_m2_sr"])
+
+
+def _physical_config(d: dict, cam: dict):
+    from degrade.chain import DegradeConfig, OpticsConfig
+    from degrade.sensor import SensorConfig
+    f_m = cam["focal_length_mm"] * 1e-3
+    optics = OpticsConfig(focal_length_m=f_m, aperture_m=f_m / d["f_number"], pixel_pitch_m=cam["pixel_pitch_um"] * 1e-6,
+                          aberration_sigma_px=d["aberration_sigma_px"], motion_length_px=d["motion_blur_px"],
+                          motion_angle_deg=d["motion_angle_deg"])
+    sensor = SensorConfig(quantum_efficiency=d["quantum_efficiency"], full_well_e=d["full_well_e"],
+                          read_noise_e=d["read_noise_e"], bit_depth=d["bit_depth"], exposure_s=d["exposure_us"] * 1e-6)
+    return DegradeConfig(optics=optics, sensor=sensor, encoding="srgb8")
+
+
+def render_frame_images(task: dict) -> tuple[dict, dict]:
+    """Render one frame of a task and return (images, image-derived label fields).
+
+    ``images`` maps a modality to its pixels (only the requested ones, plus ``rgb`` when
+    ``task["want_rgb"]``)."""
+    from degrade.encode import quantise, srgb_encode
+    from raytrace.camera import Camera
+    from raytrace.shade import render
+    cfg = task["cfg"]
+    mods = set(task["modalities"])
+    scene = _scene(task["model_spec"])
+    camera = Camera(*task["camera"])
+    R = np.asarray(task["R_cam_from_body"], dtype=np.float64).reshape(3, 3)
+    t = np.asarray(task["t_cam_m"], dtype=np.float64)
+    render_seed, degrade_seq = frame_seeds(cfg["sequence"]["seed"], task["frame"])
+    d = cfg["degrade"]
+    need_rgb = task.get("want_rgb") or "rgb" in mods or ("rgb_degraded" in mods and d["degrade"] == "paper")
+    need_radiance = need_rgb or "hdr" in mods or "rgb_degraded" in mods
+    images, info = {}, {}
+    if need_radiance:
+        r = cfg["render"]
+        frame = render(scene, camera, R, t, _lighting(task["light"], r), quality=r["quality"],
+                       samples=r["samples"], seed=render_seed)
+        geo, radiance = frame.geometry, frame.radiance
+    else:  # geometry-only modalities: no shading at all
+        geo, radiance = scene.render_geometry(camera, R, t), None
+    if need_rgb:
+        if cfg["render"]["exposure"] == "auto":
+            from degrade.exposure import auto_exposure
+            linear, scale = auto_exposure(radiance, geo.mask)
+        else:  # fixed: a white Lambertian surface facing the Sun (L = E/π) maps to 1.0
+            scale = math.pi / SOLAR_CONSTANT_W_M2
+            linear = radiance * np.float32(scale)
+        images["rgb"] = quantise(srgb_encode(np.minimum(linear, np.float32(1.0))), 8)
+        info["exposure_scale"] = float(scale)
+    if "rgb_degraded" in mods:
+        rng = np.random.default_rng(degrade_seq)
+        if d["degrade"] == "paper":
+            from degrade.paper import paper_degrade
+            out = paper_degrade(images["rgb"].astype(np.float32) / np.float32(255.0), d["paper_group"], rng=rng)
+        else:
+            from degrade.chain import degrade
+            from degrade.exposure import physical_exposure
+            cam = cfg["camera"]
+            signal = physical_exposure(radiance, f_number=d["f_number"], exposure_s=d["exposure_us"] * 1e-6,
+                                       pixel_pitch_m=cam["pixel_pitch_um"] * 1e-6,
+                                       quantum_efficiency=d["quantum_efficiency"], full_well_e=d["full_well_e"],
+                                       wavelengths_m=(_WHITE_BALANCE_M,) * 3)
+            out = degrade(signal, _physical_config(d, cam), rng=rng)
+        images["rgb_degraded"] = quantise(out, 8)
+    if "mask" in mods:
+        images["mask"] = geo.instance.astype(np.uint16)
+    if "depth" in mods:
+        images["depth"] = geo.depth_m.astype(np.float32)
+    if "normal" in mods:
+        images["normal"] = geo.normal_cam.astype(np.float32)
+    if "hdr" in mods:
+        images["hdr"] = radiance.astype(np.float32)
+    bbox = geo.bbox_xywh
+    vf = geo.visible_fraction
+    info.update({"bbox": None if bbox is None else [int(v) for v in bbox],
+                 "visible_fraction": None if math.isnan(vf) else float(vf),
+                 "pixel_counts": [int(v) for v in geo.pixel_counts]})
+    return images, info
+
+
+def run_frame(task: dict) -> dict:
+    """Render, degrade and write one frame (files atomically, then its manifest record);
+    returns the frame's label. With ``task["write"]`` false, returns the images instead."""
+    from raytrace import files as F
+    images, info = render_frame_images(task)
+    if not task.get("write", True):
+        return {"frame": task["frame"], "index": task.get("index"), "images": images, "info": info}
+    seq_dir, name = task["out"], f"{task['frame']:06d}"
+    rel = {m: f"{m}/{name}{_EXT[m]}" for m in task["modalities"]}
+    digests = {}
+    for m in task["modalities"]:
+        path = os.path.join(seq_dir, rel[m])
+        F.atomic_write_image(path, images[m])
+        digests[rel[m]] = F.sha256_file(path)
+    label = dict(task["label"])
+    label.update(info)
+    label["files"] = rel
+    F.write_frame_record(seq_dir, task["frame"], {"frame": task["frame"], "label": label, "files": digests})
+    return label
+
+
+# --------------------------------------------------------------------------- sequence folders
+def _versions() -> dict:
+    import platform
+    from importlib import metadata
+    out = {"python": platform.python_version()}
+    for dist in ("orbitsynth", "numpy", "scipy", "numba", "embreex", "trimesh", "OpenImageIO", "scikit-image"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = None
+    return out
+
+
+def _camera_json(camera, cfg: dict) -> dict:
+    K = camera.K.tolist()
+    cam = cfg["camera"]
+    return {"K": K, "width": camera.width, "height": camera.height,
+            "fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
+            "focal_length_m": cam["focal_length_mm"] * 1e-3, "pixel_pitch_m": cam["pixel_pitch_um"] * 1e-6,
+            "convention": "OpenCV: x right, y down, z forward; integer pixel coordinates are pixel centres",
+            # SPEED+-style keys
+            "cameraMatrix": K, "distCoeffs": [0.0, 0.0, 0.0, 0.0, 0.0], "Nu": camera.width, "Nv": camera.height,
+            "ppx": cam["pixel_pitch_um"] * 1e-6, "ppy": cam["pixel_pitch_um"] * 1e-6}
+
+
+def _frames_to_write(plan: dict) -> list:
+    frames = plan["result"]["frames"]
+    only = plan["cfg"]["output"]["only_visible"]
+    return [f["frame"] for f in frames if f["visible"] or not only]
+
+
+def _scenario(plan: dict) -> dict:
+    res, cfg, model = plan["result"], plan["cfg"], plan["model"]
+    scen = {"format": "orbitsynth sequence 1", "config": cfg, "seed": cfg["sequence"]["seed"],
+            "versions": _versions()}
+    scen.update({k: v for k, v in res.items() if k != "frames"})
+    scen["target_model"] = {
+        "file": f"model/{res['target']}.ply",
+        "n_triangles": model.n_triangles,
+        "components": [{"id": k + 1, "name": c.name, "material": c.material, "semantic": c.semantic}
+                       for k, c in enumerate(model.components)]}
+    scen["visible"] = [f["visible"] for f in res["frames"]]
+    scen["frames_written"] = _frames_to_write(plan)
+    scen["exposure"] = ("fixed: linear = radiance * pi / 1361 W/m2 (a white Lambertian surface facing the Sun "
+                        "is 1.0), sRGB 8-bit" if cfg["render"]["exposure"] == "fixed" else
+                        "auto: per frame, 99.5th luminance percentile of the target -> 0.9 (exposure_scale in labels)")
+    scen["random_streams"] = ("frame i: SeedSequence(seed).spawn(n)[i]; render seed = generate_state(1)[0] mod 2^31, "
+                              "degradation rng = its first spawned child")
+    return scen
+
+
+def _json(obj) -> str:
+    return json.dumps(obj, indent=1, allow_nan=False) + "\n"
+
+
+def _first_missing(path: str) -> str | None:
+    path = os.path.abspath(path)
+    missing = None
+    while not os.path.exists(path):
+        missing = path
+        parent = os.path.dirname(path)
+        if parent == path:
+            break
+        path = parent
+    return missing
+
+
+def _read_bytes(path: str) -> bytes:
+    with open(path, "rb") as fh:
+        return fh.read()
+
+
+def prepare_sequence(plan: dict, seq_dir: str) -> None:
+    """Create the sequence folder with scenario.json, camera.json, config.toml and model/,
+    or check that an existing one holds the same scenario (then it is resumed).
+    On failure, removes whatever it created."""
+    import shutil
+
+    from raytrace import files as F
+    scenario = _json(_scenario(plan))
+    scen_path = os.path.join(seq_dir, "scenario.json")
+    if os.path.isfile(scen_path):
+        with open(scen_path, encoding="utf-8") as fh:
+            if fh.read() != scenario:
+                raise CLIError(f"--out: {seq_dir} holds another sequence (its scenario.json differs from these "
+                               "options); choose another --out or delete it")
+    created = _first_missing(seq_dir)
+    try:
+        if os.path.exists(seq_dir) and not os.path.isdir(seq_dir):
+            raise CLIError(f"--out: {seq_dir} exists and is not a folder")
+        os.makedirs(seq_dir, exist_ok=True)
+        if not os.access(seq_dir, os.W_OK | os.X_OK):
+            raise CLIError(f"--out: {seq_dir} is not writable")
+        F.remove_stale_temporaries(seq_dir)
+        for m in plan["cfg"]["output"]["modalities"]:
+            os.makedirs(os.path.join(seq_dir, m), exist_ok=True)
+        os.makedirs(os.path.join(seq_dir, "model"), exist_ok=True)
+        texts = {"camera.json": _json(_camera_json(plan["camera"], plan["cfg"])),
+                 "config.toml": config_toml(plan["cfg"])}
+        scen = json.loads(scenario)
+        blobs = {scen["target_model"]["file"]: F.model_ply_bytes(plan["model"])}
+        blobs.update({k: v.encode("utf-8") for k, v in texts.items()})
+        for rel, data in blobs.items():
+            path = os.path.join(seq_dir, rel)
+            if not (os.path.isfile(path) and _read_bytes(path) == data):
+                F.atomic_write_bytes(path, data)
+        if not os.path.isfile(scen_path):
+            F.atomic_write_text(scen_path, scenario)  # last: its presence marks a prepared folder
+    except BaseException as exc:
+        if created is not None:
+            shutil.rmtree(created, ignore_errors=True)
+        if isinstance(exc, OSError):
+            raise CLIError(f"--out: cannot write into {seq_dir} ({exc.strerror or exc})") from None
+        raise
+
+
+def finish_sequence(plan: dict, seq_dir: str) -> dict:
+    """Write labels.json and manifest.json if every frame of the sequence is complete (from
+    any run or shard); returns counts."""
+    from raytrace import files as F
+    wanted = _frames_to_write(plan)
+    records = {}
+    for i in wanted:
+        rec = F.frame_complete(seq_dir, i, verify=False)
+        if rec is not None:
+            records[i] = rec
+    done = len(records) == len(wanted)
+    if done:
+        labels = [records[i]["label"] for i in wanted]
+        files = {}
+        for rel in ("scenario.json", "camera.json", "config.toml", _scenario(plan)["target_model"]["file"]):
+            files[rel] = F.sha256_file(os.path.join(seq_dir, rel))
+        for i in wanted:
+            files.update(records[i]["files"])
+        labels_text = _json(labels)
+        F.atomic_write_text(os.path.join(seq_dir, "labels.json"), labels_text)
+        files["labels.json"] = F.sha256_file(os.path.join(seq_dir, "labels.json"))
+        F.atomic_write_text(os.path.join(seq_dir, "manifest.json"),
+                            _json({"format": "orbitsynth manifest 1", "algorithm": "sha256", "files": files}))
+    return {"complete": done, "present": len(records), "wanted": len(wanted)}
+
+
+def _tasks_for(plan: dict, seq_dir: str, shard: tuple | None, *, write: bool = True, frames=None) -> tuple:
+    """(tasks to run, frames skipped as complete) for the frames of this shard."""
+    from raytrace import files as F
+    cfg, cam = plan["cfg"], plan["camera"]
+    wanted = _frames_to_write(plan) if frames is None else list(frames)
+    if shard is not None:
+        k, n = shard
+        wanted = [i for i in wanted if i % n == k - 1]
+    tasks, skipped = [], 0
+    for i in wanted:
+        if write and F.frame_complete(seq_dir, i) is not None:
+            skipped += 1
+            continue
+        label = plan["result"]["frames"][i]
+        tasks.append({"frame": i, "out": seq_dir, "write": write, "cfg": cfg, "model_spec": plan["model_spec"],
+                      "camera": (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy),
+                      "R_cam_from_body": label["R_cam_from_body"], "t_cam_m": label["t_cam_m"],
+                      "light": plan["lights"][i], "label": label,
+                      "modalities": cfg["output"]["modalities"] if write else [], "want_rgb": not write})
+    return tasks, skipped
+
+
+# --------------------------------------------------------------------------- execution
+def default_workers() -> int:
+    """All cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:
+        return max(1, os.cpu_count() or 1)
+
+
+def execute(tasks: list, *, workers: int, scheduler: str | None = None, progress=None):
+    """Run :func:`run_frame` on every task: in this process (1 worker), on a pool of
+    ``workers`` spawned processes, or on a dask.distributed cluster; yields results as they
+    complete and advances ``progress`` (a tqdm bar) by one per frame."""
+    if not tasks:
+        return
+    if scheduler is not None:
+        try:
+            from distributed import Client, as_completed
+        except ImportError:
+            raise CLIError("--scheduler needs dask.distributed: pip install 'orbitsynth[dask]'") from None
+        try:
+            client = Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise CLIError(f"--scheduler: cannot connect to {scheduler} ({exc})") from None
+        with client:
+            futures = client.map(run_frame, tasks, pure=False)
+            for fut in as_completed(futures):
+                res = fut.result()
+                if progress is not None:
+                    progress.update(1)
+                yield res
+        return
+    if workers <= 1 or len(tasks) == 1:
+        for task in tasks:
+            res = run_frame(task)
+            if progress is not None:
+                progress.update(1)
+            yield res
+        return
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    n = min(workers, len(tasks))
+    threads = max(1, default_workers() // n)
+    pool = ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_worker_init, initargs=(threads,))
+    try:
+        pending = {pool.submit(run_frame, t) for t in tasks}
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                res = fut.result()
+                if progress is not None:
+                    progress.update(1)
+                yield res
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _progress(total: int, initial: int, desc: str, quiet: bool):
+    from tqdm import tqdm
+    return tqdm(total=total, initial=initial, desc=desc, unit="frame", disable=quiet, file=sys.stderr,
+                dynamic_ncols=True, smoothing=0.1, mininterval=0.5)
+
+
+def run_plans(jobs: list, args: argparse.Namespace, *, desc: str | None = None) -> list:
+    """Render the (plan, sequence folder) pairs: prepare folders, run every missing frame of
+    this shard on the chosen backend (one progress bar), then assemble labels and manifests.
+    Returns one stats dict per sequence."""
+    workers = args.workers or default_workers()
+    for plan, seq_dir in jobs:
+        prepare_sequence(plan, seq_dir)
+    all_tasks, stats = [], []
+    for plan, seq_dir in jobs:
+        tasks, skipped = _tasks_for(plan, seq_dir, args.shard)
+        all_tasks += tasks
+        stats.append({"name": plan["name"], "dir": seq_dir, "rendered": len(tasks), "skipped": skipped,
+                      "frames": len(plan["result"]["frames"]),
+                      "visible": sum(f["visible"] for f in plan["result"]["frames"])})
+    skipped = sum(s["skipped"] for s in stats)
+    t0 = time.perf_counter()
+    bar = _progress(len(all_tasks) + skipped, skipped, desc or jobs[0][0]["name"], args.quiet)
+    try:
+        for _ in execute(all_tasks, workers=workers, scheduler=args.scheduler, progress=bar):
+            pass
+    finally:
+        bar.close()
+    elapsed = time.perf_counter() - t0
+    for (plan, seq_dir), s in zip(jobs, stats):
+        s.update(finish_sequence(plan, seq_dir))
+        s["seconds"] = elapsed
+    return stats
+
+
+def _summary_line(s: dict, elapsed: float) -> str:
+    rate = f", {s['rendered'] / elapsed:.2f} frames/s" if s["rendered"] and elapsed > 0 else ""
+    state = ("labels.json and manifest.json written" if s["complete"] else
+             f"{s['present']} of {s['wanted']} frames present; labels.json is written when all are "
+             "(run the other shards, or rerun without --shard)")
+    return (f"{s['name']}: {s['frames']} frames, {s['visible']} visible; rendered {s['rendered']}, "
+            f"skipped {s['skipped']} complete, in {elapsed:.1f} s{rate} -> {s['dir']}/ ({state})\n")
+
+
+# --------------------------------------------------------------------------- commands
+def _fail(exc: BaseException) -> int:
+    sys.stderr.write(f"{PROG}: error: {exc}\n")
+    return 2
+
+
+def _render_failed(exc: BaseException) -> int:
+    msg = " ".join(str(exc).split()) or type(exc).__name__
+    sys.stderr.write(f"{PROG}: error: rendering failed ({type(exc).__name__}: {msg}); complete frames are kept, "
+                     "rerun the same command to resume\n")
+    return 1
+
+
+def main_job(argv: list) -> int:
+    """``cli.py [options]``: render one sequence (or print its states with --dry-run/--json)."""
+    args = build_parser().parse_args(argv)
+    try:
+        cfg, given = resolve_config(args)
+        plan = plan_sequence(cfg, given)
+    except (CLIError, ValueError) as exc:
+        return _fail(exc)
+    if args.json or args.dry_run:
+        try:
+            if args.json:
+                json.dump(plan["result"], sys.stdout, indent=1, allow_nan=False)
+                sys.stdout.write("\n")
+            else:
+                _print_table(plan["result"], sys.stdout)
+            sys.stdout.flush()
+        except BrokenPipeError:  # e.g. `python cli.py --dry-run | head`: the reader left, not an error
+            sys.stdout = None
+        return 0
+    seq_dir = args.out or os.path.join("output", plan["name"])
+    t0 = time.perf_counter()
+    try:
+        stats = run_plans([(plan, seq_dir)], args)
+    except CLIError as exc:
+        return _fail(exc)
+    except KeyboardInterrupt:
+        sys.stderr.write(f"{PROG}: interrupted; complete frames are kept, rerun the same command to resume\n")
+        return 130
+    except Exception as exc:  # noqa: BLE001 - a failure while rendering: one line, frames done are kept
+        return _render_failed(exc)
+    sys.stdout.write(_summary_line(stats[0], time.perf_counter() - t0))
+    return 0
+
+
+def dataset_main(argv: list) -> int:
+    """``cli.py dataset``: the paper's dataset (targets × patterns) in one command."""
+    p = _Parser(prog=f"{PROG} dataset", description="Render the paper's dataset: every target (and with --patterns "
+                "every pattern) as one sequence folder each, with one progress bar and a final table of counts.")
+    p.add_argument("--targets", type=_subset(TARGETS), default=list(TARGETS), metavar="LIST",
+                   help=f"built-in targets (default: {','.join(TARGETS)})")
+    p.add_argument("--patterns", action="store_true", help="all four patterns per target (default: --pattern only)")
+    defaults = {"frames": DATASET_FRAMES, "degrade": "none", "modalities": list(DATASET_MODALITIES)}
+    _add_options(p, defaults, skip=("target", "mesh", "mesh_unit_m"))
+    _add_exec(p, out_help="dataset folder; one sub-folder TARGET_PATTERN per sequence (default: output/dataset)")
+    args = p.parse_args(argv)
+    for key in ("target", "mesh", "mesh_unit_m"):
+        setattr(args, key, None)
+    t0 = time.perf_counter()
+    try:
+        cfg, given = resolve_config(args, defaults)
+        if cfg["sequence"]["mesh"] is not None:
+            raise CLIError("--config: [sequence] mesh is not used by the dataset command (built-in targets only)")
+        jobs = []
+        patterns = list(PATTERNS) if args.patterns else [cfg["sequence"]["pattern"]]
+        root = args.out or os.path.join("output", "dataset")
+        for target in args.targets:
+            for pattern in patterns:
+                c = json.loads(json.dumps(cfg))
+                c["sequence"]["target"], c["sequence"]["pattern"] = target, pattern
+                plan = plan_sequence(c, given - {"pattern"})
+                jobs.append((plan, os.path.join(root, plan["name"])))
+        stats = run_plans(jobs, args, desc="dataset")
+    except (CLIError, ValueError) as exc:
+        return _fail(exc)
+    except KeyboardInterrupt:
+        sys.stderr.write(f"{PROG}: interrupted; complete frames are kept, rerun the same command to resume\n")
+        return 130
+    except Exception as exc:  # noqa: BLE001 - a failure while rendering: one line, frames done are kept
+        return _render_failed(exc)
+    elapsed = time.perf_counter() - t0
+    w = sys.stdout.write
+    w(f"{'sequence':<26} {'frames':>6} {'visible':>7} {'rendered':>8} {'skipped':>7} {'complete':>8}\n")
+    for s in stats:
+        w(f"{s['name']:<26} {s['frames']:6d} {s['visible']:7d} {s['rendered']:8d} {s['skipped']:7d} "
+          f"{'yes' if s['complete'] else 'no':>8}\n")
+    tot = {k: sum(s[k] for s in stats) for k in ("frames", "visible", "rendered", "skipped")}
+    w(f"{'total':<26} {tot['frames']:6d} {tot['visible']:7d} {tot['rendered']:8d} {tot['skipped']:7d}\n")
+    w(f"{len(stats)} sequences x {len(cfg['output']['modalities'])} modalities "
+      f"({','.join(cfg['output']['modalities'])}) in {elapsed:.1f} s -> {root}/\n")
+    return 0
+
+
+def ablation_main(argv: list) -> int:
+    """``cli.py ablation``: degradation ablation (degrade.ablation) on clean renders."""
+    p = _Parser(prog=f"{PROG} ablation", description="Render N clean frames per target through the pipeline and "
+                "measure what each degradation costs (PSNR, SSIM; LPIPS when installed).")
+    p.add_argument("--target", type=_subset(TARGETS), default=["cassini"], metavar="T[,T..]",
+                   help="built-in targets (default: cassini)")
+    p.add_argument("--frames", type=_int_in(1, 10_000), default=4, help="clean frames per target (default: 4)")
+    p.add_argument("--mode", type=_choice(("paper", "physical", "both")), default="both",
+                   help="which study to report (default: both)")
+    p.add_argument("--pattern", type=_choice(PATTERNS), default="spiral", help="pattern (default: spiral)")
+    p.add_argument("--width", type=_int_in(1, 65535), default=640, help="image width [px] (default: 640)")
+    p.add_argument("--height", type=_int_in(1, 65535), default=480, help="image height [px] (default: 480)")
+    p.add_argument("--focal-length-mm", type=_float_in(0.0, 1e4, lo_open=True, unit="mm"), default=2.0,
+                   help="focal length [mm] (default: 2, the field of view of the full-size default camera)")
+    p.add_argument("--quality", type=_choice(QUALITIES), default="fast", help="shading preset (default: fast)")
+    p.add_argument("--seed", type=_int_in(0, 2**63 - 1), default=0, help="seed (default: 0)")
+    p.add_argument("--workers", type=_int_in(1, 4096), default=None, help="worker processes (default: all cores)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    args = p.parse_args(argv)
+    from degrade.ablation import format_ablation, run_ablation
+    try:
+        tasks, labels = [], []
+        for target in args.target:
+            ns = argparse.Namespace(**{o.key: None for o in OPTIONS})
+            ns.target, ns.pattern, ns.seed, ns.quality = target, args.pattern, args.seed, args.quality
+            ns.width, ns.height, ns.focal_length_mm = args.width, args.height, args.focal_length_mm
+            ns.frames = 4 * args.frames
+            cfg, given = resolve_config(ns)
+            plan = plan_sequence(cfg, given)
+            visible = [f["frame"] for f in plan["result"]["frames"] if f["visible"]] or [0]
+            pick = sorted({visible[round(j)] for j in np.linspace(0, len(visible) - 1, args.frames)})
+            t, _ = _tasks_for(plan, "", None, write=False, frames=pick)
+            for task in t:
+                task["index"] = len(tasks)
+                tasks.append(task)
+            labels += [target] * len(t)
+        bar = _progress(len(tasks), 0, "ablation", args.quiet)
+        rgb = [None] * len(tasks)
+        try:
+            for res in execute(tasks, workers=args.workers or default_workers(), progress=bar):
+                rgb[res["index"]] = res["images"]["rgb"]  # results arrive as they complete
+        finally:
+            bar.close()
+        imgs = [im.astype(np.float32) / np.float32(255.0) for im in rgb]
+        physical = None if args.mode == "paper" else _physical_config(cfg["degrade"], cfg["camera"])
+        report = run_ablation(imgs, labels, seed=args.seed, physical=physical)
+        if args.mode == "physical":
+            import dataclasses
+            report = dataclasses.replace(report, rows=tuple(r for r in report.rows if r.mode == "physical"))
+    except (CLIError, ValueError) as exc:
+        return _fail(exc)
+    sys.stdout.write(format_ablation(report) + "\n")
+    return 0
+
+
 # --------------------------------------------------------------------------- render-scene
-def _write_image(path: str, pixels: np.ndarray) -> None:
-    """Write an image with OpenImageIO (format from the extension); raise OSError on failure."""
-    import OpenImageIO as oiio
-    out = oiio.ImageOutput.create(path)
-    if out is None:
-        raise OSError(f"cannot create {path}: {oiio.geterror()}")
-    if pixels.ndim == 2:
-        pixels = pixels[:, :, None]
-    h, w, c = pixels.shape
-    fmt = {np.dtype(np.uint8): oiio.UINT8, np.dtype(np.uint16): oiio.UINT16,
-           np.dtype(np.float32): oiio.FLOAT}[pixels.dtype]
-    spec = oiio.ImageSpec(w, h, c, fmt)
-    if path.endswith(".exr"):
-        spec.attribute("compression", "zip")
-    ok = out.open(path, spec) and out.write_image(np.ascontiguousarray(pixels))
-    out.close()
-    if not ok:
-        raise OSError(f"cannot write {path}: {out.geterror()}")
-
-
 def frame_images(frame, *, name: str = "000000") -> dict:
     """The files of one rendered frame (relative path → pixels), as in a sequence folder:
     clean sRGB 8-bit ``rgb/`` (auto exposure), 16-bit instance ``mask/`` (0 background),
@@ -258,30 +1238,12 @@ def frame_images(frame, *, name: str = "000000") -> dict:
 
 
 def write_files_atomically(out_dir: str, files: dict, texts: dict) -> None:
-    """Write every file into ``out_dir`` or none: all go to a hidden temporary folder first,
-    then are moved into place; on any failure the temporary folder is removed."""
-    import shutil
-    import tempfile
+    """:func:`raytrace.files.write_files_atomically`, failures as a one-line CLIError naming --out."""
+    from raytrace.files import write_files_atomically as write
     try:
-        os.makedirs(out_dir, exist_ok=True)
-        tmp = tempfile.mkdtemp(prefix=".partial-", dir=out_dir)
+        write(out_dir, files, texts)
     except OSError as exc:
-        raise CLIError(f"--out: cannot create {out_dir} ({exc.strerror})") from None
-    try:
-        for rel, pixels in files.items():
-            os.makedirs(os.path.join(tmp, os.path.dirname(rel)), exist_ok=True)
-            _write_image(os.path.join(tmp, rel), pixels)
-        for rel, text in texts.items():
-            with open(os.path.join(tmp, rel), "w", encoding="utf-8") as fh:
-                fh.write(text)
-        for rel in list(files) + list(texts):
-            dst = os.path.join(out_dir, rel)
-            os.makedirs(os.path.dirname(dst) or out_dir, exist_ok=True)
-            os.replace(os.path.join(tmp, rel), dst)
-    except OSError as exc:
-        raise CLIError(f"--out: cannot write into {out_dir} ({exc})") from None
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        raise CLIError(f"--out: {exc}") from None
 
 
 def render_scene_main(argv: list[str]) -> int:
@@ -325,28 +1287,478 @@ def render_scene_main(argv: list[str]) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the process exit status."""
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if argv and argv[0] == "render-scene":
-        return render_scene_main(argv[1:])
-    args = build_parser().parse_args(argv)
+# --------------------------------------------------------------------------- preview
+PREVIEW_SIZE = (1600, 1000)
+"""Preview PNG size of one sequence, width × height [px]; ``--all-patterns`` uses 2800 × 1100."""
+PREVIEW_SIZE_ALL = (2800, 1100)
+
+
+def _size(text: str) -> tuple:
     try:
-        result = run_orbit_job(args)
-    except (CLIError, ValueError) as exc:
-        sys.stderr.write(f"{PROG}: error: {exc}\n")
-        return 2
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT in pixels (e.g. 1600x1000), got {text!r}") from None
+    if not (64 <= w <= 16384 and 64 <= h <= 16384):
+        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT with 64..16384 px per side, got {text!r}")
+    return w, h
+
+
+def preview_track(plan: dict):
+    """The :class:`raytrace.preview.PreviewTrack` of a planned sequence: the frames' states,
+    camera poses, visibility flags, start-frame Sun and Earth and the target mesh, in LVLH.
+
+    The camera axes come from the renderer's pose (``R_cam_from_body`` of every frame) and
+    the look-at pointing of :func:`plan_sequence`; the target is drawn at the start frame's
+    attitude ``R_lvlh_from_body = R_lvlh_from_cam @ R_cam_from_body``."""
+    from orbit.pose import look_at
+    from raytrace.preview import PreviewTrack
+    res, model, cam = plan["result"], plan["model"], plan["camera"]
+    frames = res["frames"]
+    r_lvlh = np.array([f["r_lvlh"] for f in frames], dtype=np.float64)
+    R_cam_from_body = np.array([f["R_cam_from_body"] for f in frames], dtype=np.float64).reshape(-1, 3, 3)
+    R_lvlh_from_cam = np.swapaxes(look_at(r_lvlh), -1, -2)  # as plan_sequence points the camera
+    R_lvlh_from_body0 = R_lvlh_from_cam[0] @ R_cam_from_body[0]
+    verts, faces, ids, base = [], [], [], 0
+    for k, comp in enumerate(model.components):
+        v = np.asarray(comp.mesh.vertices, dtype=np.float64)
+        f = np.asarray(comp.mesh.faces, dtype=np.int64)
+        verts.append(v @ R_lvlh_from_body0.T)
+        faces.append(f + base)
+        ids.append(np.full(len(f), k + 1, dtype=np.int64))
+        base += len(v)
+    l0 = plan["lights"][0]
+    sun = R_lvlh_from_body0 @ np.asarray(l0["sun_dir_body"])
+    earth = R_lvlh_from_body0 @ np.asarray(l0["earth_dir_body"])
+    return PreviewTrack(title=f"{res['target']} {res['pattern']}", r_lvlh_m=r_lvlh, t_s=np.asarray(res["t_s"]),
+                        visible=np.array([f["visible"] for f in frames], dtype=bool),
+                        R_lvlh_from_cam=R_lvlh_from_cam, K=cam.K, width=cam.width, height=cam.height,
+                        vertices_lvlh_m=np.vstack(verts), faces=np.vstack(faces), face_ids=np.concatenate(ids),
+                        sun_dir_lvlh=sun / np.linalg.norm(sun), earth_dir_lvlh=earth / np.linalg.norm(earth))
+
+
+def preview_main(argv: list) -> int:
+    """``cli.py preview``: an off-screen PNG of the sequence the same options would render."""
+    p = _Parser(prog=f"{PROG} preview", description="Draw, without rendering it, the sequence that the main job "
+                "would render with the same options: the target at true scale in LVLH axes, the observer "
+                "trajectory coloured by time (start and end marked), camera frusta, the Sun and Earth directions "
+                "at the start frame, frames failing visibility in red; below, the in-plane x-y projection. "
+                "Off-screen (no display needed); seconds, not minutes.")
+    _add_options(p, {})
+    g = p.add_argument_group("preview (not part of the scenario)")
+    g.add_argument("--config", type=_path, default=None, metavar="FILE.toml",
+                   help="options as TOML tables (a sequence's config.toml previews that sequence); flags override")
+    g.add_argument("--out", type=_path, default=None, metavar="FILE.png",
+                   help="PNG to write (default: output/TARGET_PATTERN_preview.png, "
+                        "output/TARGET_all-patterns_preview.png)")
+    g.add_argument("--all-patterns", action="store_true", help="the four patterns side by side for one target")
+    g.add_argument("--size", type=_size, default=None, metavar="WxH",
+                   help=f"PNG size [px] (default: {PREVIEW_SIZE[0]}x{PREVIEW_SIZE[1]}, "
+                        f"{PREVIEW_SIZE_ALL[0]}x{PREVIEW_SIZE_ALL[1]} with --all-patterns)")
+    g.add_argument("--frusta-every", type=_int_in(1, 1_000_000), default=None, metavar="K",
+                   help="a camera frustum every K frames (default: about 12 per sequence)")
+    g.add_argument("--interactive", action="store_true", help="also open a window (needs a display)")
+    g.add_argument("--html", type=_path, default=None, metavar="FILE.html",
+                   help="also export an interactive scene (needs pyvista's exporter: "
+                        "pip install trame-pyvista nest_asyncio2)")
+    args = p.parse_args(argv)
+    from raytrace import preview
+    t0 = time.perf_counter()
     try:
-        if args.json:
-            json.dump(result, sys.stdout, indent=1, allow_nan=False)
-            sys.stdout.write("\n")
+        if args.interactive and not preview.has_display():
+            raise CLIError("argument --interactive: no display (DISPLAY and WAYLAND_DISPLAY are unset); "
+                           "drop --interactive to write the PNG off-screen")
+        if args.html is not None and not preview.html_export_available():
+            raise CLIError("argument --html: pyvista's HTML exporter is not installed "
+                           f"(pip install {' '.join(preview.HTML_EXPORT_PACKAGES)})")
+        cfg, given = resolve_config(args)
+        if args.all_patterns:
+            if cfg["pattern"]["amplitude_m"] is not None or cfg["pattern"]["kappa"] is not None:
+                raise CLIError("argument --all-patterns: draws each pattern from --seed; drop --amplitude-m/--kappa")
+            plans = []
+            for pattern in PATTERNS:
+                c = json.loads(json.dumps(cfg))
+                c["sequence"]["pattern"] = pattern
+                plans.append(plan_sequence(c, given - {"pattern"}))
+            name = f"{plans[0]['result']['target']}_all-patterns"
         else:
-            _print_table(result, sys.stdout)
-        sys.stdout.flush()
-    except BrokenPipeError:  # e.g. `python cli.py | head`: the reader left, not an error
-        sys.stdout = None
+            plans = [plan_sequence(cfg, given)]
+            name = plans[0]["name"]
+        tracks = [preview_track(plan) for plan in plans]
+        size = args.size or (PREVIEW_SIZE_ALL if args.all_patterns else PREVIEW_SIZE)
+        out = args.out or os.path.join("output", f"{name}_preview.png")
+        for path in (out, args.html):
+            if path is not None and os.path.dirname(os.path.abspath(path)):
+                try:
+                    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+                except OSError as exc:
+                    raise CLIError(f"--out: cannot create the folder of {path} ({exc.strerror or exc})") from None
+        try:
+            preview.write_preview(tracks, out, size=size, frusta_every=args.frusta_every, html_path=args.html)
+        except OSError as exc:
+            raise CLIError(f"--out: cannot write {out} ({exc.strerror or exc})") from None
+        except RuntimeError as exc:
+            raise CLIError(f"argument --html: {exc}; the PNG {out} is written") from None
+    except (CLIError, ValueError) as exc:
+        return _fail(exc)
+    elapsed = time.perf_counter() - t0
+    for t in tracks:
+        sys.stdout.write(f"{t.title}: {t.n_frames} frames, {int(t.visible.sum())} visible, "
+                         f"range {np.linalg.norm(t.r_lvlh_m, axis=1).min():.1f}-"
+                         f"{np.linalg.norm(t.r_lvlh_m, axis=1).max():.1f} m\n")
+    extra = f" and {args.html}" if args.html else ""
+    sys.stdout.write(f"preview {size[0]}x{size[1]} in {elapsed:.1f} s -> {out}{extra}\n")
+    if args.interactive:
+        preview.build_plotter(tracks, size=size, frusta_every=args.frusta_every, off_screen=False).show()
     return 0
 
 
+# --------------------------------------------------------------------------- render snapshots
+SNAPSHOT_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "tests", "snapshots")
+"""Committed reference renders (``python cli.py snapshots --update`` rewrites them)."""
+SNAPSHOT_SETTINGS = {
+    "width": 160, "height": 120, "focal_length_mm": 1.0, "pixel_pitch_um": 3.45,
+    "frames": 5, "kept_frames": [1, 2, 3], "quality": "fast", "seed": 0, "degrade_presets": ["paper", "physical"],
+}
+"""What a snapshot renders: for each target × pattern, frames 1-3 of a 5-frame sequence at 160×120
+(the default 3.45 µm pixels, so the physical exposure is the main job's, and a 1 mm lens: half
+the default camera's field of view), clean RGB, mask, depth, normals and RGB degraded by both
+presets (paper D4, physical)."""
+SNAPSHOT_MODALITIES = ("rgb", "rgb_paper", "rgb_physical", "mask", "depth", "normal")
+SNAPSHOT_PSNR_DB = 45.0
+"""RGB passes when its PSNR, over every frame and over the target's window in it, is at least this [dB]."""
+SNAPSHOT_DEPTH_TOL = (1e-4, 1e-5)
+"""Depth passes when |Δ| <= atol + rtol · depth (atol [m], rtol [-]) and misses stay misses."""
+SNAPSHOT_NORMAL_ATOL = 1e-4
+"""Normals pass when every component differs by at most this [-] (background stays 0)."""
+_WINDOW_MARGIN_PX = 8
+
+
+def snapshot_cases(targets=None, patterns=None) -> list:
+    """Snapshot names ``TARGET_PATTERN`` for every built-in target × pattern (or the given ones)."""
+    return [f"{t}_{p}" for t in (targets or TARGETS) for p in (patterns or PATTERNS)]
+
+
+def render_snapshot(name: str) -> dict:
+    """Render the snapshot ``TARGET_PATTERN`` with :func:`plan_sequence` and
+    :func:`render_frame_images`: modality → the kept frames side by side (one strip)."""
+    target, _, pattern = name.partition("_")
+    if target not in TARGETS or pattern not in PATTERNS:
+        raise ValueError(f"snapshot name must be TARGET_PATTERN with a target of {', '.join(TARGETS)} and a pattern "
+                         f"of {', '.join(PATTERNS)}; got {name!r}")
+    s = SNAPSHOT_SETTINGS
+    ns = argparse.Namespace(**{o.key: None for o in OPTIONS}, config=None)
+    ns.target, ns.pattern, ns.frames, ns.seed, ns.quality = target, pattern, s["frames"], s["seed"], s["quality"]
+    ns.width, ns.height = s["width"], s["height"]
+    ns.focal_length_mm, ns.pixel_pitch_um = s["focal_length_mm"], s["pixel_pitch_um"]
+    cfg, given = resolve_config(ns)
+    plan = plan_sequence(cfg, given)
+    tasks, _ = _tasks_for(plan, "", None, write=False, frames=s["kept_frames"])
+    out = {m: [] for m in SNAPSHOT_MODALITIES}
+    for task in tasks:
+        for preset in s["degrade_presets"]:
+            t = dict(task)
+            t["cfg"] = json.loads(json.dumps(cfg))
+            t["cfg"]["degrade"]["degrade"] = preset
+            first = preset == s["degrade_presets"][0]
+            t["modalities"] = ["rgb", "rgb_degraded", "mask", "depth", "normal"] if first else ["rgb_degraded"]
+            images, _info = render_frame_images(t)
+            out[f"rgb_{preset}"].append(images["rgb_degraded"])
+            if first:
+                for m in ("rgb", "mask", "depth", "normal"):
+                    out[m].append(images[m])
+    return {m: np.concatenate(v, axis=1) for m, v in out.items()}
+
+
+def _snapshot_files(folder: str, name: str) -> dict:
+    base = os.path.join(folder, name)
+    return {"rgb": f"{base}.rgb.webp", "rgb_paper": f"{base}.rgb_paper.webp", "rgb_physical": f"{base}.rgb_physical.webp",
+            "mask": f"{base}.mask.png", "geometry": f"{base}.geometry.npz"}
+
+
+def _write_lossless_webp(path: str, rgb: np.ndarray) -> None:
+    """8-bit RGB as lossless WebP (a quarter smaller than PNG on the degraded images' noise),
+    checked by reading it back."""
+    import OpenImageIO as oiio
+
+    from raytrace import files as F
+    rgb = np.ascontiguousarray(rgb, dtype=np.uint8)
+    tmp = f"{path}.tmp{os.getpid()}.webp"
+    spec = oiio.ImageSpec(rgb.shape[1], rgb.shape[0], 3, oiio.UINT8)
+    spec.attribute("compression", "lossless")
+    out = oiio.ImageOutput.create(tmp)
+    ok = out is not None and out.open(tmp, spec) and out.write_image(rgb)
+    err = oiio.geterror() if out is None else out.geterror()
+    if out is not None:
+        out.close()
+    if not ok or not np.array_equal(F.read_image(tmp), rgb):
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise OSError(f"cannot write {path} as lossless WebP ({err or 'pixels changed on reading back'})")
+    os.replace(tmp, path)
+
+
+def _byte_planes(a: np.ndarray) -> np.ndarray:
+    """float32 → its four little-endian byte planes, shape (4, *a.shape): zlib finds the
+    runs in the sign/exponent bytes (a sixth smaller than plain float32)."""
+    return np.moveaxis(np.ascontiguousarray(a, dtype="<f4").view(np.uint8).reshape(a.shape + (4,)), -1, 0).copy()
+
+
+def _from_byte_planes(planes: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(np.moveaxis(planes, 0, -1)).view("<f4")[..., 0].astype(np.float32)
+
+
+def write_snapshot(folder: str, name: str, images: dict) -> list:
+    """Write one snapshot's references: the RGB strips as lossless 8-bit WebP, the mask strip as
+    16-bit PNG, depth and normals as float32 byte planes in a compressed .npz (all lossless);
+    returns the paths."""
+    import io
+
+    from raytrace import files as F
+    paths = _snapshot_files(folder, name)
+    os.makedirs(folder, exist_ok=True)
+    for m in ("rgb", "rgb_paper", "rgb_physical"):
+        _write_lossless_webp(paths[m], images[m])
+    F.atomic_write_image(paths["mask"], images["mask"])
+    buf = io.BytesIO()
+    np.savez_compressed(buf, depth=_byte_planes(images["depth"]), normal=_byte_planes(images["normal"]))
+    F.atomic_write_bytes(paths["geometry"], buf.getvalue())
+    return list(paths.values())
+
+
+def read_snapshot(folder: str, name: str) -> dict:
+    """The references of one snapshot, as :func:`render_snapshot` returns them.
+
+    Raises
+    ------
+    FileNotFoundError
+        A reference file is missing (its path in the message).
+    """
+    from raytrace import files as F
+    paths = _snapshot_files(folder, name)
+    missing = [p for p in paths.values() if not os.path.isfile(p)]
+    if missing:
+        raise FileNotFoundError(f"snapshot {name}: missing reference {missing[0]} (python cli.py snapshots --update "
+                                "writes the references)")
+    out = {m: F.read_image(paths[m]) for m in ("rgb", "rgb_paper", "rgb_physical", "mask")}
+    with np.load(paths["geometry"]) as z:
+        out["depth"], out["normal"] = _from_byte_planes(z["depth"]), _from_byte_planes(z["normal"])
+    return out
+
+
+def _psnr_db(a: np.ndarray, b: np.ndarray) -> float:
+    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
+    return math.inf if mse == 0.0 else 10.0 * math.log10(255.0**2 / mse)
+
+
+def snapshot_image(modality: str, a: np.ndarray) -> np.ndarray:
+    """A uint8 RGB picture of a modality: RGB as is; mask ids in distinct colours (0 black);
+    depth near bright, far dark (misses black); normals as (n + 1)/2 (background black)."""
+    a = np.asarray(a)
+    if modality.startswith("rgb"):
+        return a.astype(np.uint8)
+    if modality == "mask":
+        ids = a.astype(np.int64)
+        golden = (ids[..., None] * np.array([0.618034, 0.381966, 0.7548777])) % 1.0
+        rgb = (55 + 200 * golden).astype(np.uint8)
+        rgb[ids == 0] = 0
+        return rgb
+    if modality == "depth":
+        hit = np.isfinite(a)
+        out = np.zeros(a.shape + (3,), np.uint8)
+        if hit.any():
+            lo, hi = float(a[hit].min()), float(a[hit].max())
+            v = 1.0 - (a[hit] - lo) / max(hi - lo, 1e-9)
+            out[hit] = (40 + 215 * v)[:, None].astype(np.uint8)
+        return out
+    if modality == "normal":
+        out = np.round((a + 1.0) * 127.5).clip(0, 255).astype(np.uint8)
+        out[np.all(a == 0, axis=-1)] = 0
+        return out
+    raise ValueError(f"modality must be one of {', '.join(SNAPSHOT_MODALITIES)}; got {modality!r}")
+
+
+def _write_diff(diff_dir: str, name: str, modality: str, ref: np.ndarray, new: np.ndarray,
+                bad: np.ndarray) -> str:
+    """Reference, candidate and failing pixels (red on grey, in a yellow box) stacked, at twice
+    the size, as one PNG; returns its path."""
+    from raytrace import files as F
+    a, b = snapshot_image(modality, ref), snapshot_image(modality, new)
+    grey = (0.3 * (a.astype(np.float32).mean(-1) + b.astype(np.float32).mean(-1)) / 2).astype(np.uint8)
+    d = np.repeat(grey[..., None], 3, axis=-1)
+    rows, cols = np.nonzero(bad)
+    if rows.size:  # a yellow box around the failing pixels, so a single one is found at a glance
+        y0, y1 = max(rows.min() - 3, 0), min(rows.max() + 3, bad.shape[0] - 1)
+        x0, x1 = max(cols.min() - 3, 0), min(cols.max() + 3, bad.shape[1] - 1)
+        d[[y0, y1], x0:x1 + 1] = (255, 220, 0)
+        d[y0:y1 + 1, [x0, x1]] = (255, 220, 0)
+    d[bad] = (255, 0, 0)
+    os.makedirs(diff_dir, exist_ok=True)
+    path = os.path.join(diff_dir, f"{name}.{modality}.diff.png")
+    F.write_image(path, np.concatenate([a, b, d], axis=0).repeat(2, axis=0).repeat(2, axis=1))
+    return path
+
+
+def compare_snapshot(name: str, ref: dict, new: dict, *, diff_dir: str) -> list:
+    """Compare a fresh snapshot with its references; returns one readable message per failing
+    modality (empty: identical within the tolerances) and writes a diff image for each into
+    ``diff_dir`` (reference above candidate above the failing pixels in red).
+
+    Masks (instance ids) must match exactly; depth within :data:`SNAPSHOT_DEPTH_TOL` with
+    misses in the same pixels; normals within :data:`SNAPSHOT_NORMAL_ATOL`; each RGB image
+    (clean and both degradation presets) must reach :data:`SNAPSHOT_PSNR_DB` in every frame,
+    over the whole frame and over the target's window (its mask's box grown by 8 px), so a
+    few changed pixels on a small target cannot hide in the black sky."""
+    msgs = []
+    shapes = {m: (ref[m].shape, new[m].shape) for m in SNAPSHOT_MODALITIES if ref[m].shape != new[m].shape}
+    if shapes:
+        return [f"{name}: {m}: shape {b} differs from the reference's {a} (snapshot settings changed? "
+                "python cli.py snapshots --update)" for m, (a, b) in shapes.items()]
+
+    def fail(modality: str, text: str, bad: np.ndarray) -> None:
+        path = _write_diff(diff_dir, name, modality, ref[modality], new[modality], bad)
+        msgs.append(f"{name}: {modality}: {text}; diff image {path}")
+
+    m0, m1 = ref["mask"], new["mask"]
+    bad = m0 != m1
+    if bad.any():
+        ious = []
+        for k in np.union1d(np.unique(m0), np.unique(m1)):
+            if k:
+                a, b = m0 == k, m1 == k
+                ious.append((np.count_nonzero(a & b) / np.count_nonzero(a | b), int(k)))
+        iou, k = min(ious) if ious else (1.0, 0)
+        fail("mask", f"{np.count_nonzero(bad)} of {bad.size} pixels have other instance ids (must match exactly; "
+             f"lowest instance IoU {iou:.4f}, id {k})", bad)
+    d0, d1 = ref["depth"].astype(np.float64), new["depth"].astype(np.float64)
+    f0, f1 = np.isfinite(d0), np.isfinite(d1)
+    both = f0 & f1
+    err = np.zeros_like(d0)
+    err[both] = np.abs(d1[both] - d0[both])
+    atol, rtol = SNAPSHOT_DEPTH_TOL
+    bad = (f0 != f1) | (both & (err > atol + rtol * np.where(both, np.abs(d0), 0.0)))
+    if bad.any():
+        fail("depth", f"{np.count_nonzero(bad)} pixels outside |Δ| <= {atol:g} m + {rtol:g}·depth or hit/miss "
+             f"changed ({np.count_nonzero(f0 != f1)}); max |Δ| {err.max():.3g} m", bad)
+    n0, n1 = ref["normal"].astype(np.float64), new["normal"].astype(np.float64)
+    nerr = np.abs(n1 - n0).max(axis=-1)
+    bad = nerr > SNAPSHOT_NORMAL_ATOL
+    if bad.any():
+        fail("normal", f"{np.count_nonzero(bad)} pixels differ by more than {SNAPSHOT_NORMAL_ATOL:g}; "
+             f"max |Δ| {nerr.max():.3g}", bad)
+    width = SNAPSHOT_SETTINGS["width"]
+    n_frames = m0.shape[1] // width
+    for m in ("rgb", "rgb_paper", "rgb_physical"):
+        worst = []
+        for j in range(n_frames):
+            cols = slice(j * width, (j + 1) * width)
+            a, b = ref[m][:, cols], new[m][:, cols]
+            worst.append((_psnr_db(a, b), f"frame {j + 1} of {n_frames}"))
+            support = (m0[:, cols] > 0) | (m1[:, cols] > 0)
+            if support.any():
+                rows, cs = np.flatnonzero(support.any(axis=1)), np.flatnonzero(support.any(axis=0))
+                y0, y1 = max(rows[0] - _WINDOW_MARGIN_PX, 0), rows[-1] + _WINDOW_MARGIN_PX + 1
+                x0, x1 = max(cs[0] - _WINDOW_MARGIN_PX, 0), cs[-1] + _WINDOW_MARGIN_PX + 1
+                worst.append((_psnr_db(a[y0:y1, x0:x1], b[y0:y1, x0:x1]),
+                              f"frame {j + 1} of {n_frames}, target window rows {y0}:{y1} cols {x0}:{x1}"))
+        psnr, where = min(worst)
+        if psnr < SNAPSHOT_PSNR_DB:
+            bad = np.any(ref[m] != new[m], axis=-1)
+            fail(m, f"PSNR {psnr:.1f} dB < {SNAPSHOT_PSNR_DB:g} dB ({where}); {np.count_nonzero(bad)} pixels differ, "
+                 f"max |Δ| {int(np.abs(ref[m].astype(int) - new[m].astype(int)).max())} DN", bad)
+    return msgs
+
+
+def _snapshot_settings_json() -> str:
+    return json.dumps({"format": "orbitsynth snapshots 1", **SNAPSHOT_SETTINGS,
+                       "psnr_db": SNAPSHOT_PSNR_DB, "depth_atol_m_rtol": list(SNAPSHOT_DEPTH_TOL),
+                       "normal_atol": SNAPSHOT_NORMAL_ATOL}, indent=1) + "\n"
+
+
+def snapshot_settings_message(folder: str) -> str | None:
+    """None when ``folder``'s ``settings.json`` records the current snapshot settings and
+    tolerances, else a message saying what to do."""
+    path = os.path.join(folder, "settings.json")
+    try:
+        with open(path, encoding="utf-8") as fh:
+            stored = fh.read()
+    except OSError:
+        return f"snapshots: missing {path} (python cli.py snapshots --update writes the references)"
+    if stored != _snapshot_settings_json():
+        return (f"snapshots: {path} records other snapshot settings or tolerances than cli.SNAPSHOT_SETTINGS; "
+                "the references are stale: python cli.py snapshots --update")
+    return None
+
+
+def snapshots_main(argv: list) -> int:
+    """``cli.py snapshots [--update]``: compare small renders with the committed references."""
+    import tempfile
+    p = _Parser(prog=f"{PROG} snapshots", description="Render every built-in target x pattern small (160x120, three "
+                "frames, clean RGB, both degradation presets, mask, depth, normals) and compare with the references "
+                "in tests/snapshots/: masks exactly, depth and normals within tight tolerances, RGB by PSNR >= 45 dB. "
+                "Exit status 1 when something moved (a diff image per failure). --update rewrites the references.")
+    p.add_argument("--update", action="store_true", help="rewrite the references instead of comparing (deliberate)")
+    p.add_argument("--targets", type=_subset(TARGETS), default=None, metavar="LIST",
+                   help=f"only these targets (default: {','.join(TARGETS)})")
+    p.add_argument("--patterns", type=_subset(PATTERNS), default=None, metavar="LIST",
+                   help=f"only these patterns (default: {','.join(PATTERNS)})")
+    p.add_argument("--dir", type=_path, default=SNAPSHOT_DIR, metavar="DIR",
+                   help="reference folder (default: tests/snapshots)")
+    p.add_argument("--diff-dir", type=_path, default=None, metavar="DIR",
+                   help="where diff images go (default: a new temporary folder)")
+    args = p.parse_args(argv)
+    names = snapshot_cases(args.targets, args.patterns)
+    diff_dir = args.diff_dir or tempfile.mkdtemp(prefix="orbitsynth-snapshots-")
+    t0 = time.perf_counter()
+    failures, nbytes = [], 0
+    try:
+        stale = None if args.update else snapshot_settings_message(args.dir)
+        if stale:
+            sys.stdout.write(f"FAIL {stale}\n")
+            return 1
+        for name in names:
+            new = render_snapshot(name)
+            if args.update:
+                nbytes += sum(os.path.getsize(q) for q in write_snapshot(args.dir, name, new))
+                sys.stdout.write(f"{name}: reference written\n")
+                continue
+            msgs = compare_snapshot(name, read_snapshot(args.dir, name), new, diff_dir=diff_dir)
+            failures += msgs
+            sys.stdout.write("".join(f"FAIL {m}\n" for m in msgs) or f"{name}: ok\n")
+        if args.update:
+            from raytrace.files import atomic_write_text
+            atomic_write_text(os.path.join(args.dir, "settings.json"), _snapshot_settings_json())
+    except (CLIError, ValueError, FileNotFoundError) as exc:
+        return _fail(exc)
+    except OSError as exc:
+        return _fail(CLIError(f"--dir: {exc}"))
+    elapsed = time.perf_counter() - t0
+    if args.update:
+        sys.stdout.write(f"{len(names)} snapshots written to {args.dir} ({nbytes / 1e6:.2f} MB) in {elapsed:.1f} s; "
+                         "review them (git diff) before committing\n")
+        return 0
+    if failures:
+        sys.stdout.write(f"{len(failures)} failure(s) in {len(names)} snapshots ({elapsed:.1f} s); diff images in "
+                         f"{diff_dir}; if the change is intended: python cli.py snapshots --update\n")
+        return 1
+    if not args.diff_dir:
+        os.rmdir(diff_dir)
+    sys.stdout.write(f"{len(names)} snapshots match the references in {elapsed:.1f} s\n")
+    return 0
+
+
+COMMANDS = {"render-scene": render_scene_main, "dataset": dataset_main, "ablation": ablation_main,
+            "preview": preview_main, "snapshots": snapshots_main}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the process exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] in COMMANDS:
+        return COMMANDS[argv[0]](argv[1:])
+    return main_job(argv)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    # run as the module `cli`, so worker processes (spawned, or dask) find run_frame by name
+    import cli
+    sys.exit(cli.main())

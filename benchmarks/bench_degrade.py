@@ -193,17 +193,19 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="3 repeats")
     args = ap.parse_args(argv)
     repeats = 3 if args.quick else args.repeats
+    load_start = os.getloadavg()[0]
     physical = physical_table(repeats)  # runs the parallel kernels: threading layer known
+    paper = paper_table(repeats)
     print(f"1280×960 RGB float32, median of {repeats} interleaved runs; {os.cpu_count()} cores "
           f"({platform.machine()}), Python {platform.python_version()}, NumPy {np.__version__}, "
           f"SciPy {scipy.__version__}, scikit-image {skimage.__version__}, OpenImageIO {oiio.__version__}, "
-          f"Numba {numba.__version__} ({numba.threading_layer()} threading layer); load average "
-          f"{os.getloadavg()[0]:.1f} at the end of the run.")
+          f"Numba {numba.__version__} ({numba.threading_layer()} threading layer); 1-minute load average "
+          f"{load_start:.1f} at the start, {os.getloadavg()[0]:.1f} after the physical and paper tables.")
     print(f"Command: `python benchmarks/bench_degrade.py{' --quick' if args.quick else ''}`\n")
     print("### Physical chain per stage\n")
     print("\n".join(physical))
     print("\n### Paper mode (SPEC §10) against scipy.ndimage + skimage.util.random_noise\n")
-    print("\n".join(paper_table(repeats)))
+    print("\n".join(paper))
     print("\n### Convolution: direct vs FFT (1280×960×3 float32)\n")
     print("\n".join(convolution_table(max(3, repeats // 2))))
     return 0

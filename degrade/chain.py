@@ -7,7 +7,8 @@ PSF_total = PSF_diffraction ⊛ PSF_aberration ⊛ PSF_defocus ⊛ PSF_motion, p
 (the Airy pattern scales with wavelength). A stage whose config is ``None`` (or whose
 parameters make it the identity, e.g. zero motion) is skipped (DESIGN.md, "Skip what a frame
 does not need"). Per-frame quantities (motion length and angle from the image-plane
-velocity × exposure, defocus radius from the range) go into :class:`OpticsConfig` via
+velocity × exposure, :func:`degrade.psf.motion_from_velocity`; defocus radius from the range,
+:func:`degrade.psf.defocus_radius_px`) go into :class:`OpticsConfig` via
 :func:`dataclasses.replace`; the PSF of each distinct configuration is built once and cached.
 """
 

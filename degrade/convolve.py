@@ -11,7 +11,7 @@ Both methods compute the same true convolution (the kernel is flipped, as in
   ``BORDER_REFLECT_101``.
 
 ``method="auto"`` picks by the number of nonzero kernel taps, from timings on a 1280×960×3
-float32 frame on a 2-core machine (``benchmarks/bench_degrade.py``, BENCHMARKS_degrade.md):
+float32 frame on a 2-core machine (``benchmarks/bench_degrade.py``, BENCHMARKS.md):
 the direct kernel's cost grows with the tap count, the FFT's hardly depends on the kernel
 size, so direct wins up to ``DIRECT_MAX_TAPS`` taps. The direct kernel works on the
 interleaved rows (W·C values) without transposing; per-channel weights are laid out as a
@@ -121,13 +121,13 @@ def convolve_image(image, kernel, *, mode: str = "reflect", method: str = "auto"
     k, shared = _kernel_stack(kernel, channels)
     if k.shape[1:] == (1, 1):  # a scale per channel (or one for all)
         return img * k[:, 0, 0].astype(np.float32)
-    taps = np.flatnonzero(np.any(k != 0.0, axis=0))
+    kf = k[:, ::-1, ::-1].reshape(k.shape[0], -1)  # flipped: convolution, not correlation
+    taps = np.flatnonzero(np.any(kf != 0.0, axis=0))  # nonzero taps of the *flipped* kernel
     if method == "auto":
         method = "direct" if taps.size <= DIRECT_MAX_TAPS["shared" if shared else "per_channel"] else "fft"
     r1, r2 = k.shape[1] // 2, k.shape[2] // 2
     h, w = img.shape[:2]
     if method == "direct":
-        kf = k[:, ::-1, ::-1].reshape(k.shape[0], -1)  # flipped: convolution, not correlation
         di, dj = np.divmod(taps, k.shape[2])
         weights = np.ascontiguousarray(kf[:, taps].T, dtype=np.float32)  # (T, 1 or C)
         pad = np.pad(img.reshape(h, w, channels), ((r1, r1), (r2, r2), (0, 0)), mode=pad_mode)

@@ -16,63 +16,107 @@ import math
 
 import numpy as np
 
-from ._checks import finite_scalar
+from . import _checks
 
 __all__ = ["LIGHT_SPEED_M_S", "PLANCK_J_S", "auto_exposure", "physical_exposure"]
 
 PLANCK_J_S = 6.62607015e-34
+"""Planck constant h [J·s] (exact, SI 2019)."""
 LIGHT_SPEED_M_S = 299792458.0
-_LUMA = np.array([0.2126, 0.7152, 0.0722])
+"""Speed of light in vacuum c [m/s] (exact)."""
+_LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)  # Rec. 709 / sRGB luminance weights
 
 
-def auto_exposure(radiance, mask=None, *, percentile: float = 99.5, level: float = 0.9) -> tuple[np.ndarray, float]:
-    """Scale linear radiance so the ``percentile`` of luminance (Rec. 709 weights) over
-    ``mask`` (default: every pixel with non-zero radiance) maps to ``level``.
+def auto_exposure(radiance, mask=None, *, percentile: float = 99.5,
+                  level: float = 0.9) -> tuple[np.ndarray, float]:
+    """Scale linear radiance so a high percentile of its luminance maps to ``level``.
+
+    Parameters
+    ----------
+    radiance : array_like of float, shape (H, W, 3)
+        Linear radiance, finite and ≥ 0 [W/(m²·sr)].
+    mask : array_like of bool, shape (H, W), optional
+        Pixels that set the exposure (e.g. the target's mask); default: every pixel. Only
+        pixels with non-zero luminance count.
+    percentile : float, keyword-only
+        Percentile of the luminance (Rec. 709 weights) that is mapped to ``level``, in
+        (0, 100]. Default 99.5.
+    level : float, keyword-only
+        Linear signal the percentile maps to, > 0 (values above 1 saturate later). Default 0.9.
 
     Returns
     -------
-    image : ndarray, float32, same shape
-        Linear signal, 1.0 = the top of the output range [-].
+    image : ndarray of float32, shape (H, W, 3)
+        ``radiance · scale``; 1.0 is the top of the output range [1].
     scale : float
-        The factor applied [1/(W/(m²·sr))] (1.0 for a black image).
+        The factor applied [1/(W/(m²·sr))]; 1.0 when no selected pixel has light.
     """
-    img = np.asarray(radiance, dtype=np.float32)
-    if img.ndim != 3 or img.shape[2] != 3:
-        raise ValueError(f"radiance must have shape (H, W, 3), got {img.shape}")
-    if not np.all(np.isfinite(img)) or img.min() < 0:
-        raise ValueError("radiance must be finite and >= 0")
-    percentile = finite_scalar("percentile", percentile)
+    img = _checks.image("radiance", radiance, ndim=(3,), channels=3)
+    percentile = _checks.finite_scalar("percentile", percentile)
     if not 0 < percentile <= 100:
-        raise ValueError(f"percentile must be in (0, 100], got {percentile}")
-    level = finite_scalar("level", level, positive=True)
-    luma = img @ _LUMA.astype(np.float32)
-    sel = luma > 0 if mask is None else (np.asarray(mask, dtype=bool) & (luma > 0))
+        raise ValueError(f"percentile must be in (0, 100], got {percentile!r}")
+    level = _checks.finite_scalar("level", level, positive=True)
+    luma = img @ _LUMA
+    sel = luma > 0
+    if mask is not None:
+        m = np.asarray(mask)
+        if m.shape != luma.shape:
+            raise ValueError(f"mask must have shape {luma.shape} (H, W), got {m.shape}")
+        sel &= m.astype(bool)
     if not np.any(sel):
         return img.copy(), 1.0
     ref = float(np.percentile(luma[sel], percentile))
     scale = level / ref if ref > 0 else 1.0
-    return (img * np.float32(scale)).astype(np.float32), scale
+    return img * np.float32(scale), scale
 
 
 def physical_exposure(radiance, *, f_number: float, exposure_s: float, pixel_pitch_m: float,
                       quantum_efficiency: float = 0.6, full_well_e: float = 10000.0,
                       wavelengths_m=(600e-9, 530e-9, 460e-9)) -> np.ndarray:
-    """Linear sensor signal (1.0 = full well) of radiance through a lens of f-number N with
-    exposure time t on pixels of pitch p (see module notes), per channel at its centre
-    wavelength; float32, same shape. Values above 1 saturate later in the sensor model."""
-    img = np.asarray(radiance, dtype=np.float64)
-    if img.ndim != 3 or img.shape[2] != 3:
-        raise ValueError(f"radiance must have shape (H, W, 3), got {img.shape}")
-    if not np.all(np.isfinite(img)) or img.min() < 0:
-        raise ValueError("radiance must be finite and >= 0")
-    N = finite_scalar("f_number", f_number, positive=True)
-    t = finite_scalar("exposure_s", exposure_s, positive=True)
-    p = finite_scalar("pixel_pitch_m", pixel_pitch_m, positive=True)
-    qe = finite_scalar("quantum_efficiency", quantum_efficiency, positive=True)
-    fw = finite_scalar("full_well_e", full_well_e, positive=True)
-    lam = np.asarray(wavelengths_m, dtype=np.float64)
-    if lam.shape != (3,) or not np.all(np.isfinite(lam)) or np.any(lam <= 0):
-        raise ValueError(f"wavelengths_m must be 3 positive wavelengths, got {wavelengths_m!r}")
-    joules = img * (math.pi / (4.0 * N * N)) * p * p * t
+    """Linear sensor signal of a radiance image through a lens (camera equation).
+
+    Parameters
+    ----------
+    radiance : array_like of float, shape (H, W, 3)
+        Linear radiance per colour channel, finite and ≥ 0 [W/(m²·sr)].
+    f_number : float, keyword-only
+        Lens f-number N = f/D, > 0 [1].
+    exposure_s : float, keyword-only
+        Exposure time t, > 0 [s].
+    pixel_pitch_m : float, keyword-only
+        Pixel pitch p (square pixels, 100 % fill factor), > 0 [m].
+    quantum_efficiency : float, keyword-only
+        QE in (0, 1] [e⁻/photon]. Default 0.6 (as :class:`degrade.sensor.SensorConfig`).
+    full_well_e : float, keyword-only
+        Full-well capacity, > 0 [e⁻]. Default 10 000.
+    wavelengths_m : sequence of 3 float, keyword-only
+        Centre wavelength of the R, G, B bands, > 0 [m]; each channel's energy is turned
+        into photons at its wavelength. Default (600, 530, 460) nm.
+
+    Returns
+    -------
+    signal : ndarray of float32, shape (H, W, 3)
+        QE·photons/FW: 1.0 fills the well; values above 1 saturate in the sensor model [1].
+
+    Notes
+    -----
+    E = π L/(4 N²) [W/m²] on axis (lens transmission 1, no cos⁴ fall-off);
+    photons = E p² t λ/(h c); signal = QE · photons / FW. Matches
+    ``SensorConfig(quantum_efficiency=QE, full_well_e=FW)`` with its default
+    ``photons_at_one`` = FW/QE.
+    """
+    img = _checks.image("radiance", radiance, ndim=(3,), channels=3).astype(np.float64)
+    n = _checks.finite_scalar("f_number", f_number, positive=True)
+    t = _checks.finite_scalar("exposure_s", exposure_s, positive=True)
+    p = _checks.finite_scalar("pixel_pitch_m", pixel_pitch_m, positive=True)
+    qe = _checks.finite_scalar("quantum_efficiency", quantum_efficiency, positive=True)
+    if qe > 1.0:
+        raise ValueError(f"quantum_efficiency must be in (0, 1], got {quantum_efficiency!r}")
+    fw = _checks.finite_scalar("full_well_e", full_well_e, positive=True)
+    if isinstance(wavelengths_m, (str, bytes)) or np.ndim(wavelengths_m) != 1 or len(wavelengths_m) != 3:
+        raise ValueError(f"wavelengths_m must be 3 wavelengths (R, G, B) [m], got {wavelengths_m!r}")
+    lam = np.array([_checks.finite_scalar(f"wavelengths_m[{i}]", v, positive=True)
+                    for i, v in enumerate(wavelengths_m)])
+    joules = img * (math.pi / (4.0 * n * n)) * p * p * t
     photons = joules * lam / (PLANCK_J_S * LIGHT_SPEED_M_S)
     return (qe * photons / fw).astype(np.float32)

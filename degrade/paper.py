@@ -23,8 +23,10 @@ on each other).
 Speed-ups that keep the numbers identical: the distinct values of B are counted in one pass
 over its 8-bit codes (not with ``np.unique``); NumPy's Poisson sampler returns 0 for λ = 0
 without consuming the stream, so only nonzero pixels are sampled; the Gaussian draws start
-on a worker thread before the blur; blur, look-ups, sums and clipping run in Numba kernels
-that perform exactly random_noise's float64 operations.
+on a worker thread before the blur, as ``standard_normal`` (``Generator.normal(0, σ)`` is
+0 + σ·z of the same draws z, so σ·z is formed in the final kernel instead of in an extra
+pass); blur, look-ups, sums and clipping run in Numba kernels that perform exactly
+random_noise's float64 operations (no fused multiply-add: no fastmath).
 
 References
 ----------
@@ -141,26 +143,27 @@ def _scatter_counts(idx, counts, vals, out):  # pragma: no cover - compiled
 
 
 @pjit_exact
-def _add_clip(base, lut, noise, out):  # pragma: no cover - compiled
-    """out = float32(clip(lut[base] + noise, 0, 1)), the float64 sum of random_noise."""
+def _add_clip(base, lut, z, sigma, out):  # pragma: no cover - compiled
+    """out = float32(clip(lut[base] + sigma·z, 0, 1)): random_noise's float64 sum with
+    Generator.normal's noise 0.0 + sigma·z (z standard normal; adding 0.0 changes nothing)."""
     bf = base.ravel()
-    nf = noise.ravel()
+    zf = z.ravel()
     of = out.ravel()
     for k in numba.prange(bf.size):
-        of[k] = np.float32(min(max(lut[bf[k]] + nf[k], 0.0), 1.0))
+        of[k] = np.float32(min(max(lut[bf[k]] + sigma * zf[k], 0.0), 1.0))
 
 
 @pjit_exact
-def _add_clip_sparse(idx, counts, vals, noise, out):  # pragma: no cover - compiled
+def _add_clip_sparse(idx, counts, vals, z, sigma, out):  # pragma: no cover - compiled
     """D4: the clipped Poisson image is 0 except at idx, where it is min(counts/vals, 1); add
-    the noise (float64) and clip. Equal to _add_clip on the dense image."""
-    nf = noise.ravel()
+    the noise sigma·z (float64) and clip. Equal to _add_clip on the dense image."""
+    zf = z.ravel()
     of = out.ravel()
-    for k in numba.prange(nf.size):
-        of[k] = np.float32(min(max(0.0 + nf[k], 0.0), 1.0))
+    for k in numba.prange(zf.size):
+        of[k] = np.float32(min(max(0.0 + sigma * zf[k], 0.0), 1.0))
     for n in numba.prange(idx.size):
         k = idx[n]
-        of[k] = np.float32(min(max(min(counts[n] / vals, 1.0) + nf[k], 0.0), 1.0))
+        of[k] = np.float32(min(max(min(counts[n] / vals, 1.0) + sigma * zf[k], 0.0), 1.0))
 
 
 def _vals(n_distinct: int) -> np.float64:
@@ -282,9 +285,9 @@ def paper_degrade(image, group: str = "D4", config: PaperConfig = PaperConfig(),
         _requantise(blurred, blurred)
         return blurred
     rng_poisson, rng_gauss = rng.spawn(2)
-    noise = None
+    noise, sigma = None, config.gaussian_var ** 0.5  # as random_noise: var ** 0.5
     if "gaussian" in steps:  # independent of everything else: sample while we blur
-        noise = pool().submit(rng_gauss.normal, 0.0, config.gaussian_var ** 0.5, img.shape)
+        noise = pool().submit(rng_gauss.standard_normal, img.shape)  # the draws of rng.normal(0, σ)
     blurred = _blur(img, config)
     codes = np.empty(img.shape, np.uint8)
     _codes8(blurred, codes)
@@ -297,7 +300,7 @@ def paper_degrade(image, group: str = "D4", config: PaperConfig = PaperConfig(),
             out.fill(0.0)
             _scatter_counts(idx, counts, float(vals), out)
         else:
-            _add_clip_sparse(idx, counts, float(vals), noise.result(), out)
+            _add_clip_sparse(idx, counts, float(vals), noise.result(), sigma, out)
     else:
-        _add_clip(codes, _LUT8, noise.result(), out)
+        _add_clip(codes, _LUT8, noise.result(), sigma, out)
     return out

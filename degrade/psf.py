@@ -26,6 +26,7 @@ __all__ = [
     "defocus_psf",
     "defocus_radius_px",
     "gaussian_psf",
+    "motion_from_velocity",
     "motion_psf",
 ]
 
@@ -271,6 +272,42 @@ def _motion(length: float, angle_deg: float, spp: int) -> np.ndarray:
         for dj, wj in ((0, 1.0 - fj), (1, fj)):
             h += np.bincount((i0 + di) * k + (j0 + dj), weights=wi * wj, minlength=k * k)
     return _frozen(h.reshape(k, k))
+
+
+def motion_from_velocity(velocity_px_s, exposure_s: float) -> tuple[float, float]:
+    """Motion-blur length and direction from the target's image-plane velocity.
+
+    Parameters
+    ----------
+    velocity_px_s : array_like of float, shape (2,)
+        (du/dt, dv/dt): the image velocity in pixel coordinates, u along columns (right) and
+        v along rows (down) [px/s].
+    exposure_s : float
+        Exposure (integration) time t, ≥ 0 [s].
+
+    Returns
+    -------
+    length_px : float
+        L = |velocity| · t [px].
+    angle_deg : float
+        θ = atan2(−dv/dt, du/dt) in (−180, 180] [deg]: counter-clockwise from +u as displayed
+        (SPEC §10), the convention of :func:`motion_psf` and
+        :class:`degrade.chain.OpticsConfig` (rows grow downward, hence the minus sign).
+
+    Notes
+    -----
+    A constant velocity during the exposure is assumed (the blur is a straight segment).
+    The line PSF is point-symmetric, so the sign of the direction does not matter for the
+    blur; θ is still reported as the direction of motion.
+    """
+    try:
+        v = np.asarray(velocity_px_s, dtype=np.float64)
+    except (TypeError, ValueError):
+        v = np.full(1, np.nan)
+    if v.shape != (2,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"velocity_px_s must be 2 finite numbers (du/dt, dv/dt) [px/s], got {velocity_px_s!r}")
+    t = _checks.finite_scalar("exposure_s", exposure_s, nonnegative=True)
+    return float(math.hypot(v[0], v[1]) * t), float(math.degrees(math.atan2(-v[1], v[0])))
 
 
 def compose(*kernels: np.ndarray) -> np.ndarray:

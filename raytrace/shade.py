@@ -445,6 +445,9 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
             _check_finite("anti-aliasing", sub)
             rad[epix] = sub
     timings["antialias"] = time.perf_counter() - t0
+    # the control-variate corrections (gather − cache) may overshoot below zero where the
+    # cache is brighter than the truth; radiance is never negative
+    np.maximum(rad, 0.0, out=rad)
     return RenderFrame(geo, rad.reshape(H, W, 3), q, timings)
 
 

@@ -41,6 +41,18 @@ def test_per_channel_kernels(method):
     assert_allclose(out, reference(img, kernels, "reflect"), rtol=0, atol=2e-6)
 
 
+@pytest.mark.parametrize("method", ["direct", "fft"])
+def test_sparse_asymmetric_kernels(method):
+    # zeros that are not point-symmetric: the direct path must take its taps from the flipped
+    # kernel (a one-sided shift kernel once came out as all zeros)
+    img = RNG.random((20, 30, 3), dtype=np.float32)
+    shift = np.zeros((3, 5))
+    shift[0, 0], shift[1, 3] = 1.0, 0.5
+    kernels = np.stack([shift, shift[::-1], shift[:, ::-1]])
+    assert_allclose(convolve_image(img, shift, method=method), reference(img, shift, "reflect"), atol=2e-6)
+    assert_allclose(convolve_image(img, kernels, method=method), reference(img, kernels, "reflect"), atol=2e-6)
+
+
 def test_kernel_larger_than_image_mirror():
     img = RNG.random((6, 5), dtype=np.float32)
     kernel = psf.motion_psf(15.0, 30.0)  # 19×19 on a 6×5 image

@@ -51,6 +51,24 @@ def test_encode_with_bits_equals_quantise_dequantise(bits):
     assert_array_equal(dequantise(codes, bits), enc)
 
 
+def test_8bit_table_path_at_every_code_boundary():
+    # the 8-bit encode looks most values up in a table; around each code boundary (where the
+    # float64 IEC curve crosses (k − 1/2)/255) it must agree with the curve + quantise, ulp by ulp
+    edges = iec_decode((np.arange(1, 256) - 0.5) / 255).astype(np.float32)
+    steps = np.arange(-6, 7)
+    x = (edges.view(np.int32)[:, None] + steps[None, :]).astype(np.int32).view(np.float32).ravel()
+    x = np.concatenate([x, [0.0, -0.0, 1e-30, 1.0, np.nextafter(np.float32(1), np.float32(0)), 1.5, 7.0]])
+    x = x.astype(np.float32)
+    enc = srgb_encode(x, bits=8)
+    assert_array_equal(enc, dequantise(quantise(srgb_encode(x), 8), 8))
+    codes = quantise(enc, 8).astype(np.int64)
+    scaled = 255 * iec_encode(x)  # float64 curve: may differ only within float32 rounding of an edge
+    near_edge = np.abs(scaled - np.floor(scaled) - 0.5) < 1e-4
+    assert np.all((codes == np.rint(scaled)) | near_edge)
+    assert np.count_nonzero(codes != np.rint(scaled)) < 0.1 * x.size
+    assert codes[-7] == 0 and codes[-6] == 0 and codes[-4] == 255 and codes[-2] == 255  # 0, −0, 1, >1
+
+
 def test_quantise_rounds_and_saturates():
     assert_array_equal(quantise(np.array([0.0, 0.25, 0.5, 0.75, 1.0, 3.0]), 1), [0, 0, 0, 1, 1, 1])  # half to even
     assert_array_equal(quantise(np.array([0.5, 0.999]), 2), [2, 3])

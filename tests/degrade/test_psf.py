@@ -186,6 +186,30 @@ def test_motion_direction_is_counter_clockwise_as_displayed():
     assert h[c - 3, c + 3] > 0.05 and h[c + 3, c + 3] == 0.0
 
 
+@pytest.mark.parametrize("du, dv", [(40.0, 0.0), (0.0, -40.0), (30.0, 30.0), (-12.0, 25.0)])
+def test_motion_from_velocity_blurs_along_the_displacement(du, dv):
+    length, angle = psf.motion_from_velocity([du, dv], 0.25)
+    assert_allclose(length, 0.25 * math.hypot(du, dv), rtol=1e-15)
+    # the kernel's long axis, in (row, col), must be the displacement (dv, du) in pixels
+    _, cov = centroid_and_cov(psf.motion_psf(length, angle))
+    w, vecs = np.linalg.eigh(cov)
+    axis = vecs[:, np.argmax(w)]
+    assert_allclose(abs(axis @ np.array([dv, du])) / math.hypot(du, dv), 1.0, atol=1e-9)
+    assert_allclose(w.max(), length**2 / 12 + 1 / 6, rtol=0.02)  # SPEC §10 variance along the line
+
+
+def test_motion_from_velocity_angle_convention():
+    assert psf.motion_from_velocity([10.0, 0.0], 1.0) == (10.0, 0.0)
+    assert psf.motion_from_velocity([0.0, -10.0], 1.0)[1] == 90.0  # moving up the screen
+    assert psf.motion_from_velocity([0.0, 10.0], 0.5) == (5.0, -90.0)
+    assert psf.motion_from_velocity([3.0, 4.0], 0.0) == (0.0, -53.13010235415598)
+    for bad in ([1.0, np.nan], [1.0, 2.0, 3.0], "fast"):
+        with pytest.raises(ValueError, match="velocity_px_s"):
+            psf.motion_from_velocity(bad, 1.0)
+    with pytest.raises(ValueError, match="exposure_s"):
+        psf.motion_from_velocity([1.0, 2.0], -1.0)
+
+
 def test_compose_gaussians_add_variances_and_delta_is_identity():
     g = psf.compose(psf.gaussian_psf(1.2), psf.gaussian_psf(1.6))
     _, cov = centroid_and_cov(g)

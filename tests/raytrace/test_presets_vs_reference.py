@@ -90,3 +90,12 @@ def test_presets_stay_inside_their_documented_bounds(case):
     for quality, bound in BOUNDS.items():
         assert errs[quality] <= bound, f"{name}: {quality} error {errs[quality]:.3f} > bound {bound}"
     assert errs["balanced"] <= errs["fast"] + 0.005, errs
+
+
+def test_balanced_radiance_is_never_negative(case):
+    """The gather/lobe corrections are differences against the cache; where they overshoot the
+    result is clamped, so no pixel is ever negative (it once reached −0.18 after exposure)."""
+    name, scene, R, t, _ref, _mask, _noise = case
+    for samples in (4, 8):
+        img = render(scene, CAM, R, t, LIGHT, quality="balanced", samples=samples, seed=5).radiance
+        assert img.min() >= 0.0, f"{name}: balanced-{samples} gave {img.min()}"

@@ -1,0 +1,340 @@
+"""Files of a rendered sequence: images through OpenImageIO, atomic writes, the model as PLY,
+and the per-frame manifest that makes an interrupted run resumable.
+
+Atomicity
+    Every file is written under a hidden temporary name in its destination folder
+    (``.NAME.HOST.PID.tmpEXT``: same file system, same extension so OpenImageIO picks the
+    format) and then renamed into place with :func:`os.replace`, which is atomic on POSIX. A
+    killed writer leaves at most a hidden temporary file, never a truncated file under a real
+    name; :func:`remove_stale_temporaries` deletes those whose writer (same host) has exited.
+Manifest
+    A frame is *complete* when its record ``.manifest/NNNNNN.json`` exists and every file it
+    lists exists with the SHA-256 recorded there. The record is written last, after the
+    frame's files, so a frame whose record is missing (or whose files were deleted or
+    altered) is simply rendered again. Records hold the frame's label as well, so the
+    sequence's ``labels.json`` and ``manifest.json`` can be assembled from them by whichever
+    run (or shard) finds the sequence complete.
+Model
+    :func:`write_model_ply` writes the rendered mesh as one binary little-endian PLY: float64
+    vertices in metres (body frame), triangles, and a per-face ``ushort component`` property
+    holding the instance id (component k → k + 1, as in the masks). trimesh reads it (the
+    ids are in ``mesh.metadata["_ply_raw"]``); :func:`read_model_ply` reads it back exactly.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import socket
+
+import numpy as np
+
+__all__ = [
+    "MANIFEST_DIR",
+    "atomic_write_bytes",
+    "atomic_write_image",
+    "atomic_write_text",
+    "frame_complete",
+    "model_ply_bytes",
+    "read_frame_record",
+    "read_image",
+    "read_model_ply",
+    "remove_stale_temporaries",
+    "sha256_file",
+    "write_files_atomically",
+    "write_frame_record",
+    "write_image",
+]
+
+MANIFEST_DIR = ".manifest"
+"""Sub-folder of a sequence holding one JSON record per complete frame."""
+
+_HOST = re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname()) or "host"
+_TMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<host>[A-Za-z0-9_-]+)\.(?P<pid>\d+)\.tmp(?P<ext>\.[A-Za-z0-9]+)?$")
+
+
+# --------------------------------------------------------------------------- images
+def write_image(path: str, pixels: np.ndarray) -> None:
+    """Write an image with OpenImageIO, format from the extension (PNG: 8/16 bit, EXR: float32
+    with zip compression).
+
+    Parameters
+    ----------
+    path : str
+        Destination; its extension picks the format.
+    pixels : ndarray, shape (H, W) or (H, W, C), uint8, uint16 or float32
+        Pixel values, row 0 at the top.
+
+    Notes
+    -----
+    No time stamp is written (OpenEXR would store the capture date), so equal pixels give
+    byte-identical files.
+
+    Raises
+    ------
+    OSError
+        If OpenImageIO cannot create or write the file.
+    ValueError
+        If ``pixels`` has another dtype or shape.
+    """
+    import OpenImageIO as oiio
+    pixels = np.asarray(pixels)
+    if pixels.ndim == 2:
+        pixels = pixels[:, :, None]
+    if pixels.ndim != 3:
+        raise ValueError(f"pixels must have shape (H, W) or (H, W, C), got {pixels.shape}")
+    formats = {np.dtype(np.uint8): oiio.UINT8, np.dtype(np.uint16): oiio.UINT16, np.dtype(np.float32): oiio.FLOAT}
+    if pixels.dtype not in formats:
+        raise ValueError(f"pixels must be uint8, uint16 or float32, got {pixels.dtype}")
+    out = oiio.ImageOutput.create(path)
+    if out is None:
+        raise OSError(f"cannot create {path}: {oiio.geterror()}")
+    h, w, c = pixels.shape
+    spec = oiio.ImageSpec(w, h, c, formats[pixels.dtype])
+    if path.endswith(".exr"):
+        spec.attribute("compression", "zip")
+        spec.attribute("DateTime", "")  # no capture date: the same pixels give the same bytes
+    ok = out.open(path, spec) and out.write_image(np.ascontiguousarray(pixels))
+    err = out.geterror()
+    out.close()
+    if not ok:
+        raise OSError(f"cannot write {path}: {err}")
+
+
+def read_image(path: str) -> np.ndarray:
+    """Read an image with OpenImageIO in its stored data type (uint8, uint16 or float32):
+    shape (H, W) for one channel, (H, W, C) otherwise. Raises OSError if unreadable."""
+    import OpenImageIO as oiio
+    buf = oiio.ImageBuf(str(path))
+    if buf.has_error:
+        raise OSError(f"cannot read {path}: {buf.geterror()}")
+    fmt = buf.spec().format.basetype
+    oiio_fmt = {oiio.UINT8: oiio.UINT8, oiio.UINT16: oiio.UINT16}.get(fmt, oiio.FLOAT)
+    pixels = buf.get_pixels(oiio_fmt)
+    if buf.has_error or pixels is None:
+        raise OSError(f"cannot read {path}: {buf.geterror()}")
+    return pixels[..., 0] if pixels.shape[-1] == 1 else pixels
+
+
+# --------------------------------------------------------------------------- atomic writes
+def _temporary(path: str) -> str:
+    folder, name = os.path.split(path)
+    stem, ext = os.path.splitext(name)
+    return os.path.join(folder, f".{stem}.{_HOST}.{os.getpid()}.tmp{ext}")
+
+
+def _replace(tmp: str, path: str) -> None:
+    try:
+        os.replace(tmp, path)
+    except BaseException:
+        _unlink(tmp)
+        raise
+
+
+def _unlink(path: str) -> None:
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+
+
+def atomic_write_image(path: str, pixels: np.ndarray) -> None:
+    """:func:`write_image` to a temporary name in the same folder, then rename into place."""
+    tmp = _temporary(path)
+    try:
+        write_image(tmp, pixels)
+    except BaseException:
+        _unlink(tmp)
+        raise
+    _replace(tmp, path)
+
+
+def atomic_write_bytes(path: str, data: bytes) -> None:
+    """Write ``data`` to a temporary name in the same folder, fsync, then rename into place."""
+    tmp = _temporary(path)
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+    except BaseException:
+        _unlink(tmp)
+        raise
+    _replace(tmp, path)
+
+
+def atomic_write_text(path: str, text: str) -> None:
+    """:func:`atomic_write_bytes` of UTF-8 text."""
+    atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def remove_stale_temporaries(folder: str) -> int:
+    """Delete temporary files left under ``folder`` (recursively) by writers on this host that
+    are no longer running; returns how many were removed. Temporaries of live processes and
+    of other hosts are kept (another shard may be writing them)."""
+    removed = 0
+    for root, _dirs, names in os.walk(folder):
+        for name in names:
+            m = _TMP_RE.match(name)
+            if m is None or m["host"] != _HOST or _alive(int(m["pid"])):
+                continue
+            _unlink(os.path.join(root, name))
+            removed += 1
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def write_files_atomically(out_dir: str, files: dict, texts: dict) -> None:
+    """Write every file into ``out_dir`` or none: all go to a hidden temporary folder first,
+    then are moved into place; on any failure the temporary folder is removed.
+
+    Parameters
+    ----------
+    out_dir : str
+        Destination folder, created if missing.
+    files : dict of str to ndarray
+        Relative path → pixels (see :func:`write_image`).
+    texts : dict of str to str
+        Relative path → UTF-8 text.
+
+    Raises
+    ------
+    OSError
+        With a one-line message naming the folder.
+    """
+    import shutil
+    import tempfile
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+        tmp = tempfile.mkdtemp(prefix=".partial-", dir=out_dir)
+    except OSError as exc:
+        raise OSError(f"cannot create {out_dir} ({exc.strerror})") from None
+    try:
+        for rel, pixels in files.items():
+            os.makedirs(os.path.join(tmp, os.path.dirname(rel)), exist_ok=True)
+            write_image(os.path.join(tmp, rel), pixels)
+        for rel, text in texts.items():
+            with open(os.path.join(tmp, rel), "w", encoding="utf-8") as fh:
+                fh.write(text)
+        for rel in list(files) + list(texts):
+            dst = os.path.join(out_dir, rel)
+            os.makedirs(os.path.dirname(dst) or out_dir, exist_ok=True)
+            os.replace(os.path.join(tmp, rel), dst)
+    except OSError as exc:
+        raise OSError(f"cannot write into {out_dir} ({exc})") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- checksums and manifest
+def sha256_file(path: str) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _record_path(seq_dir: str, frame: int) -> str:
+    return os.path.join(seq_dir, MANIFEST_DIR, f"{frame:06d}.json")
+
+
+def write_frame_record(seq_dir: str, frame: int, record: dict) -> None:
+    """Atomically write the manifest record of a frame whose files are all in place.
+
+    ``record`` must hold ``"files"``: relative path → SHA-256 (see :func:`sha256_file`)."""
+    if not isinstance(record.get("files"), dict):
+        raise TypeError("record must hold 'files': a dict of relative path -> sha256")
+    os.makedirs(os.path.join(seq_dir, MANIFEST_DIR), exist_ok=True)
+    atomic_write_text(_record_path(seq_dir, frame), json.dumps(record, indent=1, allow_nan=False) + "\n")
+
+
+def read_frame_record(seq_dir: str, frame: int) -> dict | None:
+    """The manifest record of a frame, or None if it is missing or unreadable."""
+    try:
+        with open(_record_path(seq_dir, frame), encoding="utf-8") as fh:
+            record = json.load(fh)
+    except (OSError, ValueError):
+        return None
+    return record if isinstance(record, dict) and isinstance(record.get("files"), dict) else None
+
+
+def frame_complete(seq_dir: str, frame: int, *, verify: bool = True) -> dict | None:
+    """The frame's record if the frame is complete (every listed file present and, with
+    ``verify``, with the recorded SHA-256), else None."""
+    record = read_frame_record(seq_dir, frame)
+    if record is None:
+        return None
+    for rel, digest in record["files"].items():
+        path = os.path.join(seq_dir, rel)
+        if not os.path.isfile(path):
+            return None
+        if verify and sha256_file(path) != digest:
+            return None
+    return record
+
+
+# --------------------------------------------------------------------------- model
+_PLY_FACE = np.dtype([("n", "u1"), ("i", "<i4", (3,)), ("c", "<u2")])
+
+
+def model_ply_bytes(model) -> bytes:
+    """The target's mesh as binary PLY bytes: float64 vertices [m] in the body frame,
+    triangles, and a per-face ``component`` property (instance id, component k → k + 1)."""
+    verts, faces, comp = [], [], []
+    base = 0
+    for k, c in enumerate(model.components):
+        v = np.asarray(c.mesh.vertices, dtype=np.float64)
+        f = np.asarray(c.mesh.faces, dtype=np.int64)
+        verts.append(v)
+        faces.append(f + base)
+        comp.append(np.full(len(f), k + 1, dtype=np.uint16))
+        base += len(v)
+    V = np.concatenate(verts)
+    F = np.concatenate(faces)
+    names = " ".join(c.name for c in model.components)
+    header = ("ply\nformat binary_little_endian 1.0\n"
+              f"comment orbitsynth target {model.name}: body frame, metres; face property component = "
+              "instance id (component k -> k + 1)\n"
+              f"comment components {names}\n"
+              f"element vertex {len(V)}\nproperty double x\nproperty double y\nproperty double z\n"
+              f"element face {len(F)}\nproperty list uchar int vertex_indices\nproperty ushort component\n"
+              "end_header\n").encode("ascii")
+    rec = np.zeros(len(F), dtype=_PLY_FACE)
+    rec["n"] = 3
+    rec["i"] = F
+    rec["c"] = np.concatenate(comp)
+    return header + V.astype("<f8").tobytes() + rec.tobytes()
+
+
+def read_model_ply(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Read a PLY written by :func:`model_ply_bytes`: vertices (n, 3) float64 [m], faces
+    (m, 3) int64 and component ids (m,) uint16. Raises ValueError on another layout."""
+    with open(path, "rb") as fh:
+        data = fh.read()
+    end = data.find(b"end_header\n")
+    if not data.startswith(b"ply\n") or end < 0:
+        raise ValueError(f"{path}: not a PLY file")
+    header = data[:end].decode("ascii").splitlines()
+    counts = {ln.split()[1]: int(ln.split()[2]) for ln in header if ln.startswith("element ")}
+    if "property ushort component" not in header or "property double x" not in header:
+        raise ValueError(f"{path}: not an orbitsynth model PLY (double vertices, ushort component)")
+    body = data[end + len(b"end_header\n"):]
+    nv, nf = counts["vertex"], counts["face"]
+    V = np.frombuffer(body, dtype="<f8", count=3 * nv).reshape(nv, 3).astype(np.float64)
+    rec = np.frombuffer(body, dtype=_PLY_FACE, count=nf, offset=24 * nv)
+    return V, rec["i"].astype(np.int64), rec["c"].astype(np.uint16)

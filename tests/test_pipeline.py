@@ -1,0 +1,417 @@
+"""The main job's pipeline: sequence folder, labels against pixels, reproducibility across
+workers, shards and dask, resume, config round trip, and one-line errors for bad input.
+
+Small frames (160×120, same field of view as the default camera) keep the whole module fast.
+"""
+
+import filecmp
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cli
+from raytrace import files as F
+
+ROOT = Path(__file__).resolve().parents[1]
+SMALL = ["--target", "icesat", "--pattern", "spiral", "--frames", "8", "--width", "160", "--height", "120",
+         "--focal-length-mm", "0.5", "--quiet"]
+MODS = ["--modalities", "rgb,rgb_degraded,mask,depth,normal,hdr"]
+
+
+def run_main(*argv) -> int:
+    try:
+        return cli.main([str(a) for a in argv])
+    except SystemExit as exc:  # argparse errors exit
+        return exc.code
+
+
+def tree(folder: Path) -> dict:
+    """Relative path → bytes of every file (hidden manifest records included)."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def assert_same_tree(a: Path, b: Path) -> None:
+    ta, tb = tree(a), tree(b)
+    assert sorted(ta) == sorted(tb)
+    different = [k for k in ta if ta[k] != tb[k]]
+    assert not different, different
+
+
+@pytest.fixture(scope="module")
+def ref(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ref") / "seq"
+    assert run_main(*SMALL, *MODS, "--workers", "1", "--out", out) == 0
+    return out
+
+
+# --------------------------------------------------------------------------- folder and labels
+def test_sequence_folder_has_every_file(ref, capsys):
+    labels = json.loads((ref / "labels.json").read_text())
+    scen = json.loads((ref / "scenario.json").read_text())
+    cam = json.loads((ref / "camera.json").read_text())
+    assert len(labels) == 8 == len(scen["t_s"])
+    for i, lab in enumerate(labels):
+        name = f"{i:06d}"
+        assert lab["files"] == {"rgb": f"rgb/{name}.png", "rgb_degraded": f"rgb_degraded/{name}.png",
+                                "mask": f"mask/{name}.png", "depth": f"depth/{name}.exr",
+                                "normal": f"normal/{name}.exr", "hdr": f"hdr/{name}.exr"}
+        for key in ("frame", "t_s", "utc", "r_lvlh", "v_lvlh", "q_cam_from_body", "R_cam_from_body", "t_cam_m",
+                    "sun_dir_cam", "earth_dir_cam", "shadow_fraction", "line_of_sight", "sun_clear",
+                    "earth_in_background", "visible", "bbox", "visible_fraction", "pixel_counts"):
+            assert key in lab, key
+        assert lab["frame"] == i and lab["t_s"] == scen["t_s"][i]
+    for key in ("config", "seed", "versions", "reference_orbit", "s0_lvlh", "n", "t_s", "pattern_parameters"):
+        assert key in scen, key
+    pp = scen["pattern_parameters"]
+    for key in ("A", "x_l", "beta", "gamma", "sigma", "kappa", "pattern"):
+        assert key in pp
+    assert pp["pattern"] == "spiral" and scen["versions"]["numpy"] == np.__version__
+    assert cam["width"] == cam["Nu"] == 160 and cam["height"] == cam["Nv"] == 120
+    np.testing.assert_allclose(cam["K"], [[0.5e-3 / 3.45e-6, 0, 79.5], [0, 0.5e-3 / 3.45e-6, 59.5], [0, 0, 1]])
+    assert cam["cameraMatrix"] == cam["K"] and len(cam["distCoeffs"]) == 5
+    # image types and sizes
+    assert F.read_image(str(ref / "rgb/000000.png")).dtype == np.uint8
+    assert F.read_image(str(ref / "rgb_degraded/000000.png")).shape == (120, 160, 3)
+    assert F.read_image(str(ref / "mask/000000.png")).dtype == np.uint16
+    assert F.read_image(str(ref / "depth/000000.exr")).shape == (120, 160)
+    assert F.read_image(str(ref / "normal/000000.exr")).shape == (120, 160, 3)
+    # the manifest's checksums are the files' own
+    manifest = json.loads((ref / "manifest.json").read_text())
+    assert "labels.json" in manifest["files"] and "model/icesat.ply" in manifest["files"]
+    for rel, digest in manifest["files"].items():
+        assert F.sha256_file(str(ref / rel)) == digest, rel
+    assert not [p for p in ref.rglob("*.tmp*")]
+
+
+def _triangle_hits(V, Fc, origin, dirs):
+    """Closest hit (t, triangle) of each ray by brute-force Möller–Trumbore in float64."""
+    a, b, c = V[Fc[:, 0]], V[Fc[:, 1]], V[Fc[:, 2]]
+    e1, e2 = b - a, c - a
+    t_best = np.full(len(dirs), np.inf)
+    tri = np.full(len(dirs), -1)
+    for k, d in enumerate(dirs):
+        p = np.cross(d, e2)
+        det = np.einsum("ij,ij->i", e1, p)
+        ok = np.abs(det) > 1e-15
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        s = origin - a
+        u = np.einsum("ij,ij->i", s, p) * inv
+        q = np.cross(s, e1)
+        v = (q @ d) * inv
+        t = np.einsum("ij,ij->i", e2, q) * inv
+        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+        if hit.any():
+            j = np.flatnonzero(hit)[np.argmin(t[hit])]
+            t_best[k], tri[k] = t[j], j
+    return t_best, tri
+
+
+def test_labels_agree_with_pixels_and_model(ref):
+    labels = json.loads((ref / "labels.json").read_text())
+    cam = json.loads((ref / "camera.json").read_text())
+    K = np.array(cam["K"])
+    V, Fc, comp = F.read_model_ply(str(ref / "model/icesat.ply"))
+    rng = np.random.default_rng(0)
+    checked = 0
+    for lab in labels:
+        mask = F.read_image(str(ref / lab["files"]["mask"]))
+        depth = F.read_image(str(ref / lab["files"]["depth"]))
+        counts = np.bincount(mask.ravel(), minlength=len(lab["pixel_counts"]))
+        assert counts.tolist() == lab["pixel_counts"]
+        assert np.array_equal(mask > 0, np.isfinite(depth))
+        R = np.array(lab["R_cam_from_body"]).reshape(3, 3)
+        t = np.array(lab["t_cam_m"])
+        uv = K @ t
+        np.testing.assert_allclose(uv[:2] / uv[2], [cam["cx"], cam["cy"]], atol=1e-9)  # look-at: origin centred
+        if lab["bbox"] is None:
+            assert not mask.any()
+            continue
+        rows, cols = np.nonzero(mask)
+        assert lab["bbox"] == [cols.min(), rows.min(), cols.max() - cols.min() + 1, rows.max() - rows.min() + 1]
+        # depth back-projects onto the model that was written, on the right component
+        pick = rng.choice(len(rows), size=min(40, len(rows)), replace=False)
+        v_px, u_px = rows[pick], cols[pick]
+        d_cam = np.column_stack([(u_px - cam["cx"]) / cam["fx"], (v_px - cam["cy"]) / cam["fy"], np.ones(len(pick))])
+        origin = -R.T @ t
+        t_hit, tri = _triangle_hits(V, Fc, origin, d_cam @ R)  # unnormalised rays: t is the z-depth
+        np.testing.assert_allclose(depth[v_px, u_px], t_hit, rtol=2e-6)
+        assert np.mean(comp[tri] == mask[v_px, u_px]) >= 0.95
+        checked += len(pick)
+    assert checked > 50
+
+
+def test_light_directions_in_labels_are_the_renderers(ref):
+    for lab in json.loads((ref / "labels.json").read_text()):
+        R = np.array(lab["R_cam_from_body"]).reshape(3, 3)
+        # the Sun is far: camera and target see it in the same direction to 1e-9
+        np.testing.assert_allclose(lab["sun_dir_cam"], R @ np.array(lab["sun_dir_body"]), atol=1e-8)
+        # Earth's centre seen from the camera vs from the target: differs by range / 6800 km
+        np.testing.assert_allclose(lab["earth_dir_cam"], R @ np.array(lab["earth_dir_body"]), atol=2e-5)
+        if lab["shadow_fraction"] == 0.0:  # umbra: no sunlight reaches the target
+            hdr = F.read_image(str(ref / lab["files"]["hdr"]))
+            mask = F.read_image(str(ref / lab["files"]["mask"]))
+            assert hdr[mask > 0].max(initial=0.0) < 5.0  # only earthshine/ambient, far below 1361/π
+
+
+def test_model_ply_reads_with_trimesh(ref):
+    import trimesh
+    V, Fc, comp = F.read_model_ply(str(ref / "model/icesat.ply"))
+    m = trimesh.load(str(ref / "model/icesat.ply"), process=False)
+    np.testing.assert_array_equal(m.vertices, V)
+    np.testing.assert_array_equal(m.faces, Fc)
+    raw = m.metadata["_ply_raw"]["face"]["data"]["component"]
+    np.testing.assert_array_equal(np.asarray(raw).ravel(), comp)
+    from raytrace.targets import load_target
+    model = load_target("icesat")
+    assert set(np.unique(comp)) == set(range(1, len(model.components) + 1))
+
+
+# --------------------------------------------------------------------------- reproducibility
+def test_two_workers_and_shards_give_the_same_bytes(ref, tmp_path):
+    assert run_main(*SMALL, *MODS, "--workers", "2", "--out", tmp_path / "w2") == 0
+    assert_same_tree(ref, tmp_path / "w2")
+    sh = tmp_path / "sh"
+    assert run_main(*SMALL, *MODS, "--workers", "1", "--shard", "2/2", "--out", sh) == 0
+    assert not (sh / "labels.json").exists()  # incomplete until the other shard has run
+    assert run_main(*SMALL, *MODS, "--workers", "1", "--shard", "1/2", "--out", sh) == 0
+    assert_same_tree(ref, sh)
+
+
+def test_config_round_trip_reproduces_the_bytes(ref, tmp_path):
+    cfg = tomllib.loads((ref / "config.toml").read_text())
+    assert cfg["camera"]["width"] == 160 and cfg["sequence"]["target"] == "icesat"
+    assert run_main("--config", ref / "config.toml", "--workers", "1", "--quiet", "--out", tmp_path / "rt") == 0
+    assert_same_tree(ref, tmp_path / "rt")
+    # flags override the file
+    args = cli.build_parser().parse_args(["--config", str(ref / "config.toml"), "--frames", "3"])
+    resolved, given = cli.resolve_config(args)
+    assert resolved["sequence"]["frames"] == 3 and resolved["camera"]["height"] == 120 and "frames" in given
+
+
+def test_rerun_skips_complete_frames_and_repairs_deleted_ones(ref, tmp_path, capsys):
+    seq = tmp_path / "seq"
+    shutil.copytree(ref, seq)
+    (seq / "rgb/000003.png").unlink()
+    (seq / "depth/000005.exr").write_bytes(b"corrupt")
+    (seq / "labels.json").unlink()
+    capsys.readouterr()
+    assert run_main(*SMALL, *MODS, "--workers", "1", "--out", seq) == 0
+    out = capsys.readouterr().out
+    assert "rendered 2, skipped 6" in out
+    assert_same_tree(ref, seq)
+
+
+def test_killed_run_leaves_no_partial_file_and_resumes(ref, tmp_path):
+    seq = tmp_path / "seq"
+    cmd = [sys.executable, str(ROOT / "cli.py"), *SMALL, *MODS, "--workers", "1", "--out", str(seq)]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    deadline = time.monotonic() + 60
+    while not (seq / ".manifest" / "000001.json").exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.005)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    for p in seq.rglob("*"):  # whatever has a real name is complete
+        if p.is_file() and not p.name.startswith(".") and p.suffix in (".png", ".exr"):
+            F.read_image(str(p))
+    r = subprocess.run(cmd, check=False, cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    skipped = int(r.stdout.split("skipped ")[1].split()[0])
+    assert skipped >= 1
+    assert_same_tree(ref, seq)
+
+
+def test_dask_local_cluster_gives_the_same_bytes(ref, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    import logging
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                  silence_logs=logging.ERROR) as lc:
+        assert run_main(*SMALL, *MODS, "--scheduler", lc.scheduler_address, "--out", tmp_path / "dask") == 0
+    assert_same_tree(ref, tmp_path / "dask")
+
+
+# --------------------------------------------------------------------------- options
+def test_only_visible_drops_frames_and_keeps_flags(ref, tmp_path):
+    out = tmp_path / "vis"
+    assert run_main(*SMALL, "--modalities", "mask", "--workers", "1", "--only-visible", "--out", out) == 0
+    all_labels = json.loads((ref / "labels.json").read_text())
+    visible = [lab["frame"] for lab in all_labels if lab["visible"]]
+    assert 0 < len(visible) < len(all_labels)  # this draw has frames in Earth's shadow
+    labels = json.loads((out / "labels.json").read_text())
+    assert [lab["frame"] for lab in labels] == visible
+    assert sorted(p.name for p in (out / "mask").iterdir()) == [f"{i:06d}.png" for i in visible]
+    assert json.loads((out / "scenario.json").read_text())["visible"] == [lab["visible"] for lab in all_labels]
+    for lab in labels:  # geometry-only modalities match the full render's
+        assert (out / lab["files"]["mask"]).read_bytes() == (ref / lab["files"]["mask"]).read_bytes()
+
+
+def test_explicit_pattern_attitude_and_paper_preset(tmp_path):
+    out = tmp_path / "x"
+    argv = [*SMALL, "--amplitude-m", "12", "--kappa", "0.2", "--attitude", "spin", "--spin-rate-deg-s", "2",
+            "--degrade", "paper", "--frames", "3", "--workers", "1", "--out", out]
+    assert run_main(*argv) == 0
+    scen = json.loads((out / "scenario.json").read_text())
+    assert scen["pattern"] == "spiral" and scen["pattern_source"] == "explicit"
+    assert scen["pattern_parameters"]["A"] == pytest.approx(12.0)
+    assert scen["pattern_parameters"]["kappa"] == pytest.approx(0.2)
+    assert (out / "rgb_degraded/000002.png").is_file()
+    labels = json.loads((out / "labels.json").read_text())
+    q0, q2 = np.array(labels[0]["q_cam_from_body"]), np.array(labels[2]["q_cam_from_body"])
+    assert 2 * math.acos(min(1.0, abs(q0 @ q2))) > 0.1  # the target spun between frames
+
+
+def test_dataset_command_table(tmp_path, capsys):
+    argv = ["dataset", "--targets", "icesat", "--patterns", "--frames", "2", "--width", "48", "--height", "36",
+            "--focal-length-mm", "0.15", "--workers", "1", "--quiet", "--out", tmp_path / "ds"]
+    assert run_main(*argv) == 0
+    out = capsys.readouterr().out
+    for pattern in ("elliptical", "spiral", "drip-drop", "drift"):
+        assert f"icesat_{pattern}" in out
+        seq = tmp_path / "ds" / f"icesat_{pattern}"
+        assert sorted(p.name for p in seq.iterdir() if not p.name.startswith(".")) == [
+            "camera.json", "config.toml", "depth", "labels.json", "manifest.json", "mask", "model", "normal", "rgb",
+            "scenario.json"]
+    assert "total" in out and "4 sequences x 4 modalities" in out
+
+
+def test_ablation_command_prints_the_table(capsys):
+    argv = ["ablation", "--target", "icesat", "--frames", "2", "--width", "64", "--height", "48",
+            "--focal-length-mm", "0.2", "--workers", "1", "--quiet"]
+    assert run_main(*argv) == 0
+    out = capsys.readouterr().out
+    assert "D4 blur + Poisson + Gaussian" in out and "+ demosaic" in out and "| icesat |" in out
+
+
+# --------------------------------------------------------------------------- bad input
+def _bad_mesh(tmp_path):
+    p = tmp_path / "broken.ply"
+    p.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1 2\n")
+    return ["--mesh", str(p)]
+
+
+def _bad_config(text):
+    def make(tmp_path):
+        p = tmp_path / "bad.toml"
+        p.write_text(text)
+        return ["--config", str(p)]
+    return make
+
+
+def _out_under_a_file(tmp_path):
+    (tmp_path / "afile").write_text("x")
+    return ["--out", str(tmp_path / "afile" / "seq")]
+
+
+BAD = [
+    (["--target", "hubble"], ["--target", "cassini"]),
+    (["--pattern", "circle"], ["--pattern", "drip-drop"]),
+    (["--modalities", "rgb,xray"], ["--modalities", "normal"]),
+    (["--degrade", "blurry"], ["--degrade", "physical"]),
+    (["--attitude", "wobble"], ["--attitude", "tumble"]),
+    (["--quality", "ultra"], ["--quality", "reference"]),
+    (["--altitude-km", "nan"], ["--altitude-km"]),
+    (["--altitude-km", "50"], ["--altitude-km", "100"]),
+    (["--inclination-deg", "200"], ["--inclination-deg"]),
+    (["--width", "0"], ["--width", "[1, 65535]"]),
+    (["--height", "-5"], ["--height"]),
+    (["--focal-length-mm", "-4"], ["--focal-length-mm"]),
+    (["--pixel-pitch-um", "0"], ["--pixel-pitch-um"]),
+    (["--spin-axis", "0,0,0"], ["--spin-axis", "non-zero"]),
+    (["--shard", "3/2"], ["--shard", "K/N"]),
+    (["--kappa", "0.1"], ["--amplitude-m"]),
+    (["--amplitude-m", "12", "--kappa", "0.5"], ["--kappa", "drip-drop", "spiral"]),
+    (["--pattern", "elliptical", "--amplitude-m", "0.2", "--kappa", "0"], ["--amplitude-m", "bounding radius"]),
+    (["--modalities", "rgb_degraded", "--degrade", "none"], ["--modalities", "--degrade"]),
+    (["--pattern", "drift", "--window-s", "1000000"], ["window_s"]),
+    (_bad_mesh, ["--mesh", "broken.ply"]),
+    (lambda tmp: ["--mesh", str(tmp / "missing.glb")], ["--mesh", "missing.glb"]),
+    (_bad_config("[sequence]\nframes = [\n"), ["--config", "not valid TOML"]),
+    (_bad_config("[camera]\nwidht = 3\n"), ["--config", "widht", "width"]),
+    (_bad_config("[camera]\nwidth = 'wide'\n"), ["--config", "width", "integer"]),
+    (_bad_config("[lens]\nf = 1\n"), ["--config", "[lens]", "[camera]"]),
+    (lambda tmp: ["--config", str(tmp / "nope.toml")], ["--config", "nope.toml"]),
+    (_out_under_a_file, ["--out", "afile"]),
+]
+
+
+@pytest.mark.parametrize("args, names", BAD)
+def test_bad_input_is_one_line_exit_2_and_leaves_nothing(tmp_path, capsys, args, names):
+    extra = args(tmp_path) if callable(args) else args
+    before = sorted(str(p) for p in tmp_path.rglob("*"))
+    out = ["--out", str(tmp_path / "seq")] if "--out" not in extra else []
+    assert run_main(*SMALL, "--workers", "1", *extra, *out) == 2
+    cap = capsys.readouterr()
+    assert cap.out == ""
+    err = cap.err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("cli.py: error: "), err
+    for name in names:
+        assert name in err, (name, err)
+    assert sorted(str(p) for p in tmp_path.rglob("*")) == before  # nothing created
+
+
+def test_another_sequence_in_the_folder_is_refused(ref, tmp_path, capsys):
+    seq = tmp_path / "seq"
+    shutil.copytree(ref, seq)
+    assert run_main(*SMALL, *MODS, "--seed", "1", "--workers", "1", "--out", seq) == 2
+    assert "holds another sequence" in capsys.readouterr().err
+    assert filecmp.cmp(seq / "scenario.json", ref / "scenario.json", shallow=False)
+
+
+# --------------------------------------------------------------------------- files
+def test_atomic_writes_leave_no_temporary(tmp_path):
+    with pytest.raises(ValueError, match="uint8, uint16 or float32"):
+        F.atomic_write_image(str(tmp_path / "a.png"), np.zeros((2, 2), np.int64))
+    assert list(tmp_path.iterdir()) == []
+    F.atomic_write_image(str(tmp_path / "a.exr"), np.ones((2, 3), np.float32))
+    assert [p.name for p in tmp_path.iterdir()] == ["a.exr"]
+    np.testing.assert_array_equal(F.read_image(str(tmp_path / "a.exr")), np.ones((2, 3)))
+    # a temporary of a writer that died is removed; one of a live writer is kept
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          check=True, capture_output=True, text=True)
+    host = F._HOST
+    stale = tmp_path / f".000001.{host}.{int(dead.stdout)}.tmp.png"
+    live = tmp_path / f".000002.{host}.{os.getpid()}.tmp.png"
+    stale.write_bytes(b"x")
+    live.write_bytes(b"x")
+    assert F.remove_stale_temporaries(str(tmp_path)) == 1
+    assert not stale.exists() and live.exists()
+
+
+def test_frame_seeds_are_the_spawned_children():
+    children = np.random.SeedSequence(7).spawn(5)
+    for i, child in enumerate(children):
+        render_seed, degrade_seq = cli.frame_seeds(7, i)
+        assert render_seed == int(child.generate_state(1)[0] % 2**31)
+        assert np.array_equal(degrade_seq.generate_state(4), child.spawn(1)[0].generate_state(4))
+
+
+def test_dry_run_and_json_render_nothing(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert run_main(*SMALL, "--dry-run") == 0
+    assert run_main(*SMALL, "--json") == 0
+    out = capsys.readouterr().out
+    assert "frames visible" in out and '"s0_lvlh"' in out
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_user_mesh_renders_and_is_written_back(tmp_path):
+    import trimesh
+    trimesh.creation.box((3.0, 2.0, 1.0)).export(tmp_path / "box.ply")
+    out = tmp_path / "seq"
+    argv = [*SMALL, "--mesh", tmp_path / "box.ply", "--frames", "2", "--modalities", "mask,depth", "--workers", "1",
+            "--out", out]
+    assert run_main(*argv) == 0
+    V, Fc, comp = F.read_model_ply(str(out / "model/box.ply"))
+    assert len(Fc) == 12 and set(comp.tolist()) == {1}
+    np.testing.assert_allclose(np.ptp(V, axis=0), [3.0, 2.0, 1.0])
+    labels = json.loads((out / "labels.json").read_text())
+    assert all(lab["pixel_counts"][1] > 0 for lab in labels)
