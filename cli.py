@@ -14,7 +14,11 @@ Other commands:
 * ``python cli.py dataset`` — the paper's dataset in one command (4 targets × 500 frames,
   ``--patterns`` for all four patterns per target), one progress bar, a table of counts;
 * ``python cli.py ablation --target T[,T..] --frames N`` — degradation ablation on clean renders;
-* ``python cli.py render-scene SCENE.json --out DIR`` — one frame of an explicit scene.
+* ``python cli.py render-scene SCENE.json --out DIR`` — one frame of an explicit scene;
+* ``python cli.py preview --target T --pattern P [--out preview.png] [--all-patterns]`` — an
+  off-screen pyvista picture of the trajectory, camera frusta, Sun and Earth, in seconds;
+* ``python cli.py snapshots [--update]`` — compare (or deliberately refresh) the small render
+  snapshots that CI guards pixels with.
 
 Frames are independent and seeded per frame (``SeedSequence(seed).spawn``): the output is
 byte-identical for 1 worker, N worker processes (``--workers``), shards (``--shard K/N``) or a
@@ -269,6 +273,9 @@ def _options() -> tuple:
           "physical preset: motion-blur length [px] (constant over the sequence)"),
         O("--motion-angle-deg", "degrade", _float_in(-360.0, 360.0, unit=deg), 0.0,
           "physical preset: motion-blur direction, counter-clockwise from +column [deg]"),
+        O("--motion-blur", "degrade", _choice(("fixed", "auto")), "fixed",
+          "physical preset: 'fixed' blurs every frame by --motion-blur-px at --motion-angle-deg; 'auto' takes "
+          "each frame's blur from the target's own image motion during the exposure"),
         # [output]
         O("--modalities", "output", _subset(MODALITIES), None,
           f"files per frame, from {','.join(MODALITIES)} (default: all but hdr; no rgb_degraded with --degrade none)",
@@ -324,7 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the main job."""
     p = _Parser(prog=PROG, description="Relative-orbit image generator for spacecraft vision-based navigation: "
                 "renders one sequence of the requested pattern around the target (clean and degraded RGB, "
-                "mask, depth, normals, labels). Other commands: dataset, ablation, render-scene "
+                "mask, depth, normals, labels). Other commands: dataset, ablation, render-scene, preview, snapshots "
                 "(`python cli.py COMMAND --help`).")
     _add_options(p, {})
     p.add_argument("--dry-run", action="store_true", help="print the per-frame states and flags; render nothing")
@@ -573,6 +580,9 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
     earth_distance_m = np.linalg.norm(r_tgt_eci, axis=1)
     R_body_from_earth = R_body_from_eci @ rot_z(_gmst_rad(unix_s))  # Earth-fixed axes (texture)
 
+    motion = None
+    if cfg["degrade"].get("motion_blur") == "auto":
+        motion = _image_motion(model, camera, cfg["degrade"]["exposure_us"] * 1e-6, s0, n, t_s, attitude)
     frames, lights = [], []
     for i in range(t_s.size):
         frames.append({
@@ -600,6 +610,9 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
         lights.append({"sun_dir_body": sun_dir_body[i].tolist(), "shadow_fraction": float(vis.illuminated_fraction[i]),
                        "earth_dir_body": earth_dir_body[i].tolist(), "earth_distance_m": float(earth_distance_m[i]),
                        "R_body_from_earth": R_body_from_earth[i].tolist()})
+        if motion is not None:
+            lights[-1]["motion"] = [float(motion[0][i]), float(motion[1][i])]
+            frames[-1]["motion_blur_px"], frames[-1]["motion_angle_deg"] = lights[-1]["motion"]
     result = {
         "target": target,
         "target_bounding_radius_m": radius_m,
@@ -622,6 +635,44 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
     }
     return {"result": result, "model": model, "model_spec": spec, "camera": camera, "lights": lights,
             "cfg": cfg, "name": f"{target}_{pattern}"}
+
+
+def _image_motion(model, camera, exposure_s: float, s0, n: float, t_s, attitude) -> tuple:
+    """Per frame, the blur (L [px], θ [deg]) the target's own image motion makes during an
+    exposure of ``exposure_s`` centred on the frame time: the poses at t ∓ exposure/2 (same
+    CW state, attitude law and look-at pointing as the frame) project the target's convex-hull
+    vertices; their displacements d_k [px] give L = √λ_max and θ along the principal axis of
+    Σ d_k d_kᵀ / K (the straight-line blur that best matches the image motion; a target turning
+    about the line of sight blurs most at its rim, which this averages)."""
+    from scipy.spatial import ConvexHull
+
+    from degrade.psf import motion_from_velocity
+    from orbit import cw, pose
+    pts = np.concatenate([np.asarray(c.mesh.vertices, dtype=np.float64) for c in model.components])
+    try:
+        hull = ConvexHull(pts).vertices
+    except Exception:  # noqa: BLE001 - flat or tiny point sets: use every vertex
+        hull = np.arange(len(pts))
+    pts = pts[hull]
+    half = 0.5 * exposure_s
+    uv = []
+    for dt in (-half, half):
+        tt = np.asarray(t_s, dtype=np.float64) + dt
+        s = cw.propagate(s0, n, tt)
+        R, t = pose.pose_from_relative(s[:, :3], attitude.R_lvlh_from_body(tt, n), pose.look_at(s[:, :3]))
+        p = pts[None] @ np.swapaxes(R, -1, -2) + t[:, None, :]
+        z = np.where(p[..., 2] > 1e-9, p[..., 2], np.nan)
+        uv.append(np.stack([camera.fx * p[..., 0] / z + camera.cx, camera.fy * p[..., 1] / z + camera.cy], -1))
+    d = uv[1] - uv[0]                                            # (frames, K, 2) [px]
+    lengths, angles = np.zeros(len(t_s)), np.zeros(len(t_s))
+    for i in range(len(t_s)):
+        di = d[i][np.all(np.isfinite(d[i]), axis=1)]
+        if exposure_s <= 0 or not len(di):
+            continue
+        w, v = np.linalg.eigh(di.T @ di / len(di))
+        if w[-1] > 0:
+            lengths[i], angles[i] = motion_from_velocity(v[:, -1] * math.sqrt(w[-1]) / exposure_s, exposure_s)
+    return lengths, angles
 
 
 def _num(value) -> str:
@@ -706,13 +757,18 @@ def _lighting(light: dict, r: dict):
                     ambient_radiance_W_m2_sr=r["ambient_W_m2_sr"])
 
 
-def _physical_config(d: dict, cam: dict):
+def _physical_config(d: dict, cam: dict, motion=None):
+    """The physical chain's settings; ``motion`` = (L [px], θ [deg]) of the frame overrides the
+    constant blur when ``--motion-blur auto``."""
     from degrade.chain import DegradeConfig, OpticsConfig
     from degrade.sensor import SensorConfig
     f_m = cam["focal_length_mm"] * 1e-3
+    length, angle = d["motion_blur_px"], d["motion_angle_deg"]
+    if d.get("motion_blur") == "auto" and motion is not None:
+        length, angle = motion
     optics = OpticsConfig(focal_length_m=f_m, aperture_m=f_m / d["f_number"], pixel_pitch_m=cam["pixel_pitch_um"] * 1e-6,
-                          aberration_sigma_px=d["aberration_sigma_px"], motion_length_px=d["motion_blur_px"],
-                          motion_angle_deg=d["motion_angle_deg"])
+                          aberration_sigma_px=d["aberration_sigma_px"], motion_length_px=length,
+                          motion_angle_deg=angle)
     sensor = SensorConfig(quantum_efficiency=d["quantum_efficiency"], full_well_e=d["full_well_e"],
                           read_noise_e=d["read_noise_e"], bit_depth=d["bit_depth"], exposure_s=d["exposure_us"] * 1e-6)
     return DegradeConfig(optics=optics, sensor=sensor, encoding="srgb8")
@@ -766,7 +822,7 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
                                        pixel_pitch_m=cam["pixel_pitch_um"] * 1e-6,
                                        quantum_efficiency=d["quantum_efficiency"], full_well_e=d["full_well_e"],
                                        wavelengths_m=(_WHITE_BALANCE_M,) * 3)
-            out = degrade(signal, _physical_config(d, cam), rng=rng)
+            out = degrade(signal, _physical_config(d, cam, task["light"].get("motion")), rng=rng)
         images["rgb_degraded"] = quantise(out, 8)
     if "mask" in mods:
         images["mask"] = geo.instance.astype(np.uint16)

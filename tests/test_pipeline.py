@@ -415,3 +415,29 @@ def test_user_mesh_renders_and_is_written_back(tmp_path):
     np.testing.assert_allclose(np.ptp(V, axis=0), [3.0, 2.0, 1.0])
     labels = json.loads((out / "labels.json").read_text())
     assert all(lab["pixel_counts"][1] > 0 for lab in labels)
+
+
+def _auto_motion(capsys, *extra):
+    argv = ["--target", "icesat", "--pattern", "elliptical", "--frames", "4", "--width", "160", "--height", "120",
+            "--attitude", "spin", "--motion-blur", "auto", "--json", *extra]
+    assert run_main(*argv) == 0
+    frames = json.loads(capsys.readouterr().out)["frames"]
+    return np.array([f["motion_blur_px"] for f in frames]), np.array([f["motion_angle_deg"] for f in frames])
+
+
+def test_auto_motion_blur_follows_the_targets_image_motion(capsys):
+    """Properties of the per-frame blur that hold whatever the geometry: it vanishes with the
+    exposure, grows linearly with it (small angles), comes from the spin (without it only the
+    slow relative-orbit rotation is left), and at the first frame (t = 0, the same attitude for
+    any rate) doubling the spin rate doubles it."""
+    L1, a1 = _auto_motion(capsys, "--spin-rate-deg-s", "30", "--exposure-us", "10000")
+    L2, _ = _auto_motion(capsys, "--spin-rate-deg-s", "30", "--exposure-us", "20000")
+    L3, _ = _auto_motion(capsys, "--spin-rate-deg-s", "60", "--exposure-us", "10000")
+    L0, _ = _auto_motion(capsys, "--spin-rate-deg-s", "30", "--exposure-us", "0.001")
+    assert np.all(L1 > 0.1), L1
+    np.testing.assert_allclose(L2, 2 * L1, rtol=1e-3)
+    np.testing.assert_allclose(L3[0], 2 * L1[0], rtol=0.01)
+    assert np.all(L0 < 1e-4 * L1 / 1e-3)
+    Ls, _ = _auto_motion(capsys, "--spin-rate-deg-s", "0", "--exposure-us", "10000")
+    assert np.all(Ls < 0.02 * L1), (Ls, L1)
+    assert np.all(np.abs(a1) <= 180.0)
