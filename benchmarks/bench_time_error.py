@@ -173,7 +173,13 @@ def main() -> None:
     ap.add_argument("--cycles-spp", type=int, nargs="*", default=[1, 4, 16, 64, 256])
     ap.add_argument("--no-cycles", action="store_true")
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--presets", nargs="*", default=None,
+                    help="only these of ours, e.g. fast balanced:8 (default: all)")
+    ap.add_argument("--merge", default=None,
+                    help="results.json of an earlier run: its rows for renderers/presets not re-run here are kept")
     args = ap.parse_args()
+    presets = PRESETS if args.presets is None else [
+        (p.split(":")[0], int(p.split(":")[1]) if ":" in p else None) for p in args.presets]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     py = None if args.no_cycles else bpy_python()
@@ -212,7 +218,7 @@ def main() -> None:
                       f"{row['s_per_frame']:8.3f} s  {100 * e:6.2f} %  corrected {100 * row['err_corrected']:6.2f} %",
                       flush=True)
 
-            for q, n in PRESETS:
+            for q, n in presets:
                 render(scene, cam, R, t, light, quality=q, samples=n, seed=0)  # warm-up (JIT, cache)
                 times = []
                 for k in range(args.repeats):
@@ -229,6 +235,12 @@ def main() -> None:
                         times.append(s)
                     record("cycles", "cycles", n, times, img)
             (out / "results.json").write_text(json.dumps(results, indent=1) + "\n")
+    if args.merge:
+        redone = {(r["target"], r["view"], r["renderer"], r["preset"], r["samples"]) for r in results}
+        kept = [r for r in json.loads(Path(args.merge).read_text())
+                if (r["target"], r["view"], r["renderer"], r["preset"], r["samples"]) not in redone]
+        results = kept + results
+        (out / "results.json").write_text(json.dumps(results, indent=1) + "\n")
     write_table(results, out / "table.md")
     plot(results, out / "time_error.png")
     print((out / "table.md").read_text())

@@ -11,7 +11,7 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     highlight exact; sky, Earth and inter-reflected light from the body-space radiance cache
     (:mod:`raytrace.cache`), interpolated at the pixel's surface point; the specular
     reflection of the environment and other parts along the mirror direction (one ray),
-    weighted by the lobe's directional albedo; anti-aliasing with 2×2 jittered-stratified
+    weighted by the lobe's directional albedo; anti-aliasing with 3×3 jittered-stratified
     sub-pixel rays (an unbiased box filter) only where neighbouring pixels disagree
     (silhouette, part, shadow and crease edges).
 ``balanced``
@@ -79,7 +79,7 @@ class Quality:
 
 
 _PRESETS = {
-    "fast": Quality("fast", gather_rays=0, filter_passes=0, aa_grid=2, sun_rays=4),
+    "fast": Quality("fast", gather_rays=0, filter_passes=0, aa_grid=3, sun_rays=4),
     "balanced": Quality("balanced", gather_rays=8, filter_passes=3, aa_grid=3, sun_rays=16),
     "reference": Quality("reference", spp=1024),
 }

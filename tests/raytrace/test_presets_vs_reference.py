@@ -17,15 +17,15 @@ Documented bounds (relative RMS error over target pixels, noise-corrected), also
                fast    balanced    (``balanced`` with its default 8 gather rays)
 =============  ======  ==========  ==================================================
 bound          25 %    14 %
-tiangong       15 %    11 %        measured 2026-11-21 (thin wings and masts)
-spacedragon     6 %     4 %
-icesat         20 %    12 %        small: 45 % of its pixels are edge pixels
-cassini        14 %     8 %
+tiangong       13 %    12 %        measured 2026-11-21 (thin wings and masts)
+spacedragon     5 %     3 %
+icesat         18 %    12 %        small: 45 % of its pixels are edge pixels
+cassini        12 %     8 %
 =============  ======  ==========  ==================================================
 
 and ``balanced`` is never worse than ``fast``. Most of the error sits in edge pixels, whose
-sub-pixel coverage ``fast`` estimates from 2×2 rays and ``balanced`` from 3×3. The reference's own noise must be small enough
-for the comparison to mean something (σ < 8 % at 64 samples per pixel; the quadrature
+sub-pixel coverage both ``fast`` and ``balanced`` (8 rays) estimate from 3×3 rays. The
+reference's own noise must be small enough for the comparison to mean something (σ < 8 % at 64 samples per pixel; the quadrature
 correction is precise because σ² is estimated over thousands of pixels).
 """
 
