@@ -248,6 +248,8 @@ def _options() -> tuple:
         O("--height", "camera", _int_in(1, 65535), 960, "image height [px]"),
         O("--focal-length-mm", "camera", _float_in(0.0, 1e4, lo_open=True, unit="mm"), 4.0, "focal length [mm]"),
         O("--pixel-pitch-um", "camera", _float_in(0.0, 1e3, lo_open=True, unit="um"), 3.45, "pixel pitch [um]"),
+        O("--roll-deg", "camera", _float_in(-360.0, 360.0, unit="deg"), 0.0,
+          "camera roll about its boresight, applied after the look-at pointing (SPEC §9) [deg]"),
         # [render]
         O("--quality", "render", _choice(QUALITIES), "fast", "shading preset (raytrace.shade)"),
         O("--samples", "render", _int_in(1, 1 << 20), None, "overrides the preset's sample count"),
@@ -260,6 +262,12 @@ def _options() -> tuple:
         O("--degrade", "degrade", _choice(DEGRADE_PRESETS), "physical",
           "degradation of rgb_degraded: none, paper (SPEC §10 groups) or physical (optics + sensor chain)"),
         O("--paper-group", "degrade", _choice(PAPER_GROUP_NAMES), "D4", "paper preset: D1 blur ... D4 blur+Poisson+Gaussian"),
+        O("--paper-blur-px", "degrade", _float_in(0.0, 1000.0, unit="px"), 15.0,
+          "paper preset: motion-blur length L [px] (SPEC §10: 15)"),
+        O("--paper-angle-deg", "degrade", _float_in(-360.0, 360.0, unit="deg"), 30.0,
+          "paper preset: motion-blur angle θ [deg] (SPEC §10: 30)"),
+        O("--paper-gaussian-var", "degrade", _float_in(0.0, 1.0), 0.01,
+          "paper preset: variance of the Gaussian noise on [0, 1] values (SPEC §10: 0.01)"),
         O("--f-number", "degrade", _float_in(0.5, 64.0), 4.0, "physical preset: f-number N (aperture = f / N)"),
         O("--exposure-us", "degrade", _float_in(0.0, 1e7, lo_open=True, unit="us"), 20.0,
           "physical preset: exposure time [us]"),
@@ -273,6 +281,15 @@ def _options() -> tuple:
           "physical preset: motion-blur length [px] (constant over the sequence)"),
         O("--motion-angle-deg", "degrade", _float_in(-360.0, 360.0, unit=deg), 0.0,
           "physical preset: motion-blur direction, counter-clockwise from +column [deg]"),
+        O("--defocus-radius-px", "degrade", _float_in(0.0, 100.0, unit="px"), 0.0,
+          "physical preset: defocus blur-circle radius [px] (pillbox)"),
+        O("--corner-sigma-px", "degrade", _float_in(0.0, 100.0, unit="px"), 0.0,
+          "physical preset: Gaussian aberration sigma reached in the image corners [px] (0: uniform)"),
+        O("--offset-dn", "degrade", _float_in(0.0, 65535.0, unit="DN"), 0.0, "physical preset: ADC black level"),
+        O("--dark-current-e-s", "degrade", _float_in(0.0, 1e9, unit="e-/s"), 0.0,
+          "physical preset: dark current [e-/s]"),
+        O("--demosaic", "degrade", _choice(("MHC", "linear")), "MHC",
+          "physical preset: OpenImageIO demosaic algorithm of the RGGB mosaic"),
         O("--motion-blur", "degrade", _choice(("fixed", "auto")), "fixed",
           "physical preset: 'fixed' blurs every frame by --motion-blur-px at --motion-angle-deg; 'auto' takes "
           "each frame's blur from the target's own image motion during the exposure"),
@@ -565,7 +582,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
         spin_rate_rad_s=math.radians(att["spin_rate_deg_s"]), omega0_body_rad_s=np.radians(att["omega0_deg_s"]),
         inertia_body_kg_m2=np.diag(att["inertia_kg_m2"]))
     R_lvlh_from_body = attitude.R_lvlh_from_body(t_s, n)
-    R_cam_from_lvlh = pose.look_at(s_lvlh[:, :3])
+    R_cam_from_lvlh = pose.look_at(s_lvlh[:, :3], roll_rad=math.radians(cam["roll_deg"]))
     R_cam_from_body, t_cam_m = pose.pose_from_relative(s_lvlh[:, :3], R_lvlh_from_body, R_cam_from_lvlh)
     labels = pose.pose_labels(R_cam_from_body, t_cam_m)
     R_lvlh_from_eci = np.swapaxes(ref.R_eci_from_lvlh(t_s), -1, -2)
@@ -582,7 +599,8 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
 
     motion = None
     if cfg["degrade"].get("motion_blur") == "auto":
-        motion = _image_motion(model, camera, cfg["degrade"]["exposure_us"] * 1e-6, s0, n, t_s, attitude)
+        motion = _image_motion(model, camera, cfg["degrade"]["exposure_us"] * 1e-6, s0, n, t_s, attitude,
+                               math.radians(cam["roll_deg"]))
     frames, lights = [], []
     for i in range(t_s.size):
         frames.append({
@@ -637,7 +655,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
             "cfg": cfg, "name": f"{target}_{pattern}"}
 
 
-def _image_motion(model, camera, exposure_s: float, s0, n: float, t_s, attitude) -> tuple:
+def _image_motion(model, camera, exposure_s: float, s0, n: float, t_s, attitude, roll_rad: float = 0.0) -> tuple:
     """Per frame, the blur (L [px], θ [deg]) the target's own image motion makes during an
     exposure of ``exposure_s`` centred on the frame time: the poses at t ∓ exposure/2 (same
     CW state, attitude law and look-at pointing as the frame) project the target's convex-hull
@@ -659,7 +677,8 @@ def _image_motion(model, camera, exposure_s: float, s0, n: float, t_s, attitude)
     for dt in (-half, half):
         tt = np.asarray(t_s, dtype=np.float64) + dt
         s = cw.propagate(s0, n, tt)
-        R, t = pose.pose_from_relative(s[:, :3], attitude.R_lvlh_from_body(tt, n), pose.look_at(s[:, :3]))
+        R, t = pose.pose_from_relative(s[:, :3], attitude.R_lvlh_from_body(tt, n),
+                                       pose.look_at(s[:, :3], roll_rad=roll_rad))
         p = pts[None] @ np.swapaxes(R, -1, -2) + t[:, None, :]
         z = np.where(p[..., 2] > 1e-9, p[..., 2], np.nan)
         uv.append(np.stack([camera.fx * p[..., 0] / z + camera.cx, camera.fy * p[..., 1] / z + camera.cy], -1))
@@ -768,9 +787,11 @@ def _physical_config(d: dict, cam: dict, motion=None):
         length, angle = motion
     optics = OpticsConfig(focal_length_m=f_m, aperture_m=f_m / d["f_number"], pixel_pitch_m=cam["pixel_pitch_um"] * 1e-6,
                           aberration_sigma_px=d["aberration_sigma_px"], motion_length_px=length,
-                          motion_angle_deg=angle)
+                          motion_angle_deg=angle, defocus_radius_px=d["defocus_radius_px"],
+                          corner_sigma_px=d["corner_sigma_px"] or None)
     sensor = SensorConfig(quantum_efficiency=d["quantum_efficiency"], full_well_e=d["full_well_e"],
-                          read_noise_e=d["read_noise_e"], bit_depth=d["bit_depth"], exposure_s=d["exposure_us"] * 1e-6)
+                          read_noise_e=d["read_noise_e"], bit_depth=d["bit_depth"], exposure_s=d["exposure_us"] * 1e-6,
+                          offset_dn=d["offset_dn"], dark_current_e_per_s=d["dark_current_e_s"], demosaic=d["demosaic"])
     return DegradeConfig(optics=optics, sensor=sensor, encoding="srgb8")
 
 
@@ -812,8 +833,10 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
     if "rgb_degraded" in mods:
         rng = np.random.default_rng(degrade_seq)
         if d["degrade"] == "paper":
-            from degrade.paper import paper_degrade
-            out = paper_degrade(images["rgb"].astype(np.float32) / np.float32(255.0), d["paper_group"], rng=rng)
+            from degrade.paper import PaperConfig, paper_degrade
+            paper = PaperConfig(length_px=d["paper_blur_px"], angle_deg=d["paper_angle_deg"],
+                                gaussian_var=d["paper_gaussian_var"])
+            out = paper_degrade(images["rgb"].astype(np.float32) / np.float32(255.0), d["paper_group"], paper, rng=rng)
         else:
             from degrade.chain import degrade
             from degrade.exposure import physical_exposure
