@@ -383,10 +383,12 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     s = ctx.surfaces(O, D, face)
     mirror = np.zeros((len(pix), 3))
     E = ctx.cache_E(s)
-    occ_t = np.full(len(pix), np.inf)
+    soft = q.sun_rays > 1 and lighting.sun_angular_diameter_rad > 0.0
+    occ_t = np.full(len(pix), np.inf) if soft else None  # occluder distances cost a closest-hit query
     L, vis = ctx.direct(s, E, mirror, occluder_t=occ_t)
-    footprint_m = geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx
-    ctx.soft_shadows(s, L, vis, occ_t, footprint_m, pix, H, W, q.sun_rays, int(seed))
+    if soft:
+        footprint_m = geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx
+        ctx.soft_shadows(s, L, vis, occ_t, footprint_m, pix, H, W, q.sun_rays, int(seed))
     lit_img[pix] = vis >= 0.5
     timings["direct"] = time.perf_counter() - t0
     _check_finite("direct light", L)
