@@ -517,7 +517,8 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
             sx, sy, sz = ctx.lighting.sun_dir_body
             K.sun_disc_dirs((np.repeat(epix, S)[idx] * S + idx % S).astype(np.int64), S, seed, sx, sy, sz,
                             math.cos(0.5 * ctx.lighting.sun_angular_diameter_rad), sun_dirs)
-        Ls, _ = ctx.direct(s, E, sun_dirs=sun_dirs)
+        mirror = np.zeros((len(idx), 3))
+        Ls, _ = ctx.direct(s, E, mirror, sun_dirs=sun_dirs)
         if residual is not None:
             # same part as the pixel centre: the centre's filtered corrections; another part:
             # its own (unfiltered) final gather and lobe samples
@@ -530,9 +531,7 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
             if len(j):
                 sj = {k: v[j] for k, v in s.items()}
                 keys = (centre[j] * S + idx[j] % S).astype(np.int64)
-                mirror = np.zeros((len(j), 3))
-                ctx.direct(sj, E[j], mirror, sun_dirs=None if sun_dirs is None else sun_dirs[j])
-                Ls[j] += ctx.lobe(sj, gather_rays, keys, seed) - mirror
+                Ls[j] += ctx.lobe(sj, gather_rays, keys, seed) - mirror[j]  # the lobe replaces the mirror term
                 E[j] = ctx.gather_E(sj, gather_rays, keys, seed)
         ctx.add_diffuse(s, E, Ls)
         L[idx] = Ls
