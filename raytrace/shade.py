@@ -212,14 +212,18 @@ class _Context:
         e_sun = light.sun_irradiance_at_target_W_m2
         if half <= 0.0 or e_sun <= 0.0 or n_rays <= 1 or not len(pix):
             return
-        w_px = np.zeros(H * W)
         blocked = np.isfinite(occ_t)
-        w_px[pix[blocked]] = np.minimum(occ_t[blocked] * math.tan(half) / footprint_m[blocked], 8.0)
-        reach = math.ceil(w_px.max())
-        if w_px.max() <= 0.25:
+        w_blocked = np.minimum(occ_t[blocked] * math.tan(half) / footprint_m[blocked], 8.0)
+        if not len(w_blocked) or w_blocked.max() <= 0.25:
             return
         from scipy.ndimage import maximum_filter
-        near = maximum_filter(w_px.reshape(H, W), size=2 * reach + 1, mode="constant").ravel()[pix] > 0.25
+        # the max filter runs on the target's bounding box only (pixels are row-major in pix)
+        v, u = pix // W, pix % W
+        v0, u0 = v.min(), u.min()
+        w_px = np.zeros((v.max() - v0 + 1, u.max() - u0 + 1))
+        w_px[v[blocked] - v0, u[blocked] - u0] = w_blocked
+        reach = math.ceil(w_blocked.max())
+        near = maximum_filter(w_px, size=2 * reach + 1, mode="constant")[v - v0, u - u0] > 0.25
         sx, sy, sz = light.sun_dir_body
         facing = ((s["NS"] @ np.array([sx, sy, sz]) > 0.0) & (s["NG"] @ np.array([sx, sy, sz]) > 0.0))
         cand = np.flatnonzero(near & facing)
