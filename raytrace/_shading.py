@@ -160,7 +160,7 @@ def mirror_rays(NS, NG, WO, P, eps, want, out_o, out_d):
 @jit
 def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_normal, corner_normal, comp_of_face,
              mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
-             vis_sun):
+             vis_sun, eir, eig, eib):
     """Radiance arriving along a traced ray (o, d): the environment where it escaped; where it
     hit a surface, that surface's radiance towards the ray from the cache: diffuse ρ_d/π·E,
     the exact specular reflection of the Sun towards −d and the specular albedo times the
@@ -168,7 +168,8 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
     the hit comes from the cache when ``vis_sun`` < 0, else it is ``vis_sun`` (a shadow ray
     cast from the hit): then the hit's sunlight is exact and only its indirect light comes
     from the cache, so shadows finer than the cache's lattice are not blurred into the light
-    bounced off them."""
+    bounced off them; (``eir``, ``eig``, ``eib``) ≥ 0 then also replaces the cache's indirect
+    irradiance at the hit (a traced estimate of it)."""
     dn = math.sqrt(dx * dx + dy * dy + dz * dz)
     dx /= dn
     dy /= dn
@@ -195,9 +196,14 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
     cs = nx * sun[0] + ny * sun[1] + nz * sun[2]
     if vis_sun >= 0.0:  # exact sunlight replaces the cache's
         ex = vis_sun * sun[3] * cs if cs > 0.0 else 0.0
-        er = max(er - es, 0.0) + ex
-        eg = max(eg - es, 0.0) + ex
-        eb = max(eb - es, 0.0) + ex
+        if eir >= 0.0:  # and a traced estimate its indirect light
+            er = eir + ex
+            eg = eig + ex
+            eb = eib + ex
+        else:
+            er = max(er - es, 0.0) + ex
+            eg = max(eg - es, 0.0) + ex
+            eb = max(eb - es, 0.0) + ex
         es = ex
     lr = mat_diff[c, 0] / math.pi * er
     lg = mat_diff[c, 1] / math.pi * eg
@@ -231,7 +237,7 @@ def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset
         k = idx[j]
         r, g, b = incoming(geom[j], prim[j], hu[j], hv[j], O[j, 0], O[j, 1], O[j, 2], D[j, 0], D[j, 1], D[j, 2],
                            face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, table,
-                           sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0)
+                           sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0, -1.0, -1.0, -1.0)
         c = comp[k]
         t = min(max((mat_alpha[c] - 0.05) / 0.3, 0.0), 1.0)
         r = (1.0 - t) * r + t * E_point[k, 0] / math.pi
@@ -295,11 +301,58 @@ def bounce_sun_rays(O, D, tfar, geom, prim, face_offset, face_normal, sx, sy, sz
 
 
 @pjit
+def bounce2_rays(O, D, tfar, geom, prim, hu, hv, face_offset, face_normal, corner_normal, keys, seed, eps, want,
+                 out_o, out_d):
+    """A second bounce from the hits of traced rays: one cosine-weighted direction about the
+    hit's shading normal (facing the ray's origin), from a hash of (keys[m], seed); wanted
+    where it leaves the surface (above the geometric normal)."""
+    for m in numba.prange(D.shape[0]):
+        want[m] = False
+        if geom[m] < 0:
+            continue
+        f = face_offset[geom[m]] + prim[m]
+        dx, dy, dz = D[m, 0], D[m, 1], D[m, 2]
+        sgn = -1.0 if face_normal[f, 0] * dx + face_normal[f, 1] * dy + face_normal[f, 2] * dz > 0.0 else 1.0
+        ngx, ngy, ngz = sgn * face_normal[f, 0], sgn * face_normal[f, 1], sgn * face_normal[f, 2]
+        b0 = 1.0 - hu[m] - hv[m]
+        nx = sgn * (b0 * corner_normal[f, 0, 0] + hu[m] * corner_normal[f, 1, 0] + hv[m] * corner_normal[f, 2, 0])
+        ny = sgn * (b0 * corner_normal[f, 0, 1] + hu[m] * corner_normal[f, 1, 1] + hv[m] * corner_normal[f, 2, 1])
+        nz = sgn * (b0 * corner_normal[f, 0, 2] + hu[m] * corner_normal[f, 1, 2] + hv[m] * corner_normal[f, 2, 2])
+        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if nn < 1e-12 or nx * dx + ny * dy + nz * dz > 0.0:
+            nx, ny, nz, nn = ngx, ngy, ngz, 1.0
+        wx, wy, wz = cosine_direction(nx / nn, ny / nn, nz / nn, _hash01(keys[m], 4 * seed + 31),
+                                      _hash01(keys[m], 4 * seed + 32))
+        if wx * ngx + wy * ngy + wz * ngz <= 0.0:
+            continue
+        want[m] = True
+        t = tfar[m]
+        out_o[m, 0] = O[m, 0] + t * dx + eps * ngx
+        out_o[m, 1] = O[m, 1] + t * dy + eps * ngy
+        out_o[m, 2] = O[m, 2] + t * dz + eps * ngz
+        out_d[m, 0] = wx
+        out_d[m, 1] = wy
+        out_d[m, 2] = wz
+
+
+@pjit
+def incoming_rays(O, D, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
+                  mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis, out):
+    """:func:`incoming` along each ray (the Sun's visibility at its hit from ``vis``)."""
+    for m in numba.prange(D.shape[0]):
+        out[m, 0], out[m, 1], out[m, 2] = incoming(
+            geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1], D[m, 2], face_offset,
+            face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid,
+            face_s, lat_start, lat_ids, p, tex, vis[m], -1.0, -1.0, -1.0)
+
+
+@pjit
 def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
                mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis,
-               out):
+               e_ind, out):
     """Irradiance estimate π/N Σ L_in per point (rays under the geometric surface count 0);
-    ``vis[m]`` the Sun's visibility at ray m's hit (< 0: from the cache)."""
+    ``vis[m]`` the Sun's visibility at ray m's hit (< 0: from the cache), ``e_ind[m]`` a traced
+    estimate of the hit's indirect irradiance (< 0: from the cache)."""
     for k in numba.prange(out.shape[0]):
         sr = 0.0
         sg = 0.0
@@ -311,7 +364,7 @@ def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, c
             r, g, b = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
                                D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
                                mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
-                               vis[m])
+                               vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
             sr += r
             sg += g
             sb += b
@@ -523,7 +576,8 @@ def lobe_sum(n_rays, O, D, Wt, geom, prim, hu, hv, face_offset, face_normal, cor
                 continue
             a, b, c = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
                                D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
-                               mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0)
+                               mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0,
+                               -1.0, -1.0, -1.0)
             sr += Wt[m, 0] * a
             sg += Wt[m, 1] * b
             sb += Wt[m, 2] * c

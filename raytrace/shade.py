@@ -274,11 +274,41 @@ class _Context:
         d = np.empty((n * n_rays, 3))
         K.gather_rays(s["P"], s["NS"], s["NG"], n_rays, seed, pix, self.eps, o, d)
         h = self.scene.intersect(o, d)
+        hu, hv = h["u"].astype(np.float64), h["v"].astype(np.float64)
         vis = self._bounce_sun(o, d, h)
+        e_ind = self._second_bounce(o, d, h, hu, hv, pix, n_rays, seed)
         E = np.empty((n, 3))
-        K.gather_sum(n_rays, o, d, s["NG"], h["geomID"], h["primID"], h["u"].astype(np.float64),
-                     h["v"].astype(np.float64), *self._lookup(), vis, E)
+        K.gather_sum(n_rays, o, d, s["NG"], h["geomID"], h["primID"], hu, hv, *self._lookup(), vis, e_ind, E)
         return E
+
+    def _second_bounce(self, o, d, h, hu, hv, pix, n_rays, seed):
+        """One-sample estimate of the indirect irradiance at each gather hit: a cosine-weighted
+        ray from the hit, the Sun exact (a shadow ray) where it lands, the cache beyond
+        (E ≈ π·L_in); −1 at misses. Light bounced twice within a gap narrower than the cache's
+        lattice is then traced, not interpolated."""
+        m = len(d)
+        e_ind = np.full((m, 3), -1.0)
+        hit = h["geomID"] >= 0
+        if not hit.any():
+            return e_ind
+        keys = (np.repeat(pix.astype(np.int64), n_rays) * n_rays + np.tile(np.arange(n_rays), len(pix)))
+        want = np.empty(m, dtype=bool)
+        o2 = np.empty((m, 3))
+        d2 = np.empty((m, 3))
+        sc = self.scene
+        K.bounce2_rays(o, d, h["tfar"].astype(np.float64), h["geomID"], h["primID"], hu, hv, sc.face_offset,
+                       sc.face_normal, sc.corner_normal, keys, seed, self.eps, want, o2, d2)
+        e_ind[hit] = 0.0  # directions below the surface carry nothing
+        idx = np.flatnonzero(want)
+        if len(idx):
+            o2, d2 = o2[idx], d2[idx]
+            h2 = sc.intersect(o2, d2)
+            vis2 = self._bounce_sun(o2, d2, h2)
+            L2 = np.empty((len(idx), 3))
+            K.incoming_rays(o2, d2, h2["geomID"], h2["primID"], h2["u"].astype(np.float64),
+                            h2["v"].astype(np.float64), *self._lookup(), vis2, L2)
+            e_ind[idx] = math.pi * L2
+        return e_ind
 
     def _bounce_sun(self, o, d, h):
         """The Sun's visibility (0/1) at the hits of rays (o, d) from one shadow ray each; −1 at
