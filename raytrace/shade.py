@@ -17,8 +17,10 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
 ``balanced``
     As ``fast``, but the diffuse indirect light at each pixel is a final gather: N
     cosine-weighted rays from the pixel's own surface point (exact occlusion, Earth and sky
-    evaluated exactly along each ray; other parts' outgoing radiance from the cache, all
-    bounces). The cache's interpolated value serves as a control variate: only the
+    evaluated exactly along each ray; where a ray hits another part, that part's sunlight is
+    exact (a shadow ray) and its own indirect light a traced second bounce (one cosine ray,
+    exact Sun where it lands, the cache beyond). The cache's interpolated value serves as a
+    control variate: only the
     difference (gather − cache) is filtered, by an edge-avoiding à-trous filter guided by the
     exact id, normal and depth AOVs, so the filter removes noise, not detail. Edge pixels get
     3×3 to 8×8 jittered sub-pixel rays as N grows (coverage error falls with the grid), shaded
