@@ -1163,6 +1163,21 @@ def _render_failed(exc: BaseException) -> int:
     return 1
 
 
+def _guarded(run, usage_errors=(CLIError,)) -> tuple:
+    """``run()`` under the rendering commands' error policy: (its result, None), or (None, exit
+    status) after one line on stderr: 2 for a usage error, 130 on Ctrl-C, 1 for a failure while
+    rendering (complete frames are kept either way)."""
+    try:
+        return run(), None
+    except usage_errors as exc:
+        return None, _fail(exc)
+    except KeyboardInterrupt:
+        sys.stderr.write(f"{PROG}: interrupted; complete frames are kept, rerun the same command to resume\n")
+        return None, 130
+    except Exception as exc:  # noqa: BLE001 - a failure while rendering: one line, frames done are kept
+        return None, _render_failed(exc)
+
+
 def main_job(argv: list) -> int:
     """``cli.py [options]``: render one sequence (or print its states with --dry-run/--json)."""
     args = build_parser().parse_args(argv)
@@ -1184,15 +1199,9 @@ def main_job(argv: list) -> int:
         return 0
     seq_dir = args.out or os.path.join("output", plan["name"])
     t0 = time.perf_counter()
-    try:
-        stats = run_plans([(plan, seq_dir)], args)
-    except CLIError as exc:
-        return _fail(exc)
-    except KeyboardInterrupt:
-        sys.stderr.write(f"{PROG}: interrupted; complete frames are kept, rerun the same command to resume\n")
-        return 130
-    except Exception as exc:  # noqa: BLE001 - a failure while rendering: one line, frames done are kept
-        return _render_failed(exc)
+    stats, status = _guarded(lambda: run_plans([(plan, seq_dir)], args))
+    if status is not None:
+        return status
     sys.stdout.write(_summary_line(stats[0], time.perf_counter() - t0))
     return 0
 
@@ -1211,7 +1220,8 @@ def dataset_main(argv: list) -> int:
     for key in ("target", "mesh", "mesh_unit_m"):
         setattr(args, key, None)
     t0 = time.perf_counter()
-    try:
+
+    def plan_and_run():
         cfg, given = resolve_config(args, defaults)
         if cfg["sequence"]["mesh"] is not None:
             raise CLIError("--config: [sequence] mesh is not used by the dataset command (built-in targets only)")
@@ -1224,14 +1234,12 @@ def dataset_main(argv: list) -> int:
                 c["sequence"]["target"], c["sequence"]["pattern"] = target, pattern
                 plan = plan_sequence(c, given - {"pattern"})
                 jobs.append((plan, os.path.join(root, plan["name"])))
-        stats = run_plans(jobs, args, desc="dataset")
-    except (CLIError, ValueError) as exc:
-        return _fail(exc)
-    except KeyboardInterrupt:
-        sys.stderr.write(f"{PROG}: interrupted; complete frames are kept, rerun the same command to resume\n")
-        return 130
-    except Exception as exc:  # noqa: BLE001 - a failure while rendering: one line, frames done are kept
-        return _render_failed(exc)
+        return run_plans(jobs, args, desc="dataset"), cfg["output"]["modalities"], root
+
+    done, status = _guarded(plan_and_run, (CLIError, ValueError))
+    if status is not None:
+        return status
+    stats, modalities, root = done
     elapsed = time.perf_counter() - t0
     w = sys.stdout.write
     w(f"{'sequence':<26} {'frames':>6} {'visible':>7} {'rendered':>8} {'skipped':>7} {'complete':>8}\n")
@@ -1240,8 +1248,8 @@ def dataset_main(argv: list) -> int:
           f"{'yes' if s['complete'] else 'no':>8}\n")
     tot = {k: sum(s[k] for s in stats) for k in ("frames", "visible", "rendered", "skipped")}
     w(f"{'total':<26} {tot['frames']:6d} {tot['visible']:7d} {tot['rendered']:8d} {tot['skipped']:7d}\n")
-    w(f"{len(stats)} sequences x {len(cfg['output']['modalities'])} modalities "
-      f"({','.join(cfg['output']['modalities'])}) in {elapsed:.1f} s -> {root}/\n")
+    w(f"{len(stats)} sequences x {len(modalities)} modalities ({','.join(modalities)}) in {elapsed:.1f} s "
+      f"-> {root}/\n")
     return 0
 
 
