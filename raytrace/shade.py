@@ -13,7 +13,10 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     reflection of the environment and other parts along the mirror direction (one ray),
     weighted by the lobe's directional albedo; anti-aliasing with 3×3 jittered-stratified
     sub-pixel rays (an unbiased box filter) only where neighbouring pixels disagree
-    (silhouette, part, shadow and crease edges).
+    (silhouette, part, shadow and crease edges); where those sub-samples see more than one
+    part (or space), 6×6 more primary rays, unshaded, measure how much of the pixel each part
+    covers, and the shaded sub-samples give each part's radiance (coverage and shading
+    estimated apart, as multisample anti-aliasing does).
 ``balanced``
     As ``fast``, but the diffuse indirect light at each pixel is a final gather: N
     cosine-weighted rays from the pixel's own surface point (exact occlusion, Earth and sky
@@ -23,8 +26,10 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     control variate: only the
     difference (gather − cache) is filtered, by an edge-avoiding à-trous filter guided by the
     exact id, normal and depth AOVs, so the filter removes noise, not detail. Edge pixels get
-    3×3 to 8×8 jittered sub-pixel rays as N grows (coverage error falls with the grid), shaded
-    like ``fast`` plus their pixel centre's filtered gather correction.
+    3×3 to 8×8 jittered sub-pixel rays as N grows, plus 8×8 to 10×10 coverage rays where
+    they are mixed; a sub-sample on its pixel centre's surface is shaded like ``fast`` plus
+    the centre's filtered gather correction, one on another surface gets its own N/4-ray
+    gather (from N = 16; below that the cache alone, which is less noisy).
 ``reference``
     Unbiased path tracing (:mod:`raytrace.pathtrace`): every sample jittered over the pixel
     (box filter), the solar disc sampled for soft shadows, BRDF-sampled bounces with Russian
@@ -70,6 +75,9 @@ class Quality:
     sun_rays : int
         Shadow rays over the solar disc where a penumbra can be wider than a quarter pixel
         (1: a point Sun everywhere) [-].
+    cov_grid : int
+        Edge pixels also get cov_grid² unshaded primary rays that measure how much of the
+        pixel each part covers (0: the shaded sub-samples alone) [-].
     """
 
     name: str
@@ -78,11 +86,21 @@ class Quality:
     aa_grid: int = 2
     spp: int = 0
     sun_rays: int = 1
+    cov_grid: int = 0
 
 
+# coverage grids of edge pixels (Quality.cov_grid) and the fewest final-gather rays worth
+# casting at a sub-sample off its pixel centre's surface; chosen on the 12 scenes of
+# benchmarks/bench_time_error.py (640×480): coverage 6² cut ``fast``'s median error 9.2 → 8.1 %
+# for +20 ms, 8² ``balanced``-8's 7.3 → 5.4 % on Tiangong and Cassini; 2-ray sub-sample gathers
+# made ``balanced``-8 worse than the cache alone (backlit 14.8 → 13.0 % without them), 4-ray
+# ones made ``balanced``-16 better (7.3 → 6.5 %)
+COV_FAST = 6
+COV_BAL = 8
+_MIN_SUB_GATHER = 4
 _PRESETS = {
-    "fast": Quality("fast", gather_rays=0, filter_passes=0, aa_grid=3, sun_rays=4),
-    "balanced": Quality("balanced", gather_rays=8, filter_passes=3, aa_grid=3, sun_rays=16),
+    "fast": Quality("fast", gather_rays=0, filter_passes=0, aa_grid=3, sun_rays=4, cov_grid=COV_FAST),
+    "balanced": Quality("balanced", gather_rays=8, filter_passes=3, aa_grid=3, sun_rays=16, cov_grid=COV_BAL),
     "reference": Quality("reference", spp=1024),
 }
 
@@ -102,10 +120,12 @@ def quality_preset(name: str, samples: int | None = None) -> Quality:
     if name == "balanced":
         passes = 3 if samples <= 8 else (2 if samples <= 32 else (1 if samples <= 128 else 0))
         aa = 3 if samples <= 8 else (4 if samples <= 32 else (6 if samples <= 128 else 8))
-        return Quality(name, gather_rays=samples, filter_passes=passes, aa_grid=aa, sun_rays=max(16, min(samples, 64)))
+        return Quality(name, gather_rays=samples, filter_passes=passes, aa_grid=aa, sun_rays=max(16, min(samples, 64)),
+                       cov_grid=max(COV_BAL, aa + 2))
     if name == "reference":
         return Quality(name, spp=samples)
-    return Quality(name, aa_grid=max(1, min(samples, 16)), sun_rays=4)
+    aa = max(1, min(samples, 16))
+    return Quality(name, aa_grid=aa, sun_rays=4, cov_grid=COV_FAST if aa < COV_FAST else 0)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -479,7 +499,18 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         epix = np.flatnonzero(edges.ravel())
         if len(epix):
             sub_rays = max(2, q.gather_rays // 4)
-            sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual, sub_rays)
+            centre = None
+            if residual is not None:
+                # the centre's surface (point, normal, footprint): a sub-sample shares its
+                # pixel's filtered correction only where it lies on that same surface
+                P_c = np.zeros((H * W, 3))
+                N_c = np.zeros((H * W, 3))
+                P_c[pix] = s["P"]
+                N_c[pix] = s["NS"]
+                foot = np.where(np.isfinite(geo.depth_m), geo.depth_m, 0.0).ravel() / camera.fx
+                centre = (P_c, N_c, foot)
+            sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual, sub_rays,
+                               centre, q.cov_grid)
             _check_finite("anti-aliasing", sub)
             rad[epix] = sub
     timings["antialias"] = time.perf_counter() - t0
@@ -524,20 +555,85 @@ def _corner_edges(scene: Scene, camera: Camera, R, t, o_body, geo) -> np.ndarray
 
 
 def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,
-                 residual=None, gather_rays: int = 0):
+                 residual=None, gather_rays: int = 0, centre_surface=None, cov_grid: int = 0):
     """Box-filtered radiance of the listed pixels from n_grid² jittered-stratified sub-pixel
     rays. Each sub-sample is shaded like a ``fast`` pixel (exact Sun, cache, mirror term); with
     ``residual`` (the filtered final-gather and lobe corrections of every pixel, ``balanced``)
-    a sub-sample on the same part as its pixel centre also gets that pixel's corrections, so
-    edge pixels carry the same indirect light as their neighbours. Misses see Earth or black
-    space."""
+    a sub-sample on the same surface as its pixel centre (same part, normals within 25°, within
+    a pixel footprint of the centre's tangent plane: ``centre_surface`` = (points, normals,
+    footprints) per pixel) also gets that pixel's corrections, so edge pixels carry the same
+    indirect light as their neighbours; any other sub-sample (another part, the far side of a
+    crease, another rod of a truss) gets its own final gather and lobe samples (the centre's
+    correction there overshot, to black or to twice the light). Misses see Earth or black
+    space.
+
+    With ``cov_grid`` > n_grid, coverage and shading are estimated apart (as multisample
+    anti-aliasing does): cov_grid² further primary rays, which cost a ray each and no shading,
+    give the fraction of the pixel each part (or space) covers; the shaded sub-samples give
+    each part's mean radiance. A part the shaded sub-samples missed is shaded at one of its
+    coverage rays. The estimate of where the silhouette and the part boundaries run then has
+    the noise of cov_grid² + n_grid² samples, not n_grid²."""
     S = n_grid * n_grid
     W = camera.width
-    D = np.empty((len(epix) * S, 3))
-    K.subpixel_rays(epix.astype(np.int64), W, n_grid, seed, np.ascontiguousarray(R.T), camera.fx, camera.fy,
-                    camera.cx, camera.cy, D)
+    R_bc = np.ascontiguousarray(R.T)
     z0 = 0.0 if geo.camera_inside_hull else scene._near_plane(scene.hull_vertices @ R.T + t)
+    D = np.empty((len(epix) * S, 3))
+    K.subpixel_rays(epix.astype(np.int64), W, n_grid, seed, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, D)
     h = scene.intersect(o_body + z0 * D, D)
+    centre = np.repeat(epix, S)
+    number = np.tile(np.arange(S), len(epix))
+    L = _shade_subsamples(ctx, scene, o_body, geo, D, h, centre, number, S, seed, residual, gather_rays,
+                          centre_surface)
+    out = L.reshape(len(epix), S, 3).mean(axis=1)
+    if cov_grid <= n_grid:
+        return out
+    n_groups = len(scene.model.components) + 1
+
+    def group(hh):
+        g = np.zeros(len(hh["geomID"]), dtype=np.int64)
+        ok = hh["geomID"] >= 0
+        g[ok] = scene.component_of_face[scene.face_offset[hh["geomID"][ok]] + hh["primID"][ok]] + 1
+        return g
+
+    # coverage rays only where the shaded sub-samples saw more than one part (or space):
+    # shadow edges and creases within one part need none
+    g_s = group(h).reshape(len(epix), S)
+    mixed = np.flatnonzero((g_s != g_s[:, :1]).any(axis=1))
+    if not len(mixed):
+        return out
+    mpix = epix[mixed]
+    C = cov_grid * cov_grid
+    Dc = np.empty((len(mpix) * C, 3))
+    K.subpixel_rays(mpix.astype(np.int64), W, cov_grid, (seed + 0x3C6EF372) & 0x7FFFFFFF, R_bc, camera.fx,
+                    camera.fy, camera.cx, camera.cy, Dc)
+    hc = scene.intersect(o_body + z0 * Dc, Dc)
+    slot = np.repeat(np.arange(len(mpix)), S) * n_groups + g_s[mixed].ravel()
+    slot_c = np.repeat(np.arange(len(mpix)), C) * n_groups + group(hc)
+    m = len(mpix) * n_groups
+    n_shaded = np.bincount(slot, minlength=m).astype(np.float64)
+    count = n_shaded + np.bincount(slot_c, minlength=m)
+    Lm = L.reshape(len(epix), S, 3)[mixed].reshape(-1, 3)
+    total = np.column_stack([np.bincount(slot, Lm[:, c], minlength=m) for c in range(3)])
+    # parts seen only by coverage rays: shade the first such ray of each
+    need = (n_shaded == 0) & (count > 0)
+    if need.any():
+        order = np.argsort(slot_c, kind="stable")
+        first = order[np.searchsorted(slot_c[order], np.flatnonzero(need))]
+        hx = {k: v[first] for k, v in hc.items()}
+        Lx = _shade_subsamples(ctx, scene, o_body, geo, Dc[first], hx, np.repeat(mpix, C)[first],
+                               S + first % C, S + C, seed, residual, gather_rays, centre_surface)
+        total[slot_c[first]] += Lx
+        n_shaded[slot_c[first]] += 1.0
+    frac = count / float(S + C)
+    mean = total / np.maximum(n_shaded, 1.0)[:, None]
+    out[mixed] = (frac[:, None] * mean).reshape(len(mpix), n_groups, 3).sum(axis=1)
+    return out
+
+
+def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, D, h, centre, number, S, seed, residual,
+                      gather_rays, centre_surface):
+    """Radiance along sub-pixel rays D (hits h) of pixels ``centre``; ``number`` (< S) is each
+    ray's index within its pixel (it keys the solar-disc and gather samples)."""
     hit = h["geomID"] >= 0
     L = np.zeros((len(D), 3))
     idx = np.flatnonzero(hit)
@@ -546,27 +642,32 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
         Dh = np.ascontiguousarray(D[idx])
         s = ctx.surfaces(np.ascontiguousarray(np.broadcast_to(o_body, Dh.shape)), Dh, face)
         E = ctx.cache_E(s)
+        sub_key = (centre[idx] * S + number[idx]).astype(np.int64)
         sun_dirs = None
         if ctx.lighting.sun_angular_diameter_rad > 0.0 and S > 1:
             # one solar-disc sample per sub-sample, stratified over the pixel's S sub-samples
             sun_dirs = np.empty((len(idx), 3))
             sx, sy, sz = ctx.lighting.sun_dir_body
-            K.sun_disc_dirs((np.repeat(epix, S)[idx] * S + idx % S).astype(np.int64), S, seed, sx, sy, sz,
-                            math.cos(0.5 * ctx.lighting.sun_angular_diameter_rad), sun_dirs)
+            K.sun_disc_dirs(sub_key, S, seed, sx, sy, sz, math.cos(0.5 * ctx.lighting.sun_angular_diameter_rad),
+                            sun_dirs)
         mirror = np.zeros((len(idx), 3))
         Ls, _ = ctx.direct(s, E, mirror, sun_dirs=sun_dirs)
         if residual is not None:
-            # same part as the pixel centre: the centre's filtered corrections; another part:
-            # its own (unfiltered) final gather and lobe samples
-            centre = np.repeat(epix, S)[idx]
-            same = geo.instance.ravel()[centre].astype(np.int64) - 1 == s["comp"]
+            c = centre[idx]
+            same = geo.instance.ravel()[c].astype(np.int64) - 1 == s["comp"]
+            if centre_surface is not None:
+                P_c, N_c, foot = centre_surface
+                n_c = N_c[c]
+                plane = np.abs(np.einsum("ij,ij->i", s["P"] - P_c[c], n_c))
+                same &= (np.einsum("ij,ij->i", s["NS"], n_c) > 0.9) & (plane <= foot[c])
             j = np.flatnonzero(same)
-            E[j] += residual[0][centre[j]]
-            Ls[j] += residual[1][centre[j]]
+            E[j] += residual[0][c[j]]
+            Ls[j] += residual[1][c[j]]
+            # below _MIN_SUB_GATHER rays an unfiltered gather is noisier than the cache is wrong
             j = np.flatnonzero(~same)
-            if len(j):
+            if len(j) and gather_rays >= _MIN_SUB_GATHER:
                 sj = {k: v[j] for k, v in s.items()}
-                keys = (centre[j] * S + idx[j] % S).astype(np.int64)
+                keys = sub_key[j]
                 Ls[j] += ctx.lobe(sj, gather_rays, keys, seed) - mirror[j]  # the lobe replaces the mirror term
                 E[j] = ctx.gather_E(sj, gather_rays, keys, seed)
         ctx.add_diffuse(s, E, Ls)
@@ -577,4 +678,4 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
         out = np.empty((len(miss), 3))
         K.env_along(o_body, np.ascontiguousarray(Dm), ctx.p_background, ctx.tex, out)
         L[miss] = out
-    return L.reshape(len(epix), S, 3).mean(axis=1)
+    return L

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -131,7 +133,11 @@ def test_euler_at_and_near_gimbal_lock_reproduces_matrix(yaw, side, roll, eps):
     pitch = side * (np.pi / 2 - eps)
     R = matrix_from_euler_zyx(yaw, pitch, roll)
     e = euler_zyx_from_matrix(R)
-    assert_allclose(matrix_from_euler_zyx(*e), R, atol=1e-15)
+    # inside the lock branch (|cos θ| < 1e-12) roll is set to 0 and the terms in cos θ are
+    # dropped, so the matrix is reproduced to |cos θ| (hypothesis found eps = 4.7e-15 with an
+    # error of 4.0e-15); outside it, to rounding
+    c = abs(math.cos(pitch))
+    assert_allclose(matrix_from_euler_zyx(*e), R, atol=1e-15 + (c if c < 1e-12 else 0.0))
     assert abs(e[1] - pitch) < 1e-9
     if eps == 0.0:
         assert e[2] == 0.0

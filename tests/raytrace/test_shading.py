@@ -233,3 +233,30 @@ def test_bad_quality_and_earth_inside_is_a_clear_error(sphere):
         render(sphere, CAM, R, t, light, quality="balanced", samples=0)
     with pytest.raises(ValueError, match="distance_m"):
         Earth((0, 0, -1), 6.0e6, radius_m=6.378e6)
+
+
+@pytest.mark.parametrize("quality,samples", [("fast", None), ("balanced", 8)])
+def test_silhouette_pixels_carry_the_covered_fraction_of_the_pixel(sphere, quality, samples):
+    """A sphere in a white furnace (radiance exactly 5 on it, 0 in space): each silhouette
+    pixel's radiance / 5 is the fraction of the pixel the sphere's disc covers, here integrated
+    on a 64×64 grid per pixel against the analytic disc (a tangent cone: a circle of radius
+    f·tan(asin(1/d)) about the principal point). 3×3 shaded sub-samples alone measure that
+    fraction with 6 % RMS error here; with the coverage rays (measured 3 %) it must be within
+    4 %."""
+    d = 5.0
+    R, t = _pose([0.0, -d, 0.0])
+    light = Lighting(sun_dir_body=(0, 0, 1), sun_irradiance_W_m2=0.0, ambient_radiance_W_m2_sr=10.0)
+    frame = render(sphere, CAM, R, t, light, quality=quality, samples=samples, seed=3)
+    r_px = CAM.fx * math.tan(math.asin(1.0 / d))
+    v, u = np.mgrid[0:H, 0:W]
+    edge = np.abs(np.hypot(u - CAM.cx, v - CAM.cy) - r_px) < 1.0
+    sub = (np.arange(64) + 0.5) / 64 - 0.5
+    du, dv = np.meshgrid(sub, sub)
+    uu = u[edge][:, None] + du.ravel() - CAM.cx
+    vv = v[edge][:, None] + dv.ravel() - CAM.cy
+    cover = (np.hypot(uu, vv) < r_px).mean(axis=1)
+    got = frame.radiance[edge][:, 0] / 5.0
+    assert len(got) > 200
+    rms = float(np.sqrt(np.mean((got - cover) ** 2)))
+    assert rms < 0.04, f"silhouette coverage RMS error {rms:.3f}"
+    assert abs(float(np.mean(got - cover))) < 0.01  # and unbiased
