@@ -282,7 +282,7 @@ class RadianceCache:
     ----------
     scene : Scene
     spacing_m : float, optional
-        Lattice spacing h (default: 1/100 of the target's bounding-box diagonal) [m].
+        Lattice spacing h (default: 1/60 of the target's bounding-box diagonal) [m].
     rays_per_sample : int
         G, rays per sample row (a multiple of 8) [-].
     sky_cells : int
