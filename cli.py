@@ -471,13 +471,6 @@ def _load_model(spec: tuple):
     return model
 
 
-def _gmst_rad(unix_s: np.ndarray) -> np.ndarray:
-    """Greenwich mean sidereal time (IAU 1982, UT1 ≈ UTC) [rad]: orients the Earth texture only."""
-    T = (np.asarray(unix_s) / 86400.0 + 2440587.5 - 2451545.0) / 36525.0
-    sec = 67310.54841 + (876600.0 * 3600.0 + 8640184.812866) * T + 0.093104 * T**2 - 6.2e-6 * T**3
-    return np.mod(sec, 86400.0) * (2.0 * math.pi / 86400.0)
-
-
 def _unit_rows(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
@@ -530,7 +523,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
     ``lights`` (Sun, Earth and ν in the body frame)."""
     from orbit import cw, pose, visibility
     from orbit.attitude import TargetAttitude
-    from orbit.epoch import to_iso_utc
+    from orbit.epoch import gmst_rad, to_iso_utc
     from orbit.reference import ReferenceOrbit
     from orbit.rotations import rot_z
     from orbit.sampling import range_band, sample_pattern
@@ -595,7 +588,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
     sun_dir_body = _unit_rows((R_body_from_eci @ (r_sun_eci - r_tgt_eci)[:, :, None])[:, :, 0])
     earth_dir_body = _unit_rows((R_body_from_eci @ -r_tgt_eci[:, :, None])[:, :, 0])
     earth_distance_m = np.linalg.norm(r_tgt_eci, axis=1)
-    R_body_from_earth = R_body_from_eci @ rot_z(_gmst_rad(unix_s))  # Earth-fixed axes (texture)
+    R_body_from_earth = R_body_from_eci @ rot_z(gmst_rad(unix_s))  # Earth-fixed axes (texture)
 
     motion = None
     if cfg["degrade"].get("motion_blur") == "auto":

@@ -15,7 +15,7 @@ import numpy as np
 
 from ._checks import finite_array
 
-__all__ = ["DEFAULT_EPOCH_UTC", "to_unix_seconds", "to_iso_utc", "julian_date", "JD_UNIX_EPOCH"]
+__all__ = ["DEFAULT_EPOCH_UTC", "JD_UNIX_EPOCH", "gmst_rad", "julian_date", "to_iso_utc", "to_unix_seconds"]
 
 DEFAULT_EPOCH_UTC = "2026-03-20T12:00:00Z"
 """Default epoch (the March 2026 equinox day used by the SPEC §6 Sun example)."""
@@ -97,3 +97,24 @@ def julian_date(unix_s) -> np.ndarray | float:
     arr = finite_array("unix_s", unix_s)
     jd = JD_UNIX_EPOCH + arr / 86400.0
     return float(jd) if jd.ndim == 0 else jd
+
+
+def gmst_rad(unix_s) -> np.ndarray:
+    """Greenwich mean sidereal time (IAU 1982; Vallado, *Fundamentals of Astrodynamics and
+    Applications*, 4th ed., eq. 3-47), taking UT1 ≈ UTC (|UT1 − UTC| < 0.9 s, i.e. < 4 arcsec
+    of Earth rotation). It orients the Earth-fixed axes of Earth's texture only.
+
+    Parameters
+    ----------
+    unix_s : float or array_like
+        UTC instants, Unix seconds [s].
+
+    Returns
+    -------
+    ndarray, float64
+        GMST in [0, 2π) [rad].
+    """
+    u = finite_array("unix_s", unix_s)
+    T = (u / 86400.0 + JD_UNIX_EPOCH - 2451545.0) / 36525.0
+    sec = 67310.54841 + (876600.0 * 3600.0 + 8640184.812866) * T + 0.093104 * T**2 - 6.2e-6 * T**3
+    return np.mod(sec, 86400.0) * (2.0 * math.pi / 86400.0)
