@@ -90,11 +90,12 @@ class Quality:
 
 
 # coverage grids of edge pixels (Quality.cov_grid) and the fewest final-gather rays worth
-# casting at a sub-sample off its pixel centre's surface; chosen on the 12 scenes of
-# benchmarks/bench_time_error.py (640×480): coverage 6² cut ``fast``'s median error 9.2 → 8.1 %
-# for +20 ms, 8² ``balanced``-8's 7.3 → 5.4 % on Tiangong and Cassini; 2-ray sub-sample gathers
-# made ``balanced``-8 worse than the cache alone (backlit 14.8 → 13.0 % without them), 4-ray
-# ones made ``balanced``-16 better (7.3 → 6.5 %)
+# casting at a sub-sample off its pixel centre's surface; chosen on the scenes of
+# benchmarks/bench_time_error.py at 640×480: on Tiangong's and Cassini's six, coverage 6² cut
+# ``fast``'s median error 9.2 → 8.1 % for +20 ms per frame, and 8² ``balanced``-8's error on
+# Tiangong ``sunlit`` 7.3 → 5.4 %; 2-ray sub-sample gathers made ``balanced``-8 worse than the
+# cache alone (``backlit`` views 14.7–14.9 % with them, 13.0–13.1 % without), 4-ray ones made
+# ``balanced``-16 better (median of four views 7.3 → 6.5 %)
 COV_FAST = 6
 COV_BAL = 8
 _MIN_SUB_GATHER = 4
@@ -501,14 +502,11 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
             sub_rays = max(2, q.gather_rays // 4)
             centre = None
             if residual is not None:
-                # the centre's surface (point, normal, footprint): a sub-sample shares its
-                # pixel's filtered correction only where it lies on that same surface
-                P_c = np.zeros((H * W, 3))
-                N_c = np.zeros((H * W, 3))
-                P_c[pix] = s["P"]
-                N_c[pix] = s["NS"]
-                foot = np.where(np.isfinite(geo.depth_m), geo.depth_m, 0.0).ravel() / camera.fx
-                centre = (P_c, N_c, foot)
+                # the centre's surface (point, normal, footprint; row k of s for pixel pix[k]):
+                # a sub-sample shares its pixel's filtered correction only on that same surface
+                row_of_pixel = np.full(H * W, -1, dtype=np.int32)
+                row_of_pixel[pix] = np.arange(len(pix), dtype=np.int32)
+                centre = (row_of_pixel, s["P"], s["NS"], geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx)
             sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual, sub_rays,
                                centre, q.cov_grid)
             _check_finite("anti-aliasing", sub)
@@ -560,8 +558,9 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     rays. Each sub-sample is shaded like a ``fast`` pixel (exact Sun, cache, mirror term); with
     ``residual`` (the filtered final-gather and lobe corrections of every pixel, ``balanced``)
     a sub-sample on the same surface as its pixel centre (same part, normals within 25°, within
-    a pixel footprint of the centre's tangent plane: ``centre_surface`` = (points, normals,
-    footprints) per pixel) also gets that pixel's corrections, so edge pixels carry the same
+    a pixel footprint of the centre's tangent plane: ``centre_surface`` = (row of each pixel,
+    and per row the centre's point, normal and footprint)) also gets that pixel's corrections,
+    so edge pixels carry the same
     indirect light as their neighbours; any other sub-sample (another part, the far side of a
     crease, another rod of a truss) gets its own final gather and lobe samples (the centre's
     correction there overshot, to black or to twice the light). Misses see Earth or black
@@ -656,10 +655,11 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, D, h, centre, nu
             c = centre[idx]
             same = geo.instance.ravel()[c].astype(np.int64) - 1 == s["comp"]
             if centre_surface is not None:
-                P_c, N_c, foot = centre_surface
-                n_c = N_c[c]
-                plane = np.abs(np.einsum("ij,ij->i", s["P"] - P_c[c], n_c))
-                same &= (np.einsum("ij,ij->i", s["NS"], n_c) > 0.9) & (plane <= foot[c])
+                row_of_pixel, P_c, N_c, foot = centre_surface
+                k = row_of_pixel[c]  # −1 where the centre saw space (same is False there already)
+                n_c = N_c[k]
+                plane = np.abs(np.einsum("ij,ij->i", s["P"] - P_c[k], n_c))
+                same &= (k >= 0) & (np.einsum("ij,ij->i", s["NS"], n_c) > 0.9) & (plane <= foot[k])
             j = np.flatnonzero(same)
             E[j] += residual[0][c[j]]
             Ls[j] += residual[1][c[j]]
