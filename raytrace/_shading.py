@@ -10,9 +10,10 @@ from __future__ import annotations
 import math
 
 import numba
+import numpy as np
 
 from . import environment as env
-from ._jit import jit, pjit
+from ._jit import FASTMATH, jit, pjit
 from ._kernels import moller_trumbore
 from .brdf import brdf_cos, cosine_direction, onb, sample_brdf, specular_albedo
 from .cache import _hash01, interpolate_rows, lattice_rows
@@ -158,10 +159,24 @@ def mirror_rays(NS, NG, WO, P, eps, want, out_o, out_d):
 
 
 @jit
+def incoming_env(p, tex, ox, oy, oz, dx, dy, dz):
+    """Radiance arriving along a ray (o, d) that escaped the target (d need not be unit): the
+    environment's.
+
+    The hot loops call this for their misses and :func:`incoming` only for their hits: a
+    call that passes the ~17 arrays of :func:`incoming` costs about 0.3 µs per ray on this
+    machine (measured: the gather of a 1280×960 Crew Dragon frame, 2.6 M rays, 93 % misses,
+    240 ms with every ray through :func:`incoming`, 48 ms with this split)."""
+    dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+    return env.env_radiance(p, tex, ox, oy, oz, dx / dn, dy / dn, dz / dn)
+
+
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True, forceinline=True)
 def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_normal, corner_normal, comp_of_face,
              mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
              vis_sun, eir, eig, eib):
-    """Radiance arriving along a traced ray (o, d): the environment where it escaped; where it
+    """Radiance arriving along a traced ray (o, d): the environment where it escaped
+    (:func:`incoming_env`, which hot loops call directly for misses); where it
     hit a surface, that surface's radiance towards the ray from the cache: diffuse ρ_d/π·E,
     the exact specular reflection of the Sun towards −d and the specular albedo times the
     rest of its irradiance over π. ``sun`` = (s_x, s_y, s_z, ν·E_sun). The Sun's visibility at
@@ -235,9 +250,12 @@ def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset
     ``E_point`` (wide lobes, α ≥ 0.35), as if it arrived uniformly."""
     for j in numba.prange(idx.shape[0]):
         k = idx[j]
-        r, g, b = incoming(geom[j], prim[j], hu[j], hv[j], O[j, 0], O[j, 1], O[j, 2], D[j, 0], D[j, 1], D[j, 2],
-                           face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, table,
-                           sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0, -1.0, -1.0, -1.0)
+        if geom[j] < 0:
+            r, g, b = incoming_env(p, tex, O[j, 0], O[j, 1], O[j, 2], D[j, 0], D[j, 1], D[j, 2])
+        else:
+            r, g, b = incoming(geom[j], prim[j], hu[j], hv[j], O[j, 0], O[j, 1], O[j, 2], D[j, 0], D[j, 1], D[j, 2],
+                               face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, table,
+                               sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0, -1.0, -1.0, -1.0)
         c = comp[k]
         t = min(max((mat_alpha[c] - 0.05) / 0.3, 0.0), 1.0)
         r = (1.0 - t) * r + t * E_point[k, 0] / math.pi
@@ -340,6 +358,9 @@ def incoming_rays(O, D, geom, prim, hu, hv, face_offset, face_normal, corner_nor
                   mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis, out):
     """:func:`incoming` along each ray (the Sun's visibility at its hit from ``vis``)."""
     for m in numba.prange(D.shape[0]):
+        if geom[m] < 0:
+            out[m, 0], out[m, 1], out[m, 2] = incoming_env(p, tex, O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1], D[m, 2])
+            continue
         out[m, 0], out[m, 1], out[m, 2] = incoming(
             geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1], D[m, 2], face_offset,
             face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid,
@@ -361,10 +382,13 @@ def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, c
             m = k * n_rays + j
             if D[m, 0] * NG[k, 0] + D[m, 1] * NG[k, 1] + D[m, 2] * NG[k, 2] <= 0.0:
                 continue
-            r, g, b = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
-                               D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
-                               mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
-                               vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
+            if geom[m] < 0:
+                r, g, b = incoming_env(p, tex, O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1], D[m, 2])
+            else:
+                r, g, b = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
+                                   D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
+                                   mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+                                   vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
             sr += r
             sg += g
             sb += b
@@ -379,10 +403,14 @@ def atrous(img, inst, normal, depth, fx, fy, cx, cy, step, out):
     """One pass of the edge-avoiding à-trous wavelet filter (Dammertz et al. 2010,
     doi:10.2312/EGGH/HPG10/067-075): a 5×5 B3-spline kernel with holes of ``step`` pixels,
     weighted by same instance id, normal agreement (n·n')^64 and distance from the centre
-    pixel's tangent plane (in units of the pixel footprint)."""
+    pixel's tangent plane (in units of the pixel footprint). ``img`` has any number of
+    channels, all filtered with the same weights (they depend on the geometry only);
+    (cx, cy) is the principal point in the coordinates of the (cropped) image."""
     H, W = inst.shape
+    C = img.shape[2]
     h = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
     for v in numba.prange(H):
+        acc = np.empty(C)
         for u in range(W):
             i0 = inst[v, u]
             if i0 == 0:
@@ -392,9 +420,7 @@ def atrous(img, inst, normal, depth, fx, fy, cx, cy, step, out):
             n0y = normal[v, u, 1]
             n0z = normal[v, u, 2]
             foot = z0 / fx
-            sr = 0.0
-            sg = 0.0
-            sb = 0.0
+            acc[:] = 0.0
             sw = 0.0
             for a in range(5):
                 vv = v + (a - 2) * step
@@ -407,7 +433,12 @@ def atrous(img, inst, normal, depth, fx, fy, cx, cy, step, out):
                     nd = n0x * normal[vv, uu, 0] + n0y * normal[vv, uu, 1] + n0z * normal[vv, uu, 2]
                     if nd <= 0.0:
                         continue
-                    wn = nd ** 64
+                    wn = nd * nd  # (n·n')^64 by six squarings
+                    wn *= wn
+                    wn *= wn
+                    wn *= wn
+                    wn *= wn
+                    wn *= wn
                     # distance from the centre's tangent plane, camera frame: X = (u − cx) z / fx
                     z1 = depth[vv, uu]
                     dxp = ((uu - u) * z1 + (u - cx) * (z1 - z0)) / fx
@@ -415,13 +446,11 @@ def atrous(img, inst, normal, depth, fx, fy, cx, cy, step, out):
                     dzp = z1 - z0
                     dist = abs(n0x * dxp + n0y * dyp + n0z * dzp) / (foot * (1.0 + step))
                     w = h[a] * h[b] * wn * math.exp(-dist)
-                    sr += w * img[vv, uu, 0]
-                    sg += w * img[vv, uu, 1]
-                    sb += w * img[vv, uu, 2]
+                    for c in range(C):
+                        acc[c] += w * img[vv, uu, c]
                     sw += w
-            out[v, u, 0] = sr / sw
-            out[v, u, 1] = sg / sw
-            out[v, u, 2] = sb / sw
+            for c in range(C):
+                out[v, u, c] = acc[c] / sw
 
 
 @pjit
@@ -574,10 +603,13 @@ def lobe_sum(n_rays, O, D, Wt, geom, prim, hu, hv, face_offset, face_normal, cor
             m = j * n_rays + r
             if Wt[m, 0] == 0.0 and Wt[m, 1] == 0.0 and Wt[m, 2] == 0.0:
                 continue
-            a, b, c = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
-                               D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
-                               mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0,
-                               -1.0, -1.0, -1.0)
+            if geom[m] < 0:
+                a, b, c = incoming_env(p, tex, O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1], D[m, 2])
+            else:
+                a, b, c = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
+                                   D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
+                                   mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0,
+                                   -1.0, -1.0, -1.0)
             sr += Wt[m, 0] * a
             sg += Wt[m, 1] * b
             sb += Wt[m, 2] * c

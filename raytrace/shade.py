@@ -99,6 +99,12 @@ class Quality:
 COV_FAST = 6
 COV_BAL = 8
 _MIN_SUB_GATHER = 4
+# rays per chunk of the final gather and the lobe sampling: their float64 ray, hit and bounce
+# arrays stay a few MB and are reused by the allocator instead of being mapped fresh (a whole
+# 1280×960 gather at 16 rays is 2.6 M rays, ~60 MB per array, and the page faults of writing
+# fresh arrays from parallel kernels cost more than the kernels: bounce2_rays 66 ms fresh
+# against 9 ms on mapped memory, measured on Crew Dragon ``sunlit``)
+_CHUNK_RAYS = 1 << 18
 _PRESETS = {
     "fast": Quality("fast", gather_rays=0, filter_passes=0, aa_grid=3, sun_rays=4, cov_grid=COV_FAST),
     "balanced": Quality("balanced", gather_rays=8, filter_passes=3, aa_grid=3, sun_rays=16, cov_grid=COV_BAL),
@@ -271,17 +277,20 @@ class _Context:
         idx = np.flatnonzero(self.specular[s["comp"]])
         if len(idx) == 0:
             return out
-        m = len(idx) * n_rays
-        o = np.empty((m, 3))
-        d = np.empty((m, 3))
-        w = np.empty((m, 3))
-        K.lobe_rays(idx, s["P"], s["NS"], s["NG"], s["WO"], s["comp"], self.f0, self.alpha, n_rays, seed, pix,
-                    self.eps, o, d, w)
-        h = self.scene.intersect(o, d)
-        val = np.empty((len(idx), 3))
-        K.lobe_sum(n_rays, o, d, w, h["geomID"], h["primID"], h["u"].astype(np.float64), h["v"].astype(np.float64),
-                   *self._lookup(), val)
-        out[idx] = val
+        step = max(1, _CHUNK_RAYS // n_rays)
+        for a in range(0, len(idx), step):
+            part = idx[a:a + step]
+            m = len(part) * n_rays
+            o = np.empty((m, 3))
+            d = np.empty((m, 3))
+            w = np.empty((m, 3))
+            K.lobe_rays(part, s["P"], s["NS"], s["NG"], s["WO"], s["comp"], self.f0, self.alpha, n_rays, seed, pix,
+                        self.eps, o, d, w)
+            h = self.scene.intersect(o, d)
+            val = np.empty((len(part), 3))
+            K.lobe_sum(n_rays, o, d, w, h["geomID"], h["primID"], h["u"].astype(np.float64),
+                       h["v"].astype(np.float64), *self._lookup(), val)
+            out[part] = val
         return out
 
     def cache_E(self, s):
@@ -292,6 +301,20 @@ class _Context:
         return E
 
     def gather_E(self, s, n_rays: int, pix: np.ndarray, seed: int):
+        """Final-gather irradiance (n, 3) of the points ``s`` from n_rays rays each, in chunks
+        of about _CHUNK_RAYS rays (every sample is keyed by its pixel, so the result does not
+        depend on the chunking)."""
+        n = len(s["P"])
+        step = max(1, _CHUNK_RAYS // n_rays)
+        if n <= step:
+            return self._gather_chunk(s, n_rays, pix, seed)
+        E = np.empty((n, 3))
+        for a in range(0, n, step):
+            E[a:a + step] = self._gather_chunk({k: v[a:a + step] for k, v in s.items()}, n_rays, pix[a:a + step],
+                                               seed)
+        return E
+
+    def _gather_chunk(self, s, n_rays: int, pix: np.ndarray, seed: int):
         n = len(s["P"])
         o = np.empty((n * n_rays, 3))
         d = np.empty((n * n_rays, 3))
@@ -457,21 +480,26 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         pix64 = pix.astype(np.int64)
         dE = ctx.gather_E(s, q.gather_rays, pix64, int(seed)) - E
         dS = ctx.lobe(s, q.gather_rays, pix64, int(seed)) - mirror
-        normal = geo.normal_cam.astype(np.float64)
-        depth = np.where(np.isfinite(geo.depth_m), geo.depth_m, 0.0).astype(np.float64)
-        residual = []
-        for diff in (dE, dS):
-            res = np.zeros((H * W, 3))
-            res[pix] = diff
-            res = res.reshape(H, W, 3)
-            tmp = np.empty_like(res)
-            for k in range(q.filter_passes):
-                tmp[:] = 0.0
-                K.atrous(res, geo.instance, normal, depth, camera.fx, camera.fy, camera.cx, camera.cy, 1 << k, tmp)
-                res, tmp = tmp, res
-            residual.append(res.reshape(-1, 3))
-        E = E + residual[0][pix]
-        L += residual[1][pix]
+        # both filtered with the same (geometry-only) weights, on the target's bounding box
+        spec = bool(ctx.specular[s["comp"]].any())
+        pv, pu = pix // W, pix % W
+        v0, u0 = int(pv.min()), int(pu.min())
+        box = (slice(v0, int(pv.max()) + 1), slice(u0, int(pu.max()) + 1))
+        inst = np.ascontiguousarray(geo.instance[box])
+        normal = geo.normal_cam[box].astype(np.float64)
+        depth = np.where(np.isfinite(geo.depth_m[box]), geo.depth_m[box], 0.0).astype(np.float64)
+        img = np.zeros((*inst.shape, 6 if spec else 3))
+        img[pv - v0, pu - u0] = np.hstack([dE, dS]) if spec else dE
+        tmp = np.zeros_like(img)
+        for k in range(q.filter_passes):
+            K.atrous(img, inst, normal, depth, camera.fx, camera.fy, camera.cx - u0, camera.cy - v0, 1 << k, tmp)
+            img, tmp = tmp, img
+        rows = img[pv - v0, pu - u0]
+        # per target pixel (row k of s for pixel pix[k]): the filtered irradiance and specular corrections
+        residual = (np.ascontiguousarray(rows[:, :3]),
+                    np.ascontiguousarray(rows[:, 3:]) if spec else np.zeros((len(pix), 3)))
+        E = E + residual[0]
+        L += residual[1]
     ctx.add_diffuse(s, E, L)
     _check_finite("indirect light", L)
     rad[pix] = L
@@ -556,10 +584,11 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
                  residual=None, gather_rays: int = 0, centre_surface=None, cov_grid: int = 0):
     """Box-filtered radiance of the listed pixels from n_grid² jittered-stratified sub-pixel
     rays. Each sub-sample is shaded like a ``fast`` pixel (exact Sun, cache, mirror term); with
-    ``residual`` (the filtered final-gather and lobe corrections of every pixel, ``balanced``)
-    a sub-sample on the same surface as its pixel centre (same part, normals within 25°, within
-    a pixel footprint of the centre's tangent plane: ``centre_surface`` = (row of each pixel,
-    and per row the centre's point, normal and footprint)) also gets that pixel's corrections,
+    ``residual`` (the filtered final-gather and lobe corrections, ``balanced``) a sub-sample on
+    the same surface as its pixel centre (same part, normals within 25°, within a pixel
+    footprint of the centre's tangent plane: ``centre_surface`` = (row of each pixel, −1 off
+    the target, and per row the centre's point, normal and footprint; ``residual`` is per row
+    too, and needs it)) also gets that pixel's corrections,
     so edge pixels carry the same
     indirect light as their neighbours; any other sub-sample (another part, the far side of a
     crease, another rod of a truss) gets its own final gather and lobe samples (the centre's
@@ -653,16 +682,15 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, D, h, centre, nu
         Ls, _ = ctx.direct(s, E, mirror, sun_dirs=sun_dirs)
         if residual is not None:
             c = centre[idx]
+            row_of_pixel, P_c, N_c, foot = centre_surface
+            k = row_of_pixel[c]  # −1 where the centre saw space (same is False there already)
             same = geo.instance.ravel()[c].astype(np.int64) - 1 == s["comp"]
-            if centre_surface is not None:
-                row_of_pixel, P_c, N_c, foot = centre_surface
-                k = row_of_pixel[c]  # −1 where the centre saw space (same is False there already)
-                n_c = N_c[k]
-                plane = np.abs(np.einsum("ij,ij->i", s["P"] - P_c[k], n_c))
-                same &= (k >= 0) & (np.einsum("ij,ij->i", s["NS"], n_c) > 0.9) & (plane <= foot[k])
+            n_c = N_c[k]
+            plane = np.abs(np.einsum("ij,ij->i", s["P"] - P_c[k], n_c))
+            same &= (k >= 0) & (np.einsum("ij,ij->i", s["NS"], n_c) > 0.9) & (plane <= foot[k])
             j = np.flatnonzero(same)
-            E[j] += residual[0][c[j]]
-            Ls[j] += residual[1][c[j]]
+            E[j] += residual[0][k[j]]
+            Ls[j] += residual[1][k[j]]
             # below _MIN_SUB_GATHER rays an unfiltered gather is noisier than the cache is wrong
             j = np.flatnonzero(~same)
             if len(j) and gather_rays >= _MIN_SUB_GATHER:
