@@ -535,17 +535,30 @@ def background(pix, W, o_body, R_body_from_cam, fx, fy, cx, cy, n_grid, p, tex, 
 
 
 @pjit
-def earth_mask(o_body, R_body_from_cam, fx, fy, cx, cy, p, rect, out):
-    """Pixels (inside rect) whose centre ray meets Earth."""
-    for v in numba.prange(rect[1], rect[3]):
+def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, p, tex, earth_px, rad):
+    """Earth behind the target in one pass over the image: ``earth_px[v, u]`` is set where the
+    pixel's centre ray meets Earth, and there, off the target (``inst`` 0), ``rad[v, u]``
+    (H, W, 3) receives Earth's radiance along it (``p`` without the ambient sky: the sky
+    lights the target but is not drawn)."""
+    H, W = inst.shape
+    for v in numba.prange(H):
         y = (v - cy) / fy
-        for u in range(rect[0], rect[2]):
+        for u in range(W):
             x = (u - cx) / fx
             dx = R_body_from_cam[0, 0] * x + R_body_from_cam[0, 1] * y + R_body_from_cam[0, 2]
             dy = R_body_from_cam[1, 0] * x + R_body_from_cam[1, 1] * y + R_body_from_cam[1, 2]
             dz = R_body_from_cam[2, 0] * x + R_body_from_cam[2, 1] * y + R_body_from_cam[2, 2]
             dn = math.sqrt(dx * dx + dy * dy + dz * dz)
-            out[v, u] = env.earth_hit(p, o_body[0], o_body[1], o_body[2], dx / dn, dy / dn, dz / dn) >= 0.0
+            dx /= dn
+            dy /= dn
+            dz /= dn
+            hit = env.earth_hit(p, o_body[0], o_body[1], o_body[2], dx, dy, dz) >= 0.0
+            earth_px[v, u] = hit
+            if hit and inst[v, u] == 0:
+                r, g, b = env.env_radiance(p, tex, o_body[0], o_body[1], o_body[2], dx, dy, dz)
+                rad[v, u, 0] = r
+                rad[v, u, 1] = g
+                rad[v, u, 2] = b
 
 
 @pjit

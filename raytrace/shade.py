@@ -502,21 +502,18 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         L += residual[1]
     ctx.add_diffuse(s, E, L)
     _check_finite("indirect light", L)
-    rad[pix] = L
+    # the control-variate corrections (gather − cache) may overshoot below zero where the
+    # cache is brighter than the truth; radiance is never negative
+    rad[pix] = np.maximum(L, 0.0)
     timings["indirect"] = time.perf_counter() - t0
 
     # ---- Earth behind the target, then anti-aliasing where neighbours disagree
     t0 = time.perf_counter()
     earth_px = np.zeros((H, W), dtype=bool)
     if lighting.earth is not None and _earth_may_be_in_view(camera, R, lighting):
-        K.earth_mask(o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, ctx.p, np.array([0, 0, W, H]),
-                     earth_px)
-        bg = np.flatnonzero(earth_px.ravel() & (geo.instance.ravel() == 0))
-        out = np.empty((len(bg), 3))
-        K.background(bg, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, 1, ctx.p_background,
-                     ctx.tex, out)
-        _check_finite("background", out)
-        rad[bg] = out
+        K.earth_background(geo.instance, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy,
+                           ctx.p_background, ctx.tex, earth_px, rad.reshape(H, W, 3))
+        _check_finite("background", rad)
         check = np.array([0, 0, W, H])
     else:
         u0, v0, u1, v1 = geo.cast_rect
@@ -538,11 +535,8 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
             sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual, sub_rays,
                                centre, q.cov_grid)
             _check_finite("anti-aliasing", sub)
-            rad[epix] = sub
+            rad[epix] = np.maximum(sub, 0.0)
     timings["antialias"] = time.perf_counter() - t0
-    # the control-variate corrections (gather − cache) may overshoot below zero where the
-    # cache is brighter than the truth; radiance is never negative
-    np.maximum(rad, 0.0, out=rad)
     return RenderFrame(geo, rad.reshape(H, W, 3), q, timings)
 
 
