@@ -370,25 +370,50 @@ def incoming_rays(O, D, geom, prim, hu, hv, face_offset, face_normal, corner_nor
 @pjit
 def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
                mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis,
-               e_ind, out):
-    """Irradiance estimate π/N Σ L_in per point (rays under the geometric surface count 0);
+               e_ind, NS, E_unocc, alpha, out):
+    """Irradiance estimate per point from its n_rays cosine-weighted rays (about NS; rays under
+    the geometric surface carry nothing), with the environment as a control variate:
+
+        E = α·E_env(n) + π/N Σ_j [L_in(ω_j) − α·L_env(ω_j)],
+
+    where E_env(n) is the environment's unoccluded irradiance (``E_unocc``, the table of
+    :func:`raytrace.environment.irradiance_table`) and L_env(ω) the environment's radiance
+    along ω. It is unbiased for every α (E[π/N Σ L_env] = E_env); with α = 1 an escaped ray
+    adds exactly nothing, so on an open surface the noise of sampling Earth's disc and the
+    sky vanishes and only blocked directions are noisy; in a cavity, where most rays are
+    blocked, α = 0 (the plain estimate π/N Σ L_in) would be better. Measured on the 12 scenes
+    of ``benchmarks/bench_time_error.py`` at 640×480, α = 1 against 0: never worse by more than
+    0.01 %, better where Earth lights the target (``balanced``-16 ICESat ``backlit`` 4.79 →
+    4.20 %, Crew Dragon ``backlit`` 6.39 → 5.96 %; median over the 12: 4.55 → 4.25 %).
     ``vis[m]`` the Sun's visibility at ray m's hit (< 0: from the cache), ``e_ind[m]`` a traced
     estimate of the hit's indirect irradiance (< 0: from the cache)."""
+    a = alpha
     for k in numba.prange(out.shape[0]):
         sr = 0.0
         sg = 0.0
         sb = 0.0
         for j in range(n_rays):
             m = k * n_rays + j
-            if D[m, 0] * NG[k, 0] + D[m, 1] * NG[k, 1] + D[m, 2] * NG[k, 2] <= 0.0:
-                continue
-            if geom[m] < 0:
+            below = D[m, 0] * NG[k, 0] + D[m, 1] * NG[k, 1] + D[m, 2] * NG[k, 2] <= 0.0
+            if geom[m] < 0 and not below:
+                if a == 1.0:
+                    continue  # exactly what the control variate expects
                 r, g, b = incoming_env(p, tex, O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1], D[m, 2])
-            else:
-                r, g, b = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
-                                   D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
-                                   mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
-                                   vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
+                sr += (1.0 - a) * r
+                sg += (1.0 - a) * g
+                sb += (1.0 - a) * b
+                continue
+            if a != 0.0:
+                r, g, b = incoming_env(p, tex, O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1], D[m, 2])
+                sr -= a * r
+                sg -= a * g
+                sb -= a * b
+            if below:
+                continue
+            r, g, b = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
+                               D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
+                               mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+                               vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
             sr += r
             sg += g
             sb += b
@@ -396,6 +421,11 @@ def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, c
         out[k, 0] = sr * k_
         out[k, 1] = sg * k_
         out[k, 2] = sb * k_
+        if a != 0.0:
+            er, eg, eb = env.irradiance_lookup(E_unocc, NS[k, 0], NS[k, 1], NS[k, 2])
+            out[k, 0] += a * er
+            out[k, 1] += a * eg
+            out[k, 2] += a * eb
 
 
 @pjit

@@ -16,14 +16,22 @@ Transfer (once)
     From every row, G cosine-weighted stratified rays. A ray that hits the front of a surface
     (or either side of an open one) adds 1/G, split over the three lattice points around the
     hit with their interpolation weights, to the row's entries of the surface matrix W_ss; a
-    ray that escapes adds 1/G to the octahedral sky cell (n×n) it leaves through (W_se). A
+    ray that does not escape (it hits a surface, or the inside of a closed shell) adds 1/G to
+    the octahedral sky cell (n×n) it would have left through (W_sb: the sky it blocks). A
     row whose rays mostly hit the inside of a closed shell lies buried in another part: it
     takes the values of the nearest unburied row of its component and side.
 Per frame
-    E_sun (one shadow ray per row), L_env on the sky cells (Earth + ambient), then the
-    Jacobi iteration of the radiosity equation for irradiance, all bounces:
+    E_sun (one shadow ray per row), L_env on the sky cells (Earth + ambient), the
+    environment's unoccluded irradiance E_env(n) on every row's plane (a table,
+    :func:`raytrace.environment.irradiance_table`), then the Jacobi iteration of the
+    radiosity equation for irradiance, all bounces:
 
-        E = E_sun + π W_se L_env + W_ss (ρ ⊙ E),     L_out = ρ/π ⊙ E
+        E = E_sun + E_env(n) − π W_sb L_env + W_ss (ρ ⊙ E),     L_out = ρ/π ⊙ E
+
+    The sky term is the complement of what the row's rays block: on an open surface it is
+    exact (to the table's ~0.5 %), where summing the escaping rays' cells (π W_se L_env) was a
+    G-ray, 1-cell quadrature of Earth's disc, its limb and its terminator (the Earth-facing
+    side of a sphere 400 km up: 3.6 % low with 128 rays and 16² cells).
 
     where ρ is each surface's bounce albedo (diffuse plus the cosine-averaged specular albedo:
     within the cache, light reflected towards other parts is treated as diffuse). Seen along
@@ -31,7 +39,7 @@ Per frame
     diffuse part, its exact specular reflection of the Sun towards that ray, and its
     specular albedo times the rest of its irradiance (as if that arrived uniformly).
 
-Errors: the cache resolves occlusion to the lattice spacing and the sky to one cell; the
+Errors: the cache resolves occlusion to the lattice spacing and blocked sky to one cell; the
 ``balanced`` renderer therefore uses it only one bounce away from the pixel (final gather),
 and ``fast`` uses it directly, interpolated (see :mod:`raytrace.shade`).
 """
@@ -173,6 +181,26 @@ def _bin_hits(G, d, geom, prim, hu, hv, face_offset, face_normal, two_sided_face
         hit_w[nh, 2] = w2
         nh += 1
     return nh, ne
+
+
+@pjit
+def _ray_cells(d, idx, n_cells, out):
+    """Octahedral sky cell (n×n) of the directions d[idx]."""
+    for k in numba.prange(idx.shape[0]):
+        j = idx[k]
+        out[k] = env.oct_cell(d[j, 0], d[j, 1], d[j, 2], n_cells)
+
+
+@pjit
+def _rows_irradiance(table, nrm, rows, out):
+    """The environment's unoccluded irradiance on each listed row's plane (sample normal, turned
+    to the row's side)."""
+    for r in numba.prange(rows.shape[0]):
+        row = rows[r]
+        i = row // 2
+        sgn = 1.0 if row % 2 == 0 else -1.0
+        out[row, 0], out[row, 1], out[row, 2] = env.irradiance_lookup(table, sgn * nrm[i, 0], sgn * nrm[i, 1],
+                                                                      sgn * nrm[i, 2])
 
 
 @pjit
@@ -358,7 +386,7 @@ class RadianceCache:
         rows_all = np.flatnonzero(valid).astype(np.int64)
         G = self.G
         chunk = max(1, (1 << 18) // G)
-        hit_rows, hit_cols, hit_w, esc_rows, esc_cells = [], [], [], [], []
+        hit_rows, hit_cols, hit_w, blk_rows, blk_cells = [], [], [], [], []
         buried = np.zeros(len(rows_all), dtype=np.int64)
         for a in range(0, len(rows_all), chunk):
             rows = rows_all[a:a + chunk]
@@ -379,8 +407,11 @@ class RadianceCache:
             hit_rows.append(rows[hr[:nh] // G])
             hit_cols.append(hc[:nh])
             hit_w.append(hw[:nh])
-            esc_rows.append(rows[er[:ne] // G])
-            esc_cells.append(ec[:ne])
+            blocked = np.flatnonzero(h["geomID"] >= 0)
+            cells = np.empty(len(blocked), np.int64)
+            _ray_cells(d, blocked, self.n_cells, cells)
+            blk_rows.append(rows[blocked // G])
+            blk_cells.append(cells)
         ok = valid.copy()
         ok[rows_all[buried > _BURIED_FRACTION * G]] = False
         self.alias = self._aliases(valid, ok)
@@ -391,10 +422,10 @@ class RadianceCache:
         keep_rows = ok[hr]
         self.W_ss = sp.csr_matrix((hw[keep_rows].ravel(), (np.repeat(hr[keep_rows], 3), hc[keep_rows].ravel())),
                                   shape=(self.n_rows, self.n_rows))
-        er = np.concatenate(esc_rows) if esc_rows else np.empty(0, np.int64)
-        ec = np.concatenate(esc_cells) if esc_cells else np.empty(0, np.int64)
-        ke = ok[er]
-        self.W_se = sp.csr_matrix((np.full(int(ke.sum()), 1.0 / G), (er[ke], ec[ke])),
+        br = np.concatenate(blk_rows) if blk_rows else np.empty(0, np.int64)
+        bc = np.concatenate(blk_cells) if blk_cells else np.empty(0, np.int64)
+        kb = ok[br]
+        self.W_sb = sp.csr_matrix((np.full(int(kb.sum()), 1.0 / G), (br[kb], bc[kb])),
                                   shape=(self.n_rows, self.n_cells ** 2))
         return ok
 
@@ -424,9 +455,12 @@ class RadianceCache:
                 alias[bad[has]] = nn[has, mask[has].argmax(axis=1)]
         return alias
 
-    def solve(self, lighting, *, max_iterations: int = 64, tolerance: float = 1e-3) -> CacheFrame:
+    def solve(self, lighting, *, max_iterations: int = 64, tolerance: float = 1e-3,
+              env_irradiance: np.ndarray | None = None) -> CacheFrame:
         """Irradiance and outgoing radiance of every row under ``lighting``
-        (:class:`raytrace.lighting.Lighting`), all bounces, Jacobi to ``tolerance`` (relative)."""
+        (:class:`raytrace.lighting.Lighting`), all bounces, Jacobi to ``tolerance`` (relative).
+        ``env_irradiance``: the environment's unoccluded irradiance table of this lighting
+        (:func:`raytrace.environment.irradiance_table`), if the caller already has it."""
         rows = np.flatnonzero(self.solved).astype(np.int64)
         E_sun = np.zeros(self.n_rows)
         e_sun = lighting.sun_irradiance_at_target_W_m2
@@ -443,7 +477,10 @@ class RadianceCache:
             E_sun[rows] = vals
         p, tex = lighting.packed()
         L_env = env.env_cells(p, tex, self.n_cells, 4)
-        E0 = E_sun[:, None] + math.pi * (self.W_se @ L_env)
+        table = env_irradiance if env_irradiance is not None else env.irradiance_table(p, tex)
+        E_open = np.zeros((self.n_rows, 3))
+        _rows_irradiance(table, self.normals, rows, E_open)
+        E0 = E_sun[:, None] + E_open - math.pi * (self.W_sb @ L_env)
         E = E0.copy()
         E_new = np.empty_like(E)
         Y = np.empty_like(E)

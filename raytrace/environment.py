@@ -221,3 +221,112 @@ def env_cells(p, texture, n, sub):
         out[c, 1] = sg * k
         out[c, 2] = sb * k
     return out
+
+
+# ---------------------------------------------------------------- unoccluded irradiance table
+@pjit
+def _direction_cells(p, texture, k_t, k_p, sub, L, W, D):
+    """Lat-long direction cells (k_t equal steps of θ, k_p of φ): the mean environment
+    radiance minus the sky's over each cell (sub×sub samples, equal-area within the cell), its
+    exact solid angle and its centre direction."""
+    amb = p[P_AMBIENT]
+    for c in numba.prange(k_t * k_p):
+        a = c // k_p
+        b = c % k_p
+        c0 = math.cos(math.pi * a / k_t)
+        c1 = math.cos(math.pi * (a + 1) / k_t)
+        sr = 0.0
+        sg = 0.0
+        sb = 0.0
+        for i in range(sub):
+            ct = c0 - (i + 0.5) / sub * (c0 - c1)
+            st = math.sqrt(max(0.0, 1.0 - ct * ct))
+            for j in range(sub):
+                ph = 2.0 * math.pi * (b + (j + 0.5) / sub) / k_p
+                r, g, bb = env_radiance(p, texture, 0.0, 0.0, 0.0, st * math.cos(ph), st * math.sin(ph), ct)
+                sr += r - amb
+                sg += g - amb
+                sb += bb - amb
+        k = 1.0 / (sub * sub)
+        L[c, 0] = sr * k
+        L[c, 1] = sg * k
+        L[c, 2] = sb * k
+        W[c] = (c0 - c1) * 2.0 * math.pi / k_p
+        ct = 0.5 * (c0 + c1)
+        st = math.sqrt(max(0.0, 1.0 - ct * ct))
+        ph = 2.0 * math.pi * (b + 0.5) / k_p
+        D[c, 0] = st * math.cos(ph)
+        D[c, 1] = st * math.sin(ph)
+        D[c, 2] = ct
+
+
+@pjit
+def _irradiance_nodes(n_t, n_p, amb, L, W, D, out):
+    for m in numba.prange(n_t * n_p):
+        i = m // n_p
+        j = m % n_p
+        th = math.pi * i / (n_t - 1)
+        ph = 2.0 * math.pi * j / n_p
+        nx = math.sin(th) * math.cos(ph)
+        ny = math.sin(th) * math.sin(ph)
+        nz = math.cos(th)
+        er = math.pi * amb
+        eg = er
+        eb = er
+        for c in range(L.shape[0]):
+            cs = nx * D[c, 0] + ny * D[c, 1] + nz * D[c, 2]
+            if cs > 0.0:
+                w = cs * W[c]
+                er += w * L[c, 0]
+                eg += w * L[c, 1]
+                eb += w * L[c, 2]
+        out[i, j, 0] = er
+        out[i, j, 1] = eg
+        out[i, j, 2] = eb
+
+
+def irradiance_table(p, texture, n_t: int = 49, n_p: int = 96, k_t: int = 64, k_p: int = 128, sub: int = 2):
+    """Unoccluded irradiance E(n) = ∫ L_env(ω) max(0, n·ω) dω from the whole environment
+    (Earth and sky, seen from the body origin) onto a plane of normal n, tabulated on n_t × n_p
+    normals (θ = π i/(n_t − 1), φ = 2π j/n_p; :func:`irradiance_lookup` interpolates it)
+    [W/m²]. Quadrature over k_t × k_p lat-long direction cells; the sky's constant part is
+    exact (π·L_sky), only cells where Earth replaces the sky are summed. With the defaults
+    (normals every 3.75°, directions every 2.8°, 4 samples per cell) the interpolated table is
+    within 1.1 % of a 720×1440-cell quadrature on 400 random normals (95 % within 0.51 %, mean
+    +0.07 %; Earth 400 km below, where it fills a third of the sky); about 5 ms there. A finer
+    table (65 × 128 normals) halves these errors for three times the time."""
+    k = k_t * k_p
+    L = np.empty((k, 3))
+    W = np.empty(k)
+    D = np.empty((k, 3))
+    _direction_cells(p, texture, k_t, k_p, sub, L, W, D)
+    keep = np.flatnonzero(np.abs(L).max(axis=1) > 0.0)
+    out = np.empty((n_t, n_p, 3))
+    _irradiance_nodes(n_t, n_p, float(p[P_AMBIENT]), np.ascontiguousarray(L[keep]), np.ascontiguousarray(W[keep]),
+                      np.ascontiguousarray(D[keep]), out)
+    return out
+
+
+@jit
+def irradiance_lookup(table, nx, ny, nz):
+    """Bilinear interpolation of :func:`irradiance_table` at the unit normal n."""
+    n_t = table.shape[0]
+    n_p = table.shape[1]
+    th = math.acos(max(-1.0, min(1.0, nz)))
+    ph = math.atan2(ny, nx)
+    if ph < 0.0:
+        ph += 2.0 * math.pi
+    x = th / math.pi * (n_t - 1)
+    y = ph / (2.0 * math.pi) * n_p
+    i = min(int(x), n_t - 2)
+    j = int(y) % n_p
+    fx = x - i
+    fy = y - math.floor(y)
+    j1 = (j + 1) % n_p
+    w00 = (1.0 - fx) * (1.0 - fy)
+    w01 = (1.0 - fx) * fy
+    w10 = fx * (1.0 - fy)
+    w11 = fx * fy
+    return (w00 * table[i, j, 0] + w01 * table[i, j1, 0] + w10 * table[i + 1, j, 0] + w11 * table[i + 1, j1, 0],
+            w00 * table[i, j, 1] + w01 * table[i, j1, 1] + w10 * table[i + 1, j, 1] + w11 * table[i + 1, j1, 1],
+            w00 * table[i, j, 2] + w01 * table[i, j1, 2] + w10 * table[i + 1, j, 2] + w11 * table[i + 1, j1, 2])

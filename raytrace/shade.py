@@ -99,6 +99,8 @@ class Quality:
 COV_FAST = 6
 COV_BAL = 8
 _MIN_SUB_GATHER = 4
+# weight of the environment control variate in the final gather (raytrace._shading.gather_sum)
+GATHER_ALPHA = 1.0
 # rays per chunk of the final gather and the lobe sampling: their float64 ray, hit and bounce
 # arrays stay a few MB and are reused by the allocator instead of being mapped fresh (a whole
 # 1280×960 gather at 16 rays is 2.6 M rays, ~60 MB per array, and the page faults of writing
@@ -174,7 +176,10 @@ class _Context:
         self.p_background = self.p.copy()
         self.p_background[K.env.P_AMBIENT] = 0.0  # the sky lights the target but is not drawn
         self.cache = scene.radiance_cache(**cache_options)
-        self.cf = self.cache.solve(lighting)
+        # the environment's unoccluded irradiance: the cache's sky term and the final gather's
+        # control variate are both its complement over blocked directions
+        self.env_irradiance = K.env.irradiance_table(self.p, self.tex)
+        self.cf = self.cache.solve(lighting, env_irradiance=self.env_irradiance)
         self.sun = np.array([*lighting.sun_dir_body, lighting.sun_irradiance_at_target_W_m2])
 
     def surfaces(self, O, D, face):
@@ -324,7 +329,8 @@ class _Context:
         vis = self._bounce_sun(o, d, h)
         e_ind = self._second_bounce(o, d, h, hu, hv, pix, n_rays, seed)
         E = np.empty((n, 3))
-        K.gather_sum(n_rays, o, d, s["NG"], h["geomID"], h["primID"], hu, hv, *self._lookup(), vis, e_ind, E)
+        K.gather_sum(n_rays, o, d, s["NG"], h["geomID"], h["primID"], hu, hv, *self._lookup(), vis, e_ind, s["NS"],
+                     self.env_irradiance, GATHER_ALPHA, E)
         return E
 
     def _second_bounce(self, o, d, h, hu, hv, pix, n_rays, seed):
