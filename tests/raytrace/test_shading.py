@@ -89,6 +89,26 @@ def test_white_furnace_convex_object_has_radiance_albedo_times_sky(sphere, quali
     np.testing.assert_allclose(frame.radiance[inner], 5.0, rtol=2e-3)  # a missing π would be 3x off
 
 
+@pytest.mark.parametrize("quality,samples,tol", [("fast", None, 0.01), ("balanced", 16, 0.01), ("reference", 64, 0.01)])
+def test_white_furnace_concave_object_has_radiance_of_the_sky(quality, samples, tol):
+    """Albedo 1 under a uniform sky: every surface point of any shape, however concave, sends
+    back exactly the sky's radiance (what a blocked direction hides, the surface there
+    returns). Two plates meeting at a right angle: their inner faces see each other over half
+    the hemisphere, so the cache's blocked-sky complement, its bounces and the gather's
+    control variate all act."""
+    scene = _plates(1.0, 1.0)
+    R, t = _pose([3.0, -2.5, 2.5])
+    light = Lighting(sun_dir_body=(0, 0, 1), sun_irradiance_W_m2=0.0, ambient_radiance_W_m2_sr=10.0)
+    frame = render(scene, CAM, R, t, light, quality=quality, samples=samples)
+    inner = binary_erosion(frame.geometry.mask, iterations=2)
+    assert inner.sum() > 1500
+    L = frame.radiance[inner][:, 0].astype(float)
+    if quality == "reference":  # the mean: one path per sample, noisy per pixel
+        assert L.mean() == pytest.approx(10.0, rel=tol)
+    else:
+        np.testing.assert_allclose(L, 10.0, rtol=tol)
+
+
 def _plates(rho_a, rho_b):
     # plate A: horizontal, x in [0, 2], y in [-1, 1], top face at z = 0; plate B: vertical at
     # x in [-0.02, 0], y in [-1, 1], z in [0, 2], facing +x. Thin closed boxes.
