@@ -19,10 +19,11 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     estimated apart, as multisample anti-aliasing does).
 ``balanced``
     As ``fast``, but the diffuse indirect light at each pixel is a final gather: N
-    cosine-weighted rays from the pixel's own surface point (exact occlusion, Earth and sky
-    evaluated exactly along each ray; where a ray hits another part, that part's sunlight is
-    exact (a shadow ray) and its own indirect light a traced second bounce (one cosine ray,
-    exact Sun where it lands, the cache beyond). The cache's interpolated value serves as a
+    cosine-weighted rays from the pixel's own surface point (exact occlusion; Earth and sky
+    enter as a control variate, their unoccluded irradiance on the point's plane minus the
+    environment along each blocked ray, so escaping rays add no noise; where a ray hits
+    another part, that part's sunlight is exact (a shadow ray) and its own indirect light a
+    traced second bounce (one cosine ray, exact Sun where it lands, the cache beyond)). The cache's interpolated value serves as a
     control variate: only the
     difference (gather − cache) is filtered, by an edge-avoiding à-trous filter guided by the
     exact id, normal and depth AOVs, so the filter removes noise, not detail. Edge pixels get
