@@ -175,9 +175,9 @@ def incoming_env(p, tex, ox, oy, oz, dx, dy, dz):
 def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_normal, corner_normal, comp_of_face,
              mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
              vis_sun, eir, eig, eib):
-    """Radiance arriving along a traced ray (o, d): the environment where it escaped
-    (:func:`incoming_env`, which hot loops call directly for misses); where it
-    hit a surface, that surface's radiance towards the ray from the cache: diffuse ρ_d/π·E,
+    """Radiance arriving along a traced ray (o, d) that hit a surface (``geom`` ≥ 0; for a ray
+    that escaped, :func:`incoming_env`): that surface's radiance towards the ray from the
+    cache: diffuse ρ_d/π·E,
     the exact specular reflection of the Sun towards −d and the specular albedo times the
     rest of its irradiance over π. ``sun`` = (s_x, s_y, s_z, ν·E_sun). The Sun's visibility at
     the hit comes from the cache when ``vis_sun`` < 0, else it is ``vis_sun`` (a shadow ray
@@ -189,8 +189,6 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
     dx /= dn
     dy /= dn
     dz /= dn
-    if geom < 0:
-        return env.env_radiance(p, tex, ox, oy, oz, dx, dy, dz)
     f = face_offset[geom] + prim
     side = 0 if dx * face_normal[f, 0] + dy * face_normal[f, 1] + dz * face_normal[f, 2] < 0.0 else 1
     r0, r1, r2, w0, w1, w2 = lattice_rows(valid, face_s, lat_start, lat_ids, f, hu, hv, side)

@@ -150,18 +150,14 @@ def _cache_rays(rows, pos, nrm, eps, gx, gy, out_o, out_d):
 
 @jit
 def _bin_hits(G, d, geom, prim, hu, hv, face_offset, face_normal, two_sided_face, face_s, lat_start, lat_ids,
-              n_cells, hit_ray, hit_cols, hit_w, esc_ray, esc_cell, buried):
-    """Classify a chunk's rays: escapes (sky cell), hits (the three lattice rows around the hit
-    and their interpolation weights), and hits on the inside of a closed shell (counted per
-    row in ``buried``). Returns the numbers of hits and escapes written."""
+              hit_ray, hit_cols, hit_w, buried):
+    """Classify a chunk's hits: the three lattice rows around the hit and their interpolation
+    weights, or a hit on the inside of a closed shell (counted per row in ``buried``). Returns
+    the number of hits written."""
     nh = 0
-    ne = 0
     for j in range(d.shape[0]):
         g = geom[j]
         if g < 0:
-            esc_ray[ne] = j
-            esc_cell[ne] = env.oct_cell(d[j, 0], d[j, 1], d[j, 2], n_cells)
-            ne += 1
             continue
         f = face_offset[g] + prim[j]
         dot = d[j, 0] * face_normal[f, 0] + d[j, 1] * face_normal[f, 1] + d[j, 2] * face_normal[f, 2]
@@ -180,7 +176,7 @@ def _bin_hits(G, d, geom, prim, hu, hv, face_offset, face_normal, two_sided_face
         hit_w[nh, 1] = w1
         hit_w[nh, 2] = w2
         nh += 1
-    return nh, ne
+    return nh
 
 
 @pjit
@@ -398,12 +394,9 @@ class RadianceCache:
             hr = np.empty(n, np.int64)
             hc = np.empty((n, 3), np.int64)
             hw = np.empty((n, 3), np.float64)
-            er = np.empty(n, np.int64)
-            ec = np.empty(n, np.int64)
-            nh, ne = _bin_hits(G, d, h["geomID"], h["primID"], h["u"].astype(np.float64), h["v"].astype(np.float64),
-                               scene.face_offset, scene.face_normal, self.two_sided_face, self.face_s,
-                               self.lat_start, self.lat_ids, self.n_cells, hr, hc, hw, er, ec,
-                               buried[a:a + len(rows)])
+            nh = _bin_hits(G, d, h["geomID"], h["primID"], h["u"].astype(np.float64), h["v"].astype(np.float64),
+                           scene.face_offset, scene.face_normal, self.two_sided_face, self.face_s, self.lat_start,
+                           self.lat_ids, hr, hc, hw, buried[a:a + len(rows)])
             hit_rows.append(rows[hr[:nh] // G])
             hit_cols.append(hc[:nh])
             hit_w.append(hw[:nh])
