@@ -28,16 +28,16 @@ Per frame
 
         E = E_sun + E_env(n) − π W_sb L_env + W_ss (ρ ⊙ E),     L_out = ρ/π ⊙ E
 
-    The sky term is the complement of what the row's rays block: on an open surface it is
-    exact (to the table's ~0.5 %), where summing the escaping rays' cells (π W_se L_env) was a
-    G-ray, 1-cell quadrature of Earth's disc, its limb and its terminator (the Earth-facing
-    side of a sphere 400 km up: 3.6 % low with 128 rays and 16² cells).
-
     where ρ is each surface's bounce albedo (diffuse plus the cosine-averaged specular albedo:
     within the cache, light reflected towards other parts is treated as diffuse). Seen along
     a given ray (:func:`raytrace._shading.incoming`), a glossy surface instead returns its
     diffuse part, its exact specular reflection of the Sun towards that ray, and its
     specular albedo times the rest of its irradiance (as if that arrived uniformly).
+
+    The sky term is the complement of what the row's rays block: on an open surface it is
+    exact (to the table's ~0.5 %), where summing the escaping rays' cells instead was a
+    G-ray, 1-cell quadrature of Earth's disc, its limb and its terminator (the Earth-facing
+    side of a sphere 400 km up: 3.6 % low with 128 rays and 16² cells).
 
 Errors: the cache resolves occlusion to the lattice spacing and blocked sky to one cell; the
 ``balanced`` renderer therefore uses it only one bounce away from the pixel (final gather),

@@ -23,14 +23,14 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     enter as a control variate, their unoccluded irradiance on the point's plane minus the
     environment along each blocked ray, so escaping rays add no noise; where a ray hits
     another part, that part's sunlight is exact (a shadow ray) and its own indirect light a
-    traced second bounce (one cosine ray, exact Sun where it lands, the cache beyond)). The cache's interpolated value serves as a
-    control variate: only the
-    difference (gather − cache) is filtered, by an edge-avoiding à-trous filter guided by the
-    exact id, normal and depth AOVs, so the filter removes noise, not detail. Edge pixels get
-    4×4 (N ≤ 8), 6×6 (N ≤ 128) or 8×8 jittered shaded sub-pixel rays, plus 8×8 to 10×10
-    coverage rays where they are mixed; a sub-sample on its pixel centre's surface is shaded like ``fast`` plus
-    the centre's filtered gather correction, one on another surface gets its own N/4-ray
-    gather (from N = 16; below that the cache alone, which is less noisy).
+    traced second bounce (one cosine ray, exact Sun where it lands, the cache beyond)). The
+    cache's interpolated value serves as a control variate: only the difference
+    (gather − cache) is filtered, by an edge-avoiding à-trous filter guided by the exact id,
+    normal and depth AOVs, so the filter removes noise, not detail. Edge pixels get 4×4
+    (N ≤ 8), 6×6 (N ≤ 128) or 8×8 jittered shaded sub-pixel rays, plus 8×8 to 10×10 coverage
+    rays where they are mixed; a sub-sample on its pixel centre's surface is shaded like
+    ``fast`` plus the centre's filtered gather correction, one on another surface gets its own
+    N/4-ray gather (from N = 16; below that the cache alone, which is less noisy).
 ``reference``
     Unbiased path tracing (:mod:`raytrace.pathtrace`): every sample jittered over the pixel
     (box filter), the solar disc sampled for soft shadows, BRDF-sampled bounces with Russian
@@ -99,6 +99,15 @@ class Quality:
 # ``balanced``-16 better (median of four views 7.3 → 6.5 %)
 COV_FAST = 6
 COV_BAL = 8
+_MIN_SUB_GATHER = 4
+# weight of the environment control variate in the final gather (raytrace._shading.gather_sum)
+GATHER_ALPHA = 1.0
+# rays per chunk of the final gather and the lobe sampling: their float64 ray, hit and bounce
+# arrays stay a few MB and are reused by the allocator instead of being mapped fresh (a whole
+# 1280×960 gather at 16 rays is 2.6 M rays, ~60 MB per array, and the page faults of writing
+# fresh arrays from parallel kernels cost more than the kernels: bounce2_rays 66 ms fresh
+# against 9 ms on mapped memory, measured on Crew Dragon ``sunlit``)
+_CHUNK_RAYS = 1 << 18
 
 
 def _balanced_aa(samples: int) -> int:
@@ -113,18 +122,11 @@ def _balanced_aa(samples: int) -> int:
     (N = 8: 0.353 s, 4.03 %) and so did 8×8 at N = 64 (1.04 s, 2.35 % → 1.34 s, 2.13 %)."""
     return 4 if samples <= 8 else (6 if samples <= 128 else 8)
 
-_MIN_SUB_GATHER = 4
-# weight of the environment control variate in the final gather (raytrace._shading.gather_sum)
-GATHER_ALPHA = 1.0
-# rays per chunk of the final gather and the lobe sampling: their float64 ray, hit and bounce
-# arrays stay a few MB and are reused by the allocator instead of being mapped fresh (a whole
-# 1280×960 gather at 16 rays is 2.6 M rays, ~60 MB per array, and the page faults of writing
-# fresh arrays from parallel kernels cost more than the kernels: bounce2_rays 66 ms fresh
-# against 9 ms on mapped memory, measured on Crew Dragon ``sunlit``)
-_CHUNK_RAYS = 1 << 18
+
 _PRESETS = {
     "fast": Quality("fast", gather_rays=0, filter_passes=0, aa_grid=3, sun_rays=4, cov_grid=COV_FAST),
-    "balanced": Quality("balanced", gather_rays=8, filter_passes=3, aa_grid=4, sun_rays=16, cov_grid=COV_BAL),
+    "balanced": Quality("balanced", gather_rays=8, filter_passes=3, aa_grid=_balanced_aa(8), sun_rays=16,
+                        cov_grid=COV_BAL),
     "reference": Quality("reference", spp=1024),
 }
 

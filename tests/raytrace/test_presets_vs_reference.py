@@ -17,15 +17,15 @@ Documented bounds (relative RMS error over target pixels, noise-corrected), also
                fast    balanced    (``balanced`` with its default 8 gather rays)
 =============  ======  ==========  ==================================================
 bound          25 %    14 %
-tiangong       11 %     9 %        measured 2026-11-21 (thin wings and masts)
+tiangong       11 %     9 %        measured 2026-11-21, commit 89e2a83 (thin wings and masts)
 spacedragon     4 %     3 %
-icesat         17 %    12 %        small: 45 % of its pixels are edge pixels
-cassini        11 %     8 %
+icesat         17 %    11 %        small: 45 % of its pixels are edge pixels
+cassini        11 %     7 %
 =============  ======  ==========  ==================================================
 
-and ``balanced`` is never worse than ``fast``. Most of the error sits in edge pixels, whose
-sub-pixel coverage both ``fast`` and ``balanced`` (8 rays) estimate from 3×3 shaded rays plus,
-where those see more than one part, 6×6 (``fast``) or 8×8 (``balanced``) coverage rays. The
+and ``balanced`` is never worse than ``fast``. Most of the error sits in edge pixels, which
+``fast`` shades with 3×3 sub-pixel rays and ``balanced`` (8 rays) with 4×4, plus, where those
+see more than one part, 6×6 (``fast``) or 8×8 (``balanced``) coverage rays. The
 reference's own noise must be small enough for the comparison to mean something (σ < 8 % at 64 samples per pixel; the quadrature
 correction is precise because σ² is estimated over thousands of pixels).
 """
