@@ -353,8 +353,9 @@ def bounce2_rays(O, D, tfar, geom, prim, hu, hv, face_offset, face_normal, corne
 
 @pjit
 def incoming_rays(O, D, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
-                  mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis, out):
-    """:func:`incoming` along each ray (the Sun's visibility at its hit from ``vis``)."""
+                  mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis, e_ind, out):
+    """:func:`incoming` along each ray (the Sun's visibility at its hit from ``vis``, its
+    indirect irradiance from ``e_ind`` where ≥ 0, else from the cache)."""
     for m in numba.prange(D.shape[0]):
         if geom[m] < 0:
             out[m, 0], out[m, 1], out[m, 2] = incoming_env(p, tex, O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1], D[m, 2])
@@ -362,7 +363,7 @@ def incoming_rays(O, D, geom, prim, hu, hv, face_offset, face_normal, corner_nor
         out[m, 0], out[m, 1], out[m, 2] = incoming(
             geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1], D[m, 2], face_offset,
             face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid,
-            face_s, lat_start, lat_ids, p, tex, vis[m], -1.0, -1.0, -1.0)
+            face_s, lat_start, lat_ids, p, tex, vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
 
 
 @pjit
@@ -511,6 +512,50 @@ def edge_pixels(inst, lit_img, normal, depth, earth_px, rect, out):
                     flag = True
                     break
             out[v, u] = flag
+
+
+@pjit
+def donor_rows(centre, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c, foot, borrow, out):
+    """For each sub-sample (pixel ``centre``, part ``comp``, point P, shading normal NS): the
+    row of the pixel centre whose filtered correction it takes, −1 for none. Its own pixel's
+    centre if that lies on the same surface (same part, normals within 25°, the point within
+    a pixel footprint of the centre's tangent plane); otherwise, with ``borrow``, the nearest
+    (in space) of the 8 neighbouring centres on its surface; otherwise none."""
+    for m in numba.prange(centre.shape[0]):
+        c = centre[m]
+        v = c // W
+        u = c % W
+        best = -1
+        best_d2 = np.inf
+        for a in range(10 if borrow else 1):  # a = 0: the pixel itself; a = 1..9: its 3 × 3 neighbourhood
+            dv = (a - 1) // 3 - 1 if a > 0 else 0
+            du = (a - 1) % 3 - 1 if a > 0 else 0
+            if a == 5:
+                continue  # the pixel itself again
+            vv = v + dv
+            uu = u + du
+            if vv < 0 or vv >= H or uu < 0 or uu >= W:
+                continue
+            q = vv * W + uu
+            k = row_of_pixel[q]
+            if k < 0 or inst[q] - 1 != comp[m]:
+                continue
+            nd = NS[m, 0] * N_c[k, 0] + NS[m, 1] * N_c[k, 1] + NS[m, 2] * N_c[k, 2]
+            if nd <= 0.9:
+                continue
+            dx = P[m, 0] - P_c[k, 0]
+            dy = P[m, 1] - P_c[k, 1]
+            dz = P[m, 2] - P_c[k, 2]
+            if abs(dx * N_c[k, 0] + dy * N_c[k, 1] + dz * N_c[k, 2]) > foot[k]:
+                continue
+            if a == 0:
+                best = k
+                break
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 < best_d2:
+                best_d2 = d2
+                best = k
+        out[m] = best
 
 
 @pjit
