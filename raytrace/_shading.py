@@ -559,6 +559,66 @@ def donor_rows(centre, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c, foot, bo
 
 
 @pjit
+def sliver_pixels(V, F, R, t, fx, fy, cx, cy, z_min, max_width, depth, out):
+    """Pixels touched by triangles whose projection is a sliver: narrower than ``max_width``
+    pixels (twice its area over its longest edge) but longer than one pixel — a rod, wire
+    or panel seen edge-on that can fall between pixel centres and corners. Marks ``out``
+    (H, W) conservatively: every pixel square the projected triangle overlaps (separating
+    axes: the square's two and the triangle's three edge normals) where the triangle's
+    nearest point is nearer than the pixel centre's surface (``depth``, z-depth, inf on
+    space) by more than 0.1 %: a sliver hidden behind that surface, or lying in it (the
+    tessellation of a surface seen at a grazing angle), needs no extra samples. Triangles
+    with a vertex nearer than ``z_min`` are skipped (the target is in front of the camera)."""
+    H, W = out.shape
+    for f in numba.prange(F.shape[0]):  # threads may mark a pixel at once: all write True
+        px = np.empty(3)
+        py = np.empty(3)
+        ok = True
+        z_near = np.inf
+        for k in range(3):
+            i = F[f, k]
+            xc = R[0, 0] * V[i, 0] + R[0, 1] * V[i, 1] + R[0, 2] * V[i, 2] + t[0]
+            yc = R[1, 0] * V[i, 0] + R[1, 1] * V[i, 1] + R[1, 2] * V[i, 2] + t[1]
+            zc = R[2, 0] * V[i, 0] + R[2, 1] * V[i, 1] + R[2, 2] * V[i, 2] + t[2]
+            if zc <= z_min:
+                ok = False
+                break
+            z_near = min(z_near, zc)
+            px[k] = fx * xc / zc + cx
+            py[k] = fy * yc / zc + cy
+        if not ok:
+            continue
+        area2 = abs((px[1] - px[0]) * (py[2] - py[0]) - (px[2] - px[0]) * (py[1] - py[0]))
+        longest = 0.0
+        for k in range(3):
+            j = (k + 1) % 3
+            longest = max(longest, math.hypot(px[j] - px[k], py[j] - py[k]))
+        if longest <= 1.0 or area2 >= max_width * longest or longest > 4.0 * (W + H):
+            continue  # (the last: a surface grazing the camera, not a wire)
+        # pixel k spans [k − ½, k + ½]: the square's own axes are this bounding box
+        u0 = max(math.ceil(min(px[0], px[1], px[2]) - 0.5), 0)
+        u1 = min(math.floor(max(px[0], px[1], px[2]) + 0.5), W - 1)
+        v0 = max(math.ceil(min(py[0], py[1], py[2]) - 0.5), 0)
+        v1 = min(math.floor(max(py[0], py[1], py[2]) + 0.5), H - 1)
+        # edge lines a·u + b·v + c ≥ 0 inside (orientation fixed by the sign of the area)
+        sgn = 1.0 if (px[1] - px[0]) * (py[2] - py[0]) - (px[2] - px[0]) * (py[1] - py[0]) > 0.0 else -1.0
+        for v in range(v0, v1 + 1):
+            for u in range(u0, u1 + 1):
+                inside = True
+                for k in range(3):
+                    j = (k + 1) % 3
+                    a = -(py[j] - py[k]) * sgn
+                    b = (px[j] - px[k]) * sgn
+                    c = -(a * px[k] + b * py[k])
+                    # the square's farthest corner along (a, b) is inside the half-plane?
+                    if a * u + b * v + c + 0.5 * (abs(a) + abs(b)) < 0.0:
+                        inside = False
+                        break
+                if inside and z_near < 0.999 * depth[v, u]:
+                    out[v, u] = True
+
+
+@pjit
 def subpixel_rays(pix, W, n_grid, seed, R_body_from_cam, fx, fy, cx, cy, out_d):
     """n_grid² jittered-stratified sub-pixel ray directions (body frame, z_cam = 1) per edge
     pixel: one uniform point in each cell of an n_grid × n_grid grid over the pixel, from a

@@ -321,3 +321,46 @@ def test_silhouette_pixels_carry_the_covered_fraction_of_the_pixel(sphere, quali
     rms = float(np.sqrt(np.mean((got - cover) ** 2)))
     assert rms < 0.04, f"silhouette coverage RMS error {rms:.3f}"
     assert abs(float(np.mean(got - cover))) < 0.01  # and unbiased
+
+
+def _dense_cover(px, py, W, H, n=400):
+    """Pixels containing points of the triangle (px, py): an independent, sampled rasterisation."""
+    a, b = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    keep = a + b <= 1
+    u = px[0] + a[keep] * (px[1] - px[0]) + b[keep] * (px[2] - px[0])
+    v = py[0] + a[keep] * (py[1] - py[0]) + b[keep] * (py[2] - py[0])
+    out = np.zeros((H, W), dtype=bool)
+    iu, iv = np.floor(u + 0.5).astype(int), np.floor(v + 0.5).astype(int)  # pixel k spans [k - ½, k + ½)
+    ok = (iu >= 0) & (iu < W) & (iv >= 0) & (iv < H)
+    out[iv[ok], iu[ok]] = True
+    return out
+
+
+def test_sliver_pixels_marks_exactly_the_pixels_a_thin_triangle_overlaps():
+    """A wire 0.03 px wide and 40 px long, slanted across pixel rows: every pixel square it
+    overlaps is marked, no other (against a dense point rasterisation); hidden behind the
+    pixels' surface it marks nothing; a wide triangle is no sliver."""
+    from raytrace._shading import sliver_pixels
+    W = H = 100
+    f, c, z = 100.0, 49.5, 10.0
+    px = np.array([30.3, 70.1, 70.1])
+    py = np.array([40.2, 52.7, 52.73])
+    V = np.column_stack([(px - c) * z / f, (py - c) * z / f, np.full(3, z)])
+    F = np.array([[0, 1, 2]])
+    R, t = np.eye(3), np.zeros(3)
+    out = np.zeros((H, W), dtype=bool)
+    sliver_pixels(V, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), np.inf), out)
+    want = _dense_cover(px, py, W, H, n=2000)
+    assert want.sum() > 50
+    assert np.array_equal(out, want)
+    out[:] = False
+    sliver_pixels(V, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), 5.0), out)  # a surface in front
+    assert not out.any()
+    out[:] = False
+    sliver_pixels(V, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), 20.0), out)  # a surface behind it
+    assert np.array_equal(out, want)
+    wide = np.column_stack([(np.array([30.3, 70.1, 50.0]) - c) * z / f, (np.array([40.2, 52.7, 80.0]) - c) * z / f,
+                            np.full(3, z)])
+    out[:] = False
+    sliver_pixels(wide, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), np.inf), out)
+    assert not out.any()
