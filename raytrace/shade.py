@@ -156,21 +156,32 @@ def _balanced_aa(samples: int) -> int:
     return 4 if samples <= 8 else (6 if samples <= 128 else 8)
 
 
+def _filter_passes(samples: int) -> int:
+    """À-trous passes on the gathered residual of ``balanced`` with N rays: 3 (N ≤ 4), 2
+    (N ≤ 8), 1 (N ≤ 128), 0. Chosen on the 12 scenes of ``benchmarks/bench_time_error.py`` at
+    1280×960 (median error): N = 4: 3 passes 4.29 %, 2 4.34 %; N = 8: 4 passes 4.12 %, 3 3.96 %,
+    2 3.85 %, 1 3.93 %; N = 16: 2 passes 3.08 %, 1 2.82 %, 0 5.61 %; N = 32: 2 passes 2.81 %, 1
+    2.41 %; N = 64: 1 pass 2.14 %, 0 2.91 %. (The earlier 3 / 2 / 1 / 0 at N ≤ 8 / 32 / 128 /
+    more was chosen at 640×480, where a pass spans twice the surface.)"""
+    return 3 if samples <= 4 else (2 if samples <= 8 else (1 if samples <= 128 else 0))
+
+
 def _borrow(samples: int) -> bool:
     """Whether ``balanced`` edge sub-samples off their centre's surface borrow a neighbour's
     filtered correction (:attr:`Quality.borrow`). Measured on the 12 scenes of
     ``benchmarks/bench_time_error.py`` at 1280×960 (median error, bias estimated without the
     reference's noise): N = 8 (no sub-sample gathers, the cache alone there): 4.39 → 4.22 %;
     N = 16 (4-ray gathers): 3.20 → 3.30 % for 90–100 ms less per frame (of ~470); N = 64
-    (16-ray gathers): 2.33 → 2.46 % (all with a one-bounce gather path). Below 32 rays the corrections are filtered over several
+    (16-ray gathers): 2.33 → 2.46 % (all with a one-bounce gather path and the earlier filter
+    passes; with 4-bounce paths and one pass, N = 16: 2.74 → 2.82 %). Below 32 rays the corrections are filtered over several
     pixels anyway, so the neighbour's is about as near the truth as the pixel's own."""
     return samples <= 16
 
 
 _PRESETS = {
     "fast": Quality("fast", gather_rays=0, filter_passes=0, aa_grid=3, sun_rays=4, cov_grid=COV_FAST),
-    "balanced": Quality("balanced", gather_rays=8, filter_passes=3, aa_grid=_balanced_aa(8), sun_rays=16,
-                        cov_grid=COV_BAL, borrow=_borrow(8), sun_corners=True,
+    "balanced": Quality("balanced", gather_rays=8, filter_passes=_filter_passes(8), aa_grid=_balanced_aa(8),
+                        sun_rays=16, cov_grid=COV_BAL, borrow=_borrow(8), sun_corners=True,
                         slivers=True),
     "reference": Quality("reference", spp=1024),
 }
@@ -189,7 +200,7 @@ def quality_preset(name: str, samples: int | None = None) -> Quality:
         raise ValueError(f"samples must be an integer in [1, 1048576], got {samples!r}")
     samples = int(samples)
     if name == "balanced":
-        passes = 3 if samples <= 8 else (2 if samples <= 32 else (1 if samples <= 128 else 0))
+        passes = _filter_passes(samples)
         aa = _balanced_aa(samples)
         return Quality(name, gather_rays=samples, filter_passes=passes, aa_grid=aa, sun_rays=max(16, min(samples, 64)),
                        cov_grid=max(COV_BAL, aa + 2), borrow=_borrow(samples), sun_corners=True,
