@@ -31,8 +31,9 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     (N ≤ 8), 6×6 (N ≤ 128) or 8×8 jittered shaded sub-pixel rays, plus 8×8 to 10×10 coverage
     rays where they are mixed (and pixels whose corners disagree with the centre on the Sun's
     visibility, or that a sliver of a triangle — a wire thinner than a pixel — crosses in
-    front of the centre's surface, are edge pixels too); a sub-sample on its pixel centre's surface is shaded like
-    ``fast`` plus the centre's filtered gather correction; one on another surface takes the
+    front of the centre's surface, are edge pixels too); a sub-sample on its pixel centre's
+    surface is shaded like ``fast`` plus the centre's filtered gather correction; one on
+    another surface takes the
     correction of the nearest neighbouring centre on its surface (N ≤ 16) or gets its own
     N/4-ray gather (N > 16, or no such neighbour and N = 16; below that the cache alone,
     which is less noisy).
@@ -173,8 +174,9 @@ def _borrow(samples: int) -> bool:
     reference's noise): N = 8 (no sub-sample gathers, the cache alone there): 4.39 → 4.22 %;
     N = 16 (4-ray gathers): 3.20 → 3.30 % for 90–100 ms less per frame (of ~470); N = 64
     (16-ray gathers): 2.33 → 2.46 % (all with a one-bounce gather path and the earlier filter
-    passes; with 4-bounce paths and one pass, N = 16: 2.74 → 2.82 %). Below 32 rays the corrections are filtered over several
-    pixels anyway, so the neighbour's is about as near the truth as the pixel's own."""
+    passes; with 4-bounce paths and one pass, N = 16: 2.74 → 2.82 %). Below 32 rays the
+    corrections are filtered over several pixels anyway, so the neighbour's is about as near
+    the truth as the pixel's own."""
     return samples <= 16
 
 
@@ -438,11 +440,11 @@ class _Context:
             h2 = sc.intersect(o2, d2)
             hu2, hv2 = h2["u"].astype(np.float64), h2["v"].astype(np.float64)
             vis2 = self._bounce_sun(o2, d2, h2)
-            # the next bounce's sample keys: distinct per sample and depth
-            e2 = np.full((len(idx), 3), -1.0)
+            e2 = np.full((len(idx), 3), -1.0)  # beyond the last traced bounce: the cache
             if levels > 1:
                 near = np.flatnonzero(h2["tfar"] < _NEAR_SPACINGS * self.cache.spacing_m)  # d2 is unit
                 if len(near):
+                    # keys * 4 + 1: the next bounce's samples, distinct per sample and depth
                     e2[near] = self._bounces(o2[near], d2[near], {k: v[near] for k, v in h2.items()}, hu2[near],
                                              hv2[near], keys[idx][near] * 4 + 1, seed, levels - 1)
             L2 = np.empty((len(idx), 3))
@@ -801,12 +803,11 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, D, h, centre, nu
             H, W = geo.instance.shape
             K.donor_rows(centre[idx].astype(np.int64), W, H, s["comp"], s["P"], s["NS"], row_of_pixel,
                          geo.instance.ravel(), P_c, N_c, foot, borrow, k)
-            same = k >= 0
-            j = np.flatnonzero(same)
+            j = np.flatnonzero(k >= 0)  # sub-samples with a centre's correction to take
             E[j] += residual[0][k[j]]
             Ls[j] += residual[1][k[j]]
             # below _MIN_SUB_GATHER rays an unfiltered gather is noisier than the cache is wrong
-            j = np.flatnonzero(~same)
+            j = np.flatnonzero(k < 0)
             if len(j) and gather_rays >= _MIN_SUB_GATHER:
                 sj = {k: v[j] for k, v in s.items()}
                 keys = sub_key[j]
