@@ -364,3 +364,42 @@ def test_sliver_pixels_marks_exactly_the_pixels_a_thin_triangle_overlaps():
     out[:] = False
     sliver_pixels(wide, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), np.inf), out)
     assert not out.any()
+
+
+def test_donor_rows_takes_the_centre_else_the_nearest_neighbour_on_the_same_surface():
+    """Edge sub-samples take their pixel centre's correction when they lie on its surface;
+    otherwise (with borrowing) the nearest neighbouring centre on their own surface, never one
+    of another part, a normal more than 25° away or off their plane by more than a footprint."""
+    from raytrace._shading import donor_rows
+    W = H = 3
+    inst = np.full(W * H, 1, dtype=np.int32)  # part 0 everywhere ...
+    inst[2] = 2  # ... but pixel (0, 2): part 1
+    row_of_pixel = np.arange(W * H, dtype=np.int32)
+    row_of_pixel[8] = -1  # pixel (2, 2) saw space
+    # centres on the plane z = 0, normal +z, 1 m apart; the centre pixel (1, 1) is on a wall
+    P_c = np.array([[u - 1.0, v - 1.0, 0.0] for v in range(H) for u in range(W)])
+    N_c = np.tile([0.0, 0.0, 1.0], (W * H, 1))
+    N_c[4] = [1.0, 0.0, 0.0]
+    foot = np.full(W * H, 0.05)
+    P_c[3, 2] = 0.2  # pixel (1, 0): off the plane by more than a footprint
+    # sub-samples of pixel (1, 1): on the floor nearest (1, 0) [off the plane: (2, 0) is next],
+    # nearest (0, 2) [another part: (0, 1) is next]; on the wall [the centre]; of part 1 [(0, 2)]
+    P = np.array([[-0.9, 0.05, 0.0], [0.8, -0.9, 0.0], [0.0, 0.0, 0.3], [0.9, -0.9, 0.0]])
+    NS = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    comp = np.array([0, 0, 0, 1], dtype=np.int64)
+    centre = np.full(4, 4, dtype=np.int64)
+    out = np.empty(4, dtype=np.int64)
+    donor_rows(centre, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c, foot, True, out)
+    # brute force: nearest neighbour of the same part, normal and plane
+    want = []
+    for m in range(4):
+        if inst[4] - 1 == comp[m] and NS[m] @ N_c[4] > 0.9 and abs((P[m] - P_c[4]) @ N_c[4]) <= foot[4]:
+            want.append(4)
+            continue
+        ok = [q for q in range(W * H) if q != 4 and row_of_pixel[q] >= 0 and inst[q] - 1 == comp[m]
+              and NS[m] @ N_c[q] > 0.9 and abs((P[m] - P_c[q]) @ N_c[q]) <= foot[q]]
+        want.append(min(ok, key=lambda q: np.sum((P[m] - P_c[q]) ** 2)) if ok else -1)
+    assert list(out) == want
+    assert want == [6, 1, 4, 2]  # the cases meant
+    donor_rows(centre, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c, foot, False, out)
+    assert list(out) == [-1, -1, 4, -1]
