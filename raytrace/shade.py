@@ -403,13 +403,13 @@ class _Context:
         h = self.scene.intersect(o, d)
         hu, hv = h["u"].astype(np.float64), h["v"].astype(np.float64)
         vis = self._bounce_sun(o, d, h)
-        e_ind = self._second_bounce(o, d, h, hu, hv, pix, n_rays, seed)
+        e_ind = self._traced_indirect(o, d, h, hu, hv, pix, n_rays, seed)
         E = np.empty((n, 3))
         K.gather_sum(n_rays, o, d, s["NG"], h["geomID"], h["primID"], hu, hv, *self._lookup(), vis, e_ind, s["NS"],
                      self.env_irradiance, GATHER_ALPHA, E)
         return E
 
-    def _second_bounce(self, o, d, h, hu, hv, pix, n_rays, seed):
+    def _traced_indirect(self, o, d, h, hu, hv, pix, n_rays, seed):
         """Traced estimate of the indirect irradiance at each gather hit (−1 at misses): a path
         of up to _GATHER_BOUNCES cosine-weighted one-sample bounces from the hit (continued
         only from hits nearer than _NEAR_SPACINGS lattice spacings), the Sun exact (a shadow
@@ -421,7 +421,7 @@ class _Context:
         return self._bounces(o, d, h, hu, hv, keys, seed, _GATHER_BOUNCES)
 
     def _bounces(self, o, d, h, hu, hv, keys, seed, levels):
-        """:meth:`_second_bounce` for rays (o, d) with hits h, ``levels`` bounces deep."""
+        """:meth:`_traced_indirect` for rays (o, d) with hits h, ``levels`` bounces deep."""
         m = len(d)
         e_ind = np.full((m, 3), -1.0)
         hit = h["geomID"] >= 0
