@@ -258,6 +258,12 @@ def _options() -> tuple:
         O("--earth-texture", "render", _choice(EARTH_TEXTURES), "procedural", "Earth as light and backdrop"),
         O("--earth-albedo", "render", _float_in(0.0, 1.0), 0.3, "Earth's mean albedo"),
         O("--ambient-W-m2-sr", "render", _float_in(0.0, 1e4, unit="W/(m2 sr)"), 0.0, "constant sky radiance"),
+        O("--star-limit-mag", "render", _float_in(-1.5, 9.0, unit="mag"), None,
+          "draw the stars brighter than this visual magnitude in the background (procedural sky from --seed, or "
+          "--star-catalogue) (default: no stars)", "MAG"),
+        O("--star-catalogue", "render", _path, None,
+          "draw the stars of this CSV catalogue (columns ra_deg, dec_deg, v_mag; J2000) instead of a procedural "
+          "sky", "FILE.csv"),
         # [degrade]
         O("--degrade", "degrade", _choice(DEGRADE_PRESETS), "physical",
           "degradation of rgb_degraded: none, paper (SPEC §10 groups) or physical (optics + sensor chain)"),
@@ -547,6 +553,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
         Scene(model)  # validates the mesh (e.g. zero-area triangles) before anything is written
     except ValueError as exc:
         raise CLIError(f"argument --mesh: {exc}") from None
+    _star_field(cfg)  # validates the star catalogue before anything is written
     radius_m = model.bounding_radius_m
     camera = Camera.from_focal(cam["focal_length_mm"] * 1e-3, cam["pixel_pitch_um"] * 1e-6, cam["width"], cam["height"])
     ref = ReferenceOrbit(altitude_m=orb["altitude_km"] * 1e3, inclination_rad=math.radians(orb["inclination_deg"]),
@@ -606,6 +613,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
             "q_cam_from_body": [float(v) for v in labels.q_cam_from_body[i]],
             "R_cam_from_body": [float(v) for v in R_cam_from_body[i].ravel()],
             "t_cam_m": [float(v) for v in t_cam_m[i]],
+            "R_cam_from_eci": [float(v) for v in R_cam_from_eci[i].ravel()],
             "sun_dir_cam": [float(v) for v in sun_dir_cam[i]],
             "earth_dir_cam": [float(v) for v in earth_dir_cam[i]],
             "sun_dir_body": [float(v) for v in sun_dir_body[i]],
@@ -620,7 +628,8 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
         })
         lights.append({"sun_dir_body": sun_dir_body[i].tolist(), "shadow_fraction": float(vis.illuminated_fraction[i]),
                        "earth_dir_body": earth_dir_body[i].tolist(), "earth_distance_m": float(earth_distance_m[i]),
-                       "R_body_from_earth": R_body_from_earth[i].tolist()})
+                       "R_body_from_earth": R_body_from_earth[i].tolist(),
+                       "R_body_from_eci": R_body_from_eci[i].tolist()})
         if motion is not None:
             lights[-1]["motion"] = [float(motion[0][i]), float(motion[1][i])]
             frames[-1]["motion_blur_px"], frames[-1]["motion_angle_deg"] = lights[-1]["motion"]
@@ -722,6 +731,7 @@ def _print_table(result: dict, out) -> None:
 
 # --------------------------------------------------------------------------- one frame (runs in a worker)
 _SCENES: dict = {}
+_STARS: dict = {}
 _SCENE_LOCK = None
 
 
@@ -758,7 +768,25 @@ def frame_seeds(seed: int, frame: int) -> tuple:
     return int(child.generate_state(1)[0] % 2**31), np.random.SeedSequence(seed, spawn_key=(frame, 0))
 
 
-def _lighting(light: dict, r: dict):
+def _star_field(cfg: dict):
+    """The sequence's star field (None without stars), read or drawn once per process."""
+    r = cfg["render"]
+    key = (r.get("star_catalogue"), r.get("star_limit_mag"), cfg["sequence"]["seed"])
+    if key[0] is None and key[1] is None:
+        return None
+    if key not in _STARS:
+        from raytrace.stars import MAG_FAINTEST, StarField
+        if key[0] is not None:
+            try:
+                _STARS[key] = StarField.from_csv(key[0], math.inf if key[1] is None else key[1])
+            except ValueError as exc:
+                raise CLIError(f"argument --star-catalogue: {exc}") from None
+        else:  # one sky per seed: the same stars in every frame
+            _STARS[key] = StarField.procedural(min(key[1], MAG_FAINTEST), key[2])
+    return _STARS[key]
+
+
+def _lighting(light: dict, r: dict, stars=None):
     from raytrace.lighting import Earth, Lighting
     earth = None
     if r["earth_texture"] != "none":
@@ -766,7 +794,8 @@ def _lighting(light: dict, r: dict):
                       texture=r["earth_texture"], R_body_from_earth=light["R_body_from_earth"])
     return Lighting(sun_dir_body=light["sun_dir_body"], sun_irradiance_W_m2=SOLAR_CONSTANT_W_M2,
                     shadow_fraction=light["shadow_fraction"], earth=earth,
-                    ambient_radiance_W_m2_sr=r["ambient_W_m2_sr"])
+                    ambient_radiance_W_m2_sr=r["ambient_W_m2_sr"], stars=stars,
+                    R_body_from_eci=None if stars is None else light["R_body_from_eci"])
 
 
 def _physical_config(d: dict, cam: dict, motion=None):
@@ -809,7 +838,7 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
     images, info = {}, {}
     if need_radiance:
         r = cfg["render"]
-        frame = render(scene, camera, R, t, _lighting(task["light"], r), quality=r["quality"],
+        frame = render(scene, camera, R, t, _lighting(task["light"], r, _star_field(cfg)), quality=r["quality"],
                        samples=r["samples"], seed=render_seed)
         geo, radiance = frame.geometry, frame.radiance
     else:  # geometry-only modalities: no shading at all

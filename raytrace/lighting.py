@@ -124,6 +124,10 @@ class Lighting:
         Earth as a light and backdrop (None: no Earth).
     ambient_radiance_W_m2_sr : float
         Constant sky radiance from every direction Earth does not cover [W/(m²·sr)].
+    stars : raytrace.stars.StarField or None
+        Stars drawn in the background (None: none); they light nothing.
+    R_body_from_eci : ndarray, shape (3, 3) or None
+        Attitude of the body in the inertial frame of ``stars`` (required with them) [-].
     """
 
     sun_dir_body: tuple
@@ -132,6 +136,8 @@ class Lighting:
     sun_angular_diameter_rad: float = SUN_ANGULAR_DIAMETER_RAD
     earth: Earth | None = None
     ambient_radiance_W_m2_sr: float = 0.0
+    stars: object = None
+    R_body_from_eci: object = None
 
     def __post_init__(self):
         object.__setattr__(self, "sun_dir_body", _unit3("sun_dir_body", self.sun_dir_body))
@@ -143,6 +149,15 @@ class Lighting:
                            _finite("ambient_radiance_W_m2_sr", self.ambient_radiance_W_m2_sr, 0.0))
         if self.earth is not None and not isinstance(self.earth, Earth):
             raise ValueError(f"earth must be a raytrace.lighting.Earth or None, got {type(self.earth).__name__}")
+        if self.stars is not None:
+            from .stars import StarField
+            if not isinstance(self.stars, StarField):
+                raise ValueError(f"stars must be a raytrace.stars.StarField or None, got {type(self.stars).__name__}")
+            R = None if self.R_body_from_eci is None else np.asarray(self.R_body_from_eci, dtype=np.float64)
+            if R is None or R.shape != (3, 3) or not np.all(np.isfinite(R)) \
+                    or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+                raise ValueError("R_body_from_eci must be a 3x3 rotation matrix when stars are given")
+            object.__setattr__(self, "R_body_from_eci", R)
 
     @property
     def sun_irradiance_at_target_W_m2(self) -> float:

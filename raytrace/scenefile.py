@@ -14,6 +14,8 @@ Schema (version 1; lengths in metres, directions unit vectors in the target's bo
       "earth": {"earth_dir_body": [x, y, z], "earth_distance_m": 6778137.0,
                 "radius_m": 6378137.0, "albedo": 0.3, "texture": "uniform"},      # optional
       "ambient_radiance_W_m2_sr": 0.0,                                          # optional
+      "stars": {"R_body_from_eci": [9 numbers, row-major] or 3×3,               # optional
+                "limit_mag": 6.5, "seed": 0, "catalogue": "stars.csv"},
       "quality": "balanced", "samples": null, "seed": 0                        # optional
     }
 
@@ -22,6 +24,11 @@ components (one per part, :func:`raytrace.meshio.load_mesh`), all shaded with th
 ``material`` (a preset of :data:`raytrace.materials.MATERIAL_PRESETS`) or its Lambertian
 ``albedo`` (linear RGB, or one number for grey). Camera pixel coordinates follow OpenCV: x
 right, y down, z forward, integer coordinates at pixel centres.
+
+``stars`` draws stars in the background (:mod:`raytrace.stars`): the body's attitude in the
+inertial frame (J2000) is required; without ``catalogue`` (a CSV with columns ``ra_deg``,
+``dec_deg``, ``v_mag``, relative to the JSON file's folder) a procedural sky of every star
+brighter than ``limit_mag`` (default 6.5, at most 9) is drawn from ``seed``.
 """
 
 from __future__ import annotations
@@ -39,8 +46,8 @@ from .model import MATERIALS, TargetModel
 
 __all__ = ["SceneSpec", "load_scene_file", "scene_to_dict"]
 
-_TOP_KEYS = {"meshes", "target", "camera", "sun", "earth", "ambient_radiance_W_m2_sr", "quality", "samples", "seed",
-             "version"}
+_TOP_KEYS = {"meshes", "target", "camera", "sun", "earth", "ambient_radiance_W_m2_sr", "stars", "quality", "samples",
+             "seed", "version"}
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -156,13 +163,44 @@ def _camera(cam: dict) -> tuple[Camera, np.ndarray, np.ndarray]:
     return camera, R, t
 
 
-def _lighting(data: dict) -> Lighting:
+def _stars(data: dict, folder: str):
+    st = _section(data, "stars", required=False)
+    if st is None:
+        return None, None
+    from .stars import StarField
+    unknown = set(st) - {"R_body_from_eci", "limit_mag", "seed", "catalogue"}
+    if unknown:
+        raise _err(f"stars: unknown keys {sorted(unknown)} (allowed: R_body_from_eci, limit_mag, seed, catalogue)")
+    if "R_body_from_eci" not in st:
+        raise _err("stars.R_body_from_eci is required (the body's attitude in the inertial frame, 9 numbers)")
+    R = _numbers("stars.R_body_from_eci", st["R_body_from_eci"], 9).reshape(3, 3)
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise _err("stars.R_body_from_eci must be a rotation matrix (orthonormal, det +1) to 1e-6")
+    try:
+        if "catalogue" in st:
+            if "seed" in st:
+                raise _err("stars: give 'seed' (procedural sky) or 'catalogue', not both")
+            path = st["catalogue"]
+            if not isinstance(path, str):
+                raise _err("stars.catalogue must be a path (string)")
+            path = path if os.path.isabs(path) else os.path.join(folder, path)
+            field = StarField.from_csv(path, st.get("limit_mag", math.inf))
+        else:
+            field = StarField.procedural(st.get("limit_mag", 6.5), st.get("seed", 0))
+    except ValueError as exc:
+        msg = str(exc)
+        raise (exc if msg.startswith("scene file:") else _err(f"stars: {msg}")) from None
+    return field, R
+
+
+def _lighting(data: dict, folder: str = ".") -> Lighting:
     sun = _section(data, "sun")
     unknown = set(sun) - {"sun_dir_body", "sun_irradiance_W_m2", "shadow_fraction", "angular_diameter_deg"}
     if unknown:
         raise _err(f"sun: unknown keys {sorted(unknown)}")
     if "sun_dir_body" not in sun:
         raise _err("sun.sun_dir_body is required (unit vector towards the Sun, body frame)")
+    stars, R_body_from_eci = _stars(data, folder)
     earth = None
     e = _section(data, "earth", required=False)
     try:
@@ -180,7 +218,8 @@ def _lighting(data: dict) -> Lighting:
                         sun_irradiance_W_m2=sun.get("sun_irradiance_W_m2", SOLAR_CONSTANT_W_M2),
                         shadow_fraction=sun.get("shadow_fraction", 1.0),
                         sun_angular_diameter_rad=math.radians(float(sun.get("angular_diameter_deg", 0.533))),
-                        earth=earth, ambient_radiance_W_m2_sr=data.get("ambient_radiance_W_m2_sr", 0.0))
+                        earth=earth, ambient_radiance_W_m2_sr=data.get("ambient_radiance_W_m2_sr", 0.0),
+                        stars=stars, R_body_from_eci=R_body_from_eci)
     except ValueError as exc:
         msg = str(exc)
         raise (exc if msg.startswith("scene file:") else _err(msg)) from None
@@ -219,8 +258,9 @@ def load_scene_file(path) -> SceneSpec:
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**31:
         raise _err(f"seed must be an integer in [0, 2**31), got {seed!r}")
     camera, R, t = _camera(_section(data, "camera"))
-    lighting = _lighting(data)
-    model = _model(data, os.path.dirname(os.path.abspath(path)))
+    folder = os.path.dirname(os.path.abspath(path))
+    lighting = _lighting(data, folder)
+    model = _model(data, folder)
     return SceneSpec(model, camera, R, t, lighting, quality, samples, seed)
 
 
@@ -243,4 +283,8 @@ def scene_to_dict(camera: Camera, R_cam_from_body, t_cam_m, lighting: Lighting, 
             raise ValueError("scene_to_dict: an Earth texture image cannot be written to a scene file")
         d["earth"] = {"earth_dir_body": list(e.earth_dir_body), "earth_distance_m": e.distance_m,
                       "radius_m": e.radius_m, "albedo": e.albedo, "texture": e.texture}
+    if lighting.stars is not None:
+        if lighting.stars.source is None:
+            raise ValueError("scene_to_dict: stars given star by star cannot be written to a scene file")
+        d["stars"] = {"R_body_from_eci": lighting.R_body_from_eci.ravel().tolist(), **lighting.stars.source}
     return d

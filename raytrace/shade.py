@@ -536,7 +536,9 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         rad = render_reference(scene, camera, R, t, lighting, geo, spp=q.spp, seed=int(seed))
         timings["path_trace"] = time.perf_counter() - t0
         _check_finite("path tracing", rad)
-        return RenderFrame(geo, rad.astype(np.float32), q, timings)
+        rad = rad.astype(np.float32)
+        _stars(rad, scene, camera, R, t, lighting, timings)
+        return RenderFrame(geo, rad, q, timings)
 
     t0 = time.perf_counter()
     ctx = _Context(scene, lighting, cache_options or {})
@@ -638,7 +640,20 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
             _check_finite("anti-aliasing", sub)
             rad[epix] = np.maximum(sub, 0.0)
     timings["antialias"] = time.perf_counter() - t0
-    return RenderFrame(geo, rad.reshape(H, W, 3), q, timings)
+    rad = rad.reshape(H, W, 3)
+    _stars(rad, scene, camera, R, t, lighting, timings)
+    return RenderFrame(geo, rad, q, timings)
+
+
+def _stars(rad, scene: Scene, camera: Camera, R, t, lighting: Lighting, timings: dict) -> None:
+    """The stars of ``lighting`` into the background of ``rad`` (H, W, 3), in place."""
+    if lighting.stars is None:
+        return
+    from .stars import add_stars
+    t0 = time.perf_counter()
+    add_stars(rad, lighting.stars, lighting.R_body_from_eci, scene, camera, R, t, lighting.earth)
+    _check_finite("stars", rad)
+    timings["stars"] = time.perf_counter() - t0
 
 
 def _earth_may_be_in_view(camera: Camera, R, lighting: Lighting) -> bool:

@@ -90,6 +90,8 @@ def test_same_seed_same_bytes_different_seed_differs():
     (["--window-s", "inf"], ["--window-s"]),
     (["--epoch", "yesterday"], ["--epoch", "ISO 8601"]),
     (["--bogus"], ["--bogus"]),
+    (["--star-limit-mag", "12"], ["--star-limit-mag", "9"]),
+    (["--star-catalogue", "no_such_stars.csv"], ["--star-catalogue", "no_such_stars.csv"]),
 ])
 def test_bad_input_one_line_nonzero_exit(args, names):
     r = run(*args)
@@ -153,6 +155,9 @@ def test_render_scene_writes_a_frame(tmp_path):
     ({"meshes": [{"path": "missing.ply", "albedo": 0.5}]}, "missing.ply"),
     ({"meshes": [{"path": "parts/bus.ply", "material": "unobtainium"}]}, "material must be one of"),
     ({"extra": 1}, "unknown keys"),
+    ({"stars": {"limit_mag": 6.0}}, "stars.R_body_from_eci is required"),
+    ({"stars": {"R_body_from_eci": [1, 0, 0, 0, 1, 0, 0, 0, 1], "limit_mag": 20}}, "limit magnitude"),
+    ({"stars": {"R_body_from_eci": [1, 0, 0, 0, 1, 0, 0, 0, 1], "catalogue": "none.csv"}}, "none.csv"),
 ])
 def test_render_scene_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, over, match):
     path = _tiny_scene(tmp_path, **over)
@@ -161,3 +166,34 @@ def test_render_scene_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys,
     err = capsys.readouterr().err
     assert match in err and err.count("\n") == 1
     assert not out.exists()
+
+
+def test_render_scene_stars_in_the_background_only(tmp_path):
+    """A catalogue star straight along the optical axis but behind the box is hidden; one
+    beside the box lands in its pixel, off the mask; the scene file round-trips."""
+    import OpenImageIO as oiio
+
+    from raytrace.scenefile import load_scene_file, scene_to_dict
+    path = _tiny_scene(tmp_path)
+    spec = load_scene_file(path)
+    R = spec.R_cam_from_body
+    d_axis = R.T @ np.array([0.0, 0.0, 1.0])  # body = inertial here (identity attitude)
+    d_side = R.T @ np.array([20.2 / 120.0, 3.2 / 120.0, 1.0])
+    d_side /= np.linalg.norm(d_side)
+    rows = ["ra_deg,dec_deg,v_mag"]
+    for d in (d_axis, d_side):
+        rows.append(f"{math.degrees(math.atan2(d[1], d[0])):.9f},{math.degrees(math.asin(d[2])):.9f},-3.0")
+    (tmp_path / "cat.csv").write_text("\n".join(rows) + "\n")
+    assert cli.main(["render-scene", str(path), "--out", str(tmp_path / "plain")]) == 0
+    path = _tiny_scene(tmp_path, stars={"R_body_from_eci": np.eye(3).ravel().tolist(), "catalogue": "cat.csv"})
+    out = tmp_path / "out"
+    assert cli.main(["render-scene", str(path), "--out", str(out)]) == 0
+    hdr = oiio.ImageBuf(str(out / "hdr/000000.exr")).get_pixels(oiio.FLOAT)
+    plain = oiio.ImageBuf(str(tmp_path / "plain/hdr/000000.exr")).get_pixels(oiio.FLOAT)
+    mask = oiio.ImageBuf(str(out / "mask/000000.png")).get_pixels(oiio.UINT16)[..., 0]
+    changed = np.argwhere((hdr != plain).any(-1))
+    assert changed.tolist() == [[27, 52]]  # (23.5 + 3.2, 31.5 + 20.2) rounded
+    assert mask[27, 52] == 0 and mask[24, 32] > 0  # the axis star is behind the box
+    spec = load_scene_file(path)
+    again = scene_to_dict(spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting, [])
+    assert again["stars"]["catalogue"] == str(tmp_path / "cat.csv")

@@ -163,6 +163,42 @@ def test_light_directions_in_labels_are_the_renderers(ref):
             assert hdr[mask > 0].max(initial=0.0) < 5.0  # only earthshine/ambient, far below 1361/π
 
 
+def test_stars_are_fixed_in_the_inertial_frame_of_the_labels(tmp_path):
+    """Every pixel the stars brighten holds a star of the sequence's sky projected with the
+    label's inertial attitude R_cam_from_eci, and the stars over black space are all drawn."""
+    import OpenImageIO as oiio
+
+    from raytrace.stars import StarField
+    args = [*SMALL[:4], "--frames", "3", *SMALL[6:], "--modalities", "hdr,mask", "--workers", "1"]
+    assert run_main(*args, "--out", tmp_path / "plain") == 0
+    assert run_main(*args, "--star-limit-mag", "5", "--out", tmp_path / "stars") == 0
+    labels = json.loads((tmp_path / "stars" / "labels.json").read_text())
+    K = np.array(json.loads((tmp_path / "stars" / "camera.json").read_text())["K"])
+    sky = StarField.procedural(5.0, seed=0)
+    scen = json.loads((tmp_path / "stars" / "scenario.json").read_text())
+    earth_radius = math.asin(6378137.0 / scen["reference_orbit"]["a_m"])  # seen from the orbit (±100 m)
+    n_checked = 0
+    for lab in labels:
+        hdr, plain = (oiio.ImageBuf(str(tmp_path / d / lab["files"]["hdr"])).get_pixels(oiio.FLOAT)
+                      for d in ("stars", "plain"))
+        mask = oiio.ImageBuf(str(tmp_path / "stars" / lab["files"]["mask"])).get_pixels(oiio.UINT16)[..., 0]
+        d = sky.dirs_eci @ np.reshape(lab["R_cam_from_eci"], (3, 3)).T
+        d = d[d[:, 2] > 0]
+        uv = np.floor((d @ K.T)[:, :2] / d[:, 2:] + 0.5).astype(int)
+        inside = (uv[:, 0] >= 0) & (uv[:, 0] < 160) & (uv[:, 1] >= 0) & (uv[:, 1] < 120)
+        uv, d_in = uv[inside], d[inside] / np.linalg.norm(d[inside], axis=1, keepdims=True)
+        star_px = {(v, u) for u, v in uv}
+        changed = {tuple(p) for p in np.argwhere((hdr != plain).any(-1))}
+        assert changed <= star_px
+        # over black space: not on the target, not on Earth's disc (night side black too)
+        e = np.asarray(lab["earth_dir_cam"])
+        off_earth = {(v, u) for (u, v), di in zip(uv, d_in) if di @ e < math.cos(earth_radius + 0.01)}
+        space = {p for p in star_px & off_earth if mask[p] == 0 and not plain[p].any()}
+        assert space <= changed
+        n_checked += len(space)
+    assert n_checked > 20
+
+
 def test_model_ply_reads_with_trimesh(ref):
     import trimesh
     V, Fc, comp = F.read_model_ply(str(ref / "model/icesat.ply"))
