@@ -30,6 +30,7 @@ from .model import TargetModel
 __all__ = ["GeometryFrame", "Scene", "default_threads"]
 
 _RAYS_PER_CHUNK = 1 << 14  # rays per Embree call: small enough to balance threads, large enough to amortise
+_MIN_CHUNK = 2048  # fewest rays per Embree call of a batch on the thread pool
 _POOL: ThreadPoolExecutor | None = None
 
 
@@ -292,7 +293,9 @@ class Scene:
         n = len(o)
         far = None if tfar is None else np.ascontiguousarray(np.broadcast_to(tfar, (n,)), dtype=np.float32)
         scene = self.embree
-        chunk = 4 * _RAYS_PER_CHUNK
+        # at least 4 chunks per thread: a batch of 76 k rays in 65 k + 11 k chunks ran 1.1× faster
+        # on 2 threads than on one, in 8 balanced chunks 1.9× (Cassini edge sub-pixel rays)
+        chunk = max(_MIN_CHUNK, min(4 * _RAYS_PER_CHUNK, -(-n // (4 * default_threads()))))
         spans = [(a, min(a + chunk, n)) for a in range(0, n, chunk)]
 
         def run(span):
