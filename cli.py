@@ -40,6 +40,11 @@ import sys
 import time
 from dataclasses import dataclass
 
+# one BLAS thread (unless the user set one): nothing here needs a threaded BLAS, and OpenBLAS
+# workers that spin after a product steal a core from the renderer's kernels (worker
+# processes inherit it); set before NumPy loads OpenBLAS
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import numpy as np
 
 from orbit.attitude import ATTITUDE_MODES

@@ -56,7 +56,9 @@ def auto_exposure(radiance, mask=None, *, percentile: float = 99.5,
     if not 0 < percentile <= 100:
         raise ValueError(f"percentile must be in (0, 100], got {percentile!r}")
     level = _checks.finite_scalar("level", level, positive=True)
-    luma = img @ _LUMA
+    # elementwise, not ``img @ _LUMA``: a threaded BLAS product leaves its workers spinning,
+    # which slows the next parallel kernel on a 2-core machine
+    luma = img[..., 0] * _LUMA[0] + img[..., 1] * _LUMA[1] + img[..., 2] * _LUMA[2]
     sel = luma > 0
     if mask is not None:
         m = np.asarray(mask)
