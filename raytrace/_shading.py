@@ -13,7 +13,7 @@ import numba
 import numpy as np
 
 from . import environment as env
-from ._jit import FASTMATH, jit, pjit
+from ._jit import FASTMATH, jit, pjit, pjit_exact
 from ._kernels import moller_trumbore
 from .brdf import brdf_cos, cosine_direction, onb, sample_brdf, specular_albedo
 from .cache import _hash01, interpolate_rows, lattice_rows
@@ -130,6 +130,17 @@ def cache_irradiance(values, valid, face_s, lat_start, lat_ids, face, B, SIDE, o
         out[k, 0] = r
         out[k, 1] = g
         out[k, 2] = b
+
+
+@pjit_exact
+def add_rows(k, A, B, outA, outB):
+    """outA[i] += A[k[i]] and outB[i] += B[k[i]] where k[i] ≥ 0 (rows of 3)."""
+    for i in numba.prange(k.shape[0]):
+        j = k[i]
+        if j >= 0:
+            for a in range(3):
+                outA[i, a] += A[j, a]
+                outB[i, a] += B[j, a]
 
 
 @pjit

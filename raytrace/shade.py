@@ -284,7 +284,7 @@ class _Context:
         sx, sy, sz = light.sun_dir_body
         if e_sun > 0.0 and n:
             want = np.empty(n, dtype=bool)
-            o = np.empty((n, 3))
+            o = np.empty((n, 3), np.float32)  # Embree's precision: rounded once, as before
             K.sun_rays(s["P"], s["NS"], s["NG"], sx, sy, sz, self.eps, want, o)
             idx = np.flatnonzero(want)
             if len(idx):
@@ -816,7 +816,8 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, D, h, centre, nu
         sun_dirs = None
         if ctx.lighting.sun_angular_diameter_rad > 0.0 and S > 1:
             # one solar-disc sample per sub-sample, stratified over the pixel's S sub-samples
-            sun_dirs = np.empty((len(idx), 3))
+            # (float32: they only steer shadow rays)
+            sun_dirs = np.empty((len(idx), 3), np.float32)
             sx, sy, sz = ctx.lighting.sun_dir_body
             K.sun_disc_dirs(sub_key, S, seed, sx, sy, sz, math.cos(0.5 * ctx.lighting.sun_angular_diameter_rad),
                             sun_dirs)
@@ -828,9 +829,7 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, D, h, centre, nu
             H, W = geo.instance.shape
             K.donor_rows(centre[idx].astype(np.int64), W, H, s["comp"], s["P"], s["NS"], row_of_pixel,
                          geo.instance.ravel(), P_c, N_c, foot, borrow, k)
-            j = np.flatnonzero(k >= 0)  # sub-samples with a centre's correction to take
-            E[j] += residual[0][k[j]]
-            Ls[j] += residual[1][k[j]]
+            K.add_rows(k, residual[0], residual[1], E, Ls)  # where k ≥ 0: a centre's correction
             # below _MIN_SUB_GATHER rays an unfiltered gather is noisier than the cache is wrong
             j = np.flatnonzero(k < 0)
             if len(j) and gather_rays >= _MIN_SUB_GATHER:
