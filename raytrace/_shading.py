@@ -133,6 +133,40 @@ def cache_irradiance(values, valid, face_s, lat_start, lat_ids, face, B, SIDE, o
 
 
 @pjit_exact
+def take_rows(src, idx, out):
+    """out[j] = src[idx[j]] (rows of 3): NumPy's ``src[idx]`` on both cores."""
+    for j in numba.prange(idx.shape[0]):
+        i = idx[j]
+        for a in range(3):
+            out[j, a] = src[i, a]
+
+
+@pjit_exact
+def hit_or_miss_rows(geom, out):
+    """out[k] = 0 where ray k hit (geom ≥ 0), −1 where it missed (rows of 3)."""
+    for k in numba.prange(geom.shape[0]):
+        v = 0.0 if geom[k] >= 0 else -1.0
+        for a in range(3):
+            out[k, a] = v
+
+
+@pjit_exact
+def hit_or_miss(geom, out):
+    """out[k] = 0 where ray k hit (geom ≥ 0), −1 where it missed."""
+    for k in numba.prange(geom.shape[0]):
+        out[k] = 0.0 if geom[k] >= 0 else -1.0
+
+
+@pjit_exact
+def put_scaled_rows(idx, X, scale, out):
+    """out[idx[j]] = scale · X[j] (rows of 3)."""
+    for j in numba.prange(idx.shape[0]):
+        i = idx[j]
+        for a in range(3):
+            out[i, a] = scale * X[j, a]
+
+
+@pjit_exact
 def add_rows(k, A, B, outA, outB):
     """outA[i] += A[k[i]] and outB[i] += B[k[i]] where k[i] ≥ 0 (rows of 3)."""
     for i in numba.prange(k.shape[0]):

@@ -425,9 +425,10 @@ class _Context:
     def _bounces(self, o, d, h, hu, hv, keys, seed, levels):
         """:meth:`_traced_indirect` for rays (o, d) with hits h, ``levels`` bounces deep."""
         m = len(d)
-        e_ind = np.full((m, 3), -1.0)
-        hit = h["geomID"] >= 0
-        if not hit.any() or levels <= 0:
+        e_ind = np.empty((m, 3))
+        K.hit_or_miss_rows(h["geomID"], e_ind)  # directions below the surface carry nothing
+        if levels <= 0 or not (h["geomID"] >= 0).any():
+            e_ind.fill(-1.0)
             return e_ind
         want = np.empty(m, dtype=bool)
         o2 = np.empty((m, 3))
@@ -435,10 +436,12 @@ class _Context:
         sc = self.scene
         K.bounce2_rays(o, d, h["tfar"].astype(np.float64), h["geomID"], h["primID"], hu, hv, sc.face_offset,
                        sc.face_normal, sc.corner_normal, keys, seed, self.eps, want, o2, d2)
-        e_ind[hit] = 0.0  # directions below the surface carry nothing
         idx = np.flatnonzero(want)
         if len(idx):
-            o2, d2 = o2[idx], d2[idx]
+            o2c, d2c = np.empty((len(idx), 3)), np.empty((len(idx), 3))
+            K.take_rows(o2, idx, o2c)
+            K.take_rows(d2, idx, d2c)
+            o2, d2 = o2c, d2c
             h2 = sc.intersect(o2, d2)
             hu2, hv2 = h2["u"].astype(np.float64), h2["v"].astype(np.float64)
             vis2 = self._bounce_sun(o2, d2, h2)
@@ -451,22 +454,22 @@ class _Context:
                                              hv2[near], keys[idx][near] * 4 + 1, seed, levels - 1)
             L2 = np.empty((len(idx), 3))
             K.incoming_rays(o2, d2, h2["geomID"], h2["primID"], hu2, hv2, *self._lookup(), vis2, e2, L2)
-            e_ind[idx] = math.pi * L2
+            K.put_scaled_rows(idx, L2, math.pi, e_ind)
         return e_ind
 
     def _bounce_sun(self, o, d, h):
         """The Sun's visibility (0/1) at the hits of rays (o, d) from one shadow ray each; −1 at
         misses (the environment needs none)."""
-        vis = np.full(len(d), -1.0)
         light = self.lighting
         if light.sun_irradiance_at_target_W_m2 <= 0.0 or not len(d):
-            return vis
+            return np.full(len(d), -1.0)
+        vis = np.empty(len(d))
+        K.hit_or_miss(h["geomID"], vis)
         sx, sy, sz = light.sun_dir_body
         want = np.empty(len(d), dtype=bool)
         so = np.empty((len(d), 3))
         K.bounce_sun_rays(o, d, h["tfar"].astype(np.float64), h["geomID"], h["primID"], self.scene.face_offset,
                           self.scene.face_normal, sx, sy, sz, self.eps, want, so)
-        vis[h["geomID"] >= 0] = 0.0
         idx = np.flatnonzero(want)
         if len(idx):
             blocked = self.scene.occluded(so[idx], np.broadcast_to(np.float32([sx, sy, sz]), (len(idx), 3)))
