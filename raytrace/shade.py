@@ -54,6 +54,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _shading as K
+from ._kernels import rows_times_matrix
 from .brdf import split_sum_table
 from .camera import Camera
 from .lighting import Lighting
@@ -335,7 +336,7 @@ class _Context:
         reach = math.ceil(w_blocked.max())
         near = maximum_filter(w_px, size=2 * reach + 1, mode="constant")[v - v0, u - u0] > 0.25
         sx, sy, sz = light.sun_dir_body
-        NS, NG = s["NS"], s["NG"]  # (no BLAS: see _rows_times_matrix)
+        NS, NG = s["NS"], s["NG"]  # (no BLAS: see raytrace._kernels.rows_times_matrix)
         facing = ((NS[:, 0] * sx + NS[:, 1] * sy + NS[:, 2] * sz > 0.0)
                   & (NG[:, 0] * sx + NG[:, 1] * sy + NG[:, 2] * sz > 0.0))
         cand = np.flatnonzero(near & facing)
@@ -560,7 +561,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     u = (pix % W).astype(np.float64)
     v = (pix // W).astype(np.float64)
     D_cam = np.column_stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones(len(pix))])
-    D = _rows_times_matrix(D_cam, R_bc.T)
+    D = rows_times_matrix(D_cam, R_bc.T)
     O = np.ascontiguousarray(np.broadcast_to(o_body, D.shape))
     face = geo.face_index.ravel()[pix].astype(np.int64)
     s = ctx.surfaces(O, D, face)
@@ -659,14 +660,6 @@ def _stars(rad, scene: Scene, camera: Camera, R, t, lighting: Lighting, timings:
     add_stars(rad, lighting.stars, lighting.R_body_from_eci, scene, camera, R, t, lighting.earth)
     _check_finite("stars", rad)
     timings["stars"] = time.perf_counter() - t0
-
-
-def _rows_times_matrix(X: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """X @ M for rows X (n, 3) and a 3 × 3 M, elementwise instead of through BLAS: a threaded
-    OpenBLAS product leaves its worker spinning for a while, and on 2 cores that halved the
-    speed of the next parallel kernel (Earth's background on ICESat ``earth``: 13 ms alone,
-    26 ms after the product); the result is also the same on every CPU."""
-    return np.ascontiguousarray(X[:, 0:1] * M[0] + X[:, 1:2] * M[1] + X[:, 2:3] * M[2])
 
 
 def _earth_may_be_in_view(camera: Camera, R, lighting: Lighting) -> bool:

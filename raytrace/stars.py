@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._kernels import rows_times_matrix
 from .lighting import SOLAR_CONSTANT_W_M2
 
 __all__ = ["MAG_BRIGHTEST", "MAG_FAINTEST", "SUN_V_MAG", "StarField", "irradiance_of_magnitude"]
@@ -161,8 +162,7 @@ def add_stars(radiance: np.ndarray, stars: StarField, R_body_from_eci, scene, ca
     R = np.asarray(R_cam_from_body, dtype=np.float64).reshape(3, 3)
     t = np.asarray(t_cam_m, dtype=np.float64).ravel()
     H, W = radiance.shape[:2]
-    d_body = stars.dirs_eci @ R_body_from_eci.T
-    d_cam = d_body @ R.T
+    d_cam = rows_times_matrix(stars.dirs_eci, (R @ R_body_from_eci).T)  # (no BLAS on the hot path)
     front = d_cam[:, 2] > 1e-9
     z = np.where(front, d_cam[:, 2], 1.0)
     u = camera.fx * d_cam[:, 0] / z + camera.cx
@@ -172,15 +172,16 @@ def add_stars(radiance: np.ndarray, stars: StarField, R_body_from_eci, scene, ca
     if not len(k):
         return 0
     o_body = -R.T @ t
+    d_body = rows_times_matrix(d_cam[k], R)  # R_body_from_cam d_cam, per row
     if earth is not None:
         # behind Earth's disc: the line of sight meets the sphere (centre c, radius r)
         c = np.asarray(earth.earth_dir_body) * earth.distance_m - o_body
-        b = d_body[k] @ c
-        k = k[~((b > 0.0) & (c @ c - b * b < earth.radius_m ** 2))]
+        b = d_body[:, 0] * c[0] + d_body[:, 1] * c[1] + d_body[:, 2] * c[2]
+        keep = ~((b > 0.0) & (c @ c - b * b < earth.radius_m ** 2))
+        k, d_body = k[keep], d_body[keep]
     if len(k):
         # behind the target
-        o = np.broadcast_to(o_body, (len(k), 3))
-        k = k[~scene.occluded(o, d_body[k])]
+        k = k[~scene.occluded(np.broadcast_to(o_body, (len(k), 3)), d_body)]
     # Ω of the pixel, at its centre (its spread over the pixel is second order, ~1e-5 here)
     x, y = (iu[k] - camera.cx) / camera.fx, (iv[k] - camera.cy) / camera.fy
     cos_t = 1.0 / np.sqrt(1.0 + x * x + y * y)
