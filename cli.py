@@ -780,14 +780,14 @@ def _star_field(cfg: dict):
     if key[0] is None and key[1] is None:
         return None
     if key not in _STARS:
-        from raytrace.stars import MAG_FAINTEST, StarField
+        from raytrace.stars import StarField
         if key[0] is not None:
             try:
                 _STARS[key] = StarField.from_csv(key[0], math.inf if key[1] is None else key[1])
             except ValueError as exc:
                 raise CLIError(f"argument --star-catalogue: {exc}") from None
         else:  # one sky per seed: the same stars in every frame
-            _STARS[key] = StarField.procedural(min(key[1], MAG_FAINTEST), key[2])
+            _STARS[key] = StarField.procedural(key[1], key[2])
     return _STARS[key]
 
 

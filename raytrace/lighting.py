@@ -47,6 +47,14 @@ def _finite(name: str, value, lo: float, hi: float = math.inf, lo_open: bool = F
     return x
 
 
+def _rotation(name: str, value, when: str = "") -> np.ndarray:
+    R = None if value is None else np.asarray(value, dtype=np.float64)
+    if R is None or R.shape != (3, 3) or not np.all(np.isfinite(R)) \
+            or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise ValueError(f"{name} must be a 3x3 rotation matrix (orthonormal, det +1){when}")
+    return R
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class Earth:
     """Earth as an extended light and a backdrop.
@@ -82,9 +90,7 @@ class Earth:
         object.__setattr__(self, "radius_m", r)
         object.__setattr__(self, "distance_m", _finite("earth distance_m", self.distance_m, r, lo_open=True))
         object.__setattr__(self, "albedo", _finite("earth albedo", self.albedo, 0.0, 1.0))
-        R = np.eye(3) if self.R_body_from_earth is None else np.asarray(self.R_body_from_earth, dtype=np.float64)
-        if R.shape != (3, 3) or not np.all(np.isfinite(R)) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
-            raise ValueError("R_body_from_earth must be a 3x3 rotation matrix")
+        R = np.eye(3) if self.R_body_from_earth is None else _rotation("R_body_from_earth", self.R_body_from_earth)
         object.__setattr__(self, "R_body_from_earth", R)
         tex = self.texture
         if isinstance(tex, str):
@@ -153,11 +159,8 @@ class Lighting:
             from .stars import StarField
             if not isinstance(self.stars, StarField):
                 raise ValueError(f"stars must be a raytrace.stars.StarField or None, got {type(self.stars).__name__}")
-            R = None if self.R_body_from_eci is None else np.asarray(self.R_body_from_eci, dtype=np.float64)
-            if R is None or R.shape != (3, 3) or not np.all(np.isfinite(R)) \
-                    or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
-                raise ValueError("R_body_from_eci must be a 3x3 rotation matrix when stars are given")
-            object.__setattr__(self, "R_body_from_eci", R)
+            object.__setattr__(self, "R_body_from_eci",
+                               _rotation("R_body_from_eci", self.R_body_from_eci, " when stars are given"))
 
     @property
     def sun_irradiance_at_target_W_m2(self) -> float:

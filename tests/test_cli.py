@@ -157,6 +157,7 @@ def test_render_scene_writes_a_frame(tmp_path):
     ({"extra": 1}, "unknown keys"),
     ({"stars": {"limit_mag": 6.0}}, "stars.R_body_from_eci is required"),
     ({"stars": {"R_body_from_eci": [1, 0, 0, 0, 1, 0, 0, 0, 1], "limit_mag": 20}}, "limit magnitude"),
+    ({"stars": {"R_body_from_eci": [1, 0, 0, 0, 1, 0, 0, 0, -1]}}, "R_body_from_eci must be a 3x3 rotation"),
     ({"stars": {"R_body_from_eci": [1, 0, 0, 0, 1, 0, 0, 0, 1], "catalogue": "none.csv"}}, "none.csv"),
 ])
 def test_render_scene_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, over, match):
