@@ -414,7 +414,7 @@ def incoming_rays(O, D, geom, prim, hu, hv, face_offset, face_normal, corner_nor
 @pjit
 def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
                mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis,
-               e_ind, NS, E_unocc, alpha, out):
+               e_ind, NS, E_unocc, alpha, out, out_var):
     """Irradiance estimate per point from its n_rays cosine-weighted rays (about NS; rays under
     the geometric surface carry nothing), with the environment as a control variate:
 
@@ -430,12 +430,15 @@ def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, c
     0.01 %, better where Earth lights the target (``balanced``-16 ICESat ``backlit`` 4.79 →
     4.20 %, Crew Dragon ``backlit`` 6.39 → 5.96 %; median over the 12: 4.55 → 4.25 %).
     ``vis[m]`` the Sun's visibility at ray m's hit (< 0: from the cache), ``e_ind[m]`` a traced
-    estimate of the hit's indirect irradiance (< 0: from the cache)."""
+    estimate of the hit's indirect irradiance (< 0: from the cache). ``out_var[k]`` is the
+    sample variance of the estimate's luminance (Rec. 709 weights) from the spread of its N
+    per-ray terms: s²/N [(W/m²)²], which guides :func:`atrous` (0 for N = 1)."""
     a = alpha
     for k in numba.prange(out.shape[0]):
         sr = 0.0
         sg = 0.0
         sb = 0.0
+        sy2 = 0.0  # Σ (luminance of the ray's term)²
         for j in range(n_rays):
             m = k * n_rays + j
             below = D[m, 0] * NG[k, 0] + D[m, 1] * NG[k, 1] + D[m, 2] * NG[k, 2] <= 0.0
@@ -446,25 +449,36 @@ def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, c
                 sr += (1.0 - a) * r
                 sg += (1.0 - a) * g
                 sb += (1.0 - a) * b
+                y = (1.0 - a) * (0.2126 * r + 0.7152 * g + 0.0722 * b)
+                sy2 += y * y
                 continue
+            y = 0.0  # luminance of this ray's term
             if a != 0.0:
                 r, g, b = incoming_env(p, tex, O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1], D[m, 2])
                 sr -= a * r
                 sg -= a * g
                 sb -= a * b
-            if below:
-                continue
-            r, g, b = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
-                               D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
-                               mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
-                               vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
-            sr += r
-            sg += g
-            sb += b
+                y -= a * (0.2126 * r + 0.7152 * g + 0.0722 * b)
+            if not below:
+                r, g, b = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
+                                   D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
+                                   mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+                                   vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
+                sr += r
+                sg += g
+                sb += b
+                y += 0.2126 * r + 0.7152 * g + 0.0722 * b
+            sy2 += y * y
         k_ = math.pi / n_rays
         out[k, 0] = sr * k_
         out[k, 1] = sg * k_
         out[k, 2] = sb * k_
+        # variance of the mean of the N terms π·t_j: π² (Σy² − N ȳ²) / (N (N − 1))
+        if n_rays > 1:
+            ym = (0.2126 * sr + 0.7152 * sg + 0.0722 * sb) / n_rays
+            out_var[k] = max(math.pi * math.pi * (sy2 - n_rays * ym * ym) / (n_rays * (n_rays - 1.0)), 0.0)
+        else:
+            out_var[k] = 0.0
         if a != 0.0:
             er, eg, eb = env.irradiance_lookup(E_unocc, NS[k, 0], NS[k, 1], NS[k, 2])
             out[k, 0] += a * er
@@ -525,6 +539,92 @@ def atrous(img, inst, normal, depth, fx, fy, cx, cy, step, out):
                     sw += w
             for c in range(C):
                 out[v, u, c] = acc[c] / sw
+
+
+@pjit
+def var_blur3(var, inst, out):
+    """Mean of ``var`` over each pixel's 3×3 neighbours on the same part (0 off the target)."""
+    H, W = inst.shape
+    for v in numba.prange(H):
+        for u in range(W):
+            i0 = inst[v, u]
+            if i0 == 0:
+                out[v, u] = 0.0
+                continue
+            sv = 0.0
+            nv = 0
+            for vv in range(max(v - 1, 0), min(v + 2, H)):
+                for uu in range(max(u - 1, 0), min(u + 2, W)):
+                    if inst[vv, uu] == i0:
+                        sv += var[vv, uu]
+                        nv += 1
+            out[v, u] = sv / nv
+
+
+@pjit
+def atrous_guided(img, var, vblur, inst, normal, depth, fx, fy, cx, cy, step, sigma_l, out, out_var):
+    """:func:`atrous` with an edge-stopping term on the residual itself, after SVGF (Schied et
+    al. 2017, doi:10.1145/3105762.3105770, eq. 5) but symmetric: a neighbour's weight is further
+    multiplied by exp(−|l − l'| / (σ_l·√(v + v'))), where l is the luminance of channels 0–2 and
+    v the variance of a pixel's estimate (``var``) averaged over its 3×3 same-part neighbours
+    (``vblur``, :func:`var_blur3`). |l − l'|/√(v + v') is the z-score of the difference of two
+    estimates, so a step in the residual larger than the noise — contact shadow, gap, crease —
+    is kept while noise is smoothed, and a noisy bright pixel and its quiet neighbour are
+    averaged both ways (SVGF's one-sided √v would keep the quiet ones from taking the bright
+    one's energy and darken the image). The variance is carried through the pass
+    (v' = Σ w² v / (Σ w)²) for the next."""
+    H, W = inst.shape
+    C = img.shape[2]
+    h = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
+    s2 = sigma_l * sigma_l
+    for v in numba.prange(H):
+        acc = np.empty(C)
+        for u in range(W):
+            i0 = inst[v, u]
+            if i0 == 0:
+                continue
+            vb0 = vblur[v, u]
+            l0 = 0.2126 * img[v, u, 0] + 0.7152 * img[v, u, 1] + 0.0722 * img[v, u, 2]
+            z0 = depth[v, u]
+            n0x = normal[v, u, 0]
+            n0y = normal[v, u, 1]
+            n0z = normal[v, u, 2]
+            foot = z0 / fx
+            acc[:] = 0.0
+            sw = 0.0
+            sw2v = 0.0
+            for a in range(5):
+                vv = v + (a - 2) * step
+                if vv < 0 or vv >= H:
+                    continue
+                for b in range(5):
+                    uu = u + (b - 2) * step
+                    if uu < 0 or uu >= W or inst[vv, uu] != i0:
+                        continue
+                    nd = n0x * normal[vv, uu, 0] + n0y * normal[vv, uu, 1] + n0z * normal[vv, uu, 2]
+                    if nd <= 0.0:
+                        continue
+                    wn = nd * nd  # (n·n')^64 by six squarings
+                    wn *= wn
+                    wn *= wn
+                    wn *= wn
+                    wn *= wn
+                    wn *= wn
+                    z1 = depth[vv, uu]
+                    dxp = ((uu - u) * z1 + (u - cx) * (z1 - z0)) / fx
+                    dyp = ((vv - v) * z1 + (v - cy) * (z1 - z0)) / fy
+                    dzp = z1 - z0
+                    dist = abs(n0x * dxp + n0y * dyp + n0z * dzp) / (foot * (1.0 + step))
+                    l1 = 0.2126 * img[vv, uu, 0] + 0.7152 * img[vv, uu, 1] + 0.0722 * img[vv, uu, 2]
+                    w = h[a] * h[b] * wn * math.exp(-dist - abs(l1 - l0) / (math.sqrt(s2 * (vb0 + vblur[vv, uu]))
+                                                                             + 1e-30))
+                    for c in range(C):
+                        acc[c] += w * img[vv, uu, c]
+                    sw += w
+                    sw2v += w * w * var[vv, uu]
+            for c in range(C):
+                out[v, u, c] = acc[c] / sw
+            out_var[v, u] = sw2v / (sw * sw)
 
 
 @pjit

@@ -27,7 +27,9 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     they stay within 2 cache lattice spacings — a gap —, the cache beyond)). The
     cache's interpolated value serves as a control variate: only the difference
     (gather − cache) is filtered, by an edge-avoiding à-trous filter guided by the exact id,
-    normal and depth AOVs, so the filter removes noise, not detail. Edge pixels get 4×4
+    normal and depth AOVs and by the residual's own noise (a step between two pixels larger
+    than their gathers' spread — a contact shadow, a gap — is kept), so the filter removes
+    noise, not detail. Edge pixels get 4×4
     (N ≤ 8), 6×6 (N ≤ 128) or 8×8 jittered shaded sub-pixel rays, plus 8×8 to 10×10 coverage
     rays where they are mixed (and pixels whose corners disagree with the centre on the Sun's
     visibility, or that a sliver of a triangle — a wire thinner than a pixel — crosses in
@@ -76,6 +78,10 @@ class Quality:
         Final-gather rays per pixel (0: the cache alone) [-].
     filter_passes : int
         À-trous passes on the gathered residual (pass k has holes of 2^k pixels) [-].
+    filter_sigma_l : float
+        Edge stopping on the residual itself: a neighbour's weight falls as exp(−z/σ_l), z the
+        z-score of the two pixels' difference from their gathers' own variances
+        (:func:`raytrace._shading.atrous_guided`); 0: geometry only (:func:`raytrace._shading.atrous`) [-].
     aa_grid : int
         Edge pixels get aa_grid² stratified sub-pixel rays [-].
     spp : int
@@ -114,6 +120,7 @@ class Quality:
     borrow: bool = False
     sun_corners: bool = False
     slivers: bool = False
+    filter_sigma_l: float = 0.0
 
 
 # coverage grids of edge pixels (Quality.cov_grid) and the fewest final-gather rays worth
@@ -160,12 +167,21 @@ def _balanced_aa(samples: int) -> int:
 
 def _filter_passes(samples: int) -> int:
     """À-trous passes on the gathered residual of ``balanced`` with N rays: 3 (N ≤ 4), 2
-    (N ≤ 8), 1 (N ≤ 128), 0. Chosen on the 12 scenes of ``benchmarks/bench_time_error.py`` at
-    1280×960 (median error): N = 4: 3 passes 4.29 %, 2 4.34 %; N = 8: 4 passes 4.12 %, 3 3.96 %,
-    2 3.85 %, 1 3.93 %; N = 16: 2 passes 3.08 %, 1 2.82 %, 0 5.61 %; N = 32: 2 passes 2.81 %, 1
-    2.41 %; N = 64: 1 pass 2.14 %, 0 2.91 %. (The earlier 3 / 2 / 1 / 0 at N ≤ 8 / 32 / 128 /
-    more was chosen at 640×480, where a pass spans twice the surface.)"""
-    return 3 if samples <= 4 else (2 if samples <= 8 else (1 if samples <= 128 else 0))
+    (N ≤ 32), 1. Chosen with the residual-guided filter (σ_l = FILTER_SIGMA_L) on the 12 scenes
+    of ``benchmarks/bench_time_error.py`` at 1280×960 (median error, bias and noise estimated
+    without the reference's noise): N = 8: 3 passes 3.71 %, 2 3.70 %; N = 16: 2 passes 2.74 %, 1
+    2.81 %; N = 64: 2 passes 2.07 %, 1 1.95 %; N = 256: 2 passes 1.55 %, 1 1.44 %. With the
+    geometry-only filter the best were N = 8: 2 passes 3.85 %, N = 16: 1 pass 2.82 %, N = 64:
+    1 pass 2.14 %, N = 256: 0 passes 1.71 % (a pass removed noise but blurred the residual's
+    real steps: at N = 64 the unfiltered bias was 0.6 % on Cassini ``sunlit``, 1.1 % filtered)."""
+    return 3 if samples <= 4 else (2 if samples <= 32 else 1)
+
+
+# σ_l of the residual-guided filter (Quality.filter_sigma_l): on the 12 scenes at 1280×960,
+# ``balanced``-64 median error 2.14 % geometry-only, 1.95 % with σ_l = 3, 1.95 % with 4, 1.97 %
+# with 6 (SVGF uses 4 on a one-sided score, √v of the centre only; that darkened the image,
+# interior means up to 0.5 % low at N = 16, and was worse at N = 16: 2.89 % against 2.81 %)
+FILTER_SIGMA_L = 4.0
 
 
 def _borrow(samples: int) -> bool:
@@ -185,7 +201,7 @@ _PRESETS = {
     "fast": Quality("fast", gather_rays=0, filter_passes=0, aa_grid=3, sun_rays=4, cov_grid=COV_FAST),
     "balanced": Quality("balanced", gather_rays=8, filter_passes=_filter_passes(8), aa_grid=_balanced_aa(8),
                         sun_rays=16, cov_grid=COV_BAL, borrow=_borrow(8), sun_corners=True,
-                        slivers=True),
+                        slivers=True, filter_sigma_l=FILTER_SIGMA_L),
     "reference": Quality("reference", spp=1024),
 }
 
@@ -207,7 +223,7 @@ def quality_preset(name: str, samples: int | None = None) -> Quality:
         aa = _balanced_aa(samples)
         return Quality(name, gather_rays=samples, filter_passes=passes, aa_grid=aa, sun_rays=max(16, min(samples, 64)),
                        cov_grid=max(COV_BAL, aa + 2), borrow=_borrow(samples), sun_corners=True,
-                       slivers=True)
+                       slivers=True, filter_sigma_l=FILTER_SIGMA_L)
     if name == "reference":
         return Quality(name, spp=samples)
     aa = max(1, min(samples, 16))
@@ -384,21 +400,24 @@ class _Context:
                            s["SIDE"], E)
         return E
 
-    def gather_E(self, s, n_rays: int, pix: np.ndarray, seed: int):
+    def gather_E(self, s, n_rays: int, pix: np.ndarray, seed: int, var: np.ndarray | None = None):
         """Final-gather irradiance (n, 3) of the points ``s`` from n_rays rays each, in chunks
         of about _CHUNK_RAYS rays (every sample is keyed by its pixel, so the result does not
-        depend on the chunking)."""
+        depend on the chunking); ``var`` (n,), if given, receives each estimate's luminance
+        variance (:func:`raytrace._shading.gather_sum`)."""
         n = len(s["P"])
+        if var is None:
+            var = np.empty(n)
         step = max(1, _CHUNK_RAYS // n_rays)
         if n <= step:
-            return self._gather_chunk(s, n_rays, pix, seed)
+            return self._gather_chunk(s, n_rays, pix, seed, var)
         E = np.empty((n, 3))
         for a in range(0, n, step):
             E[a:a + step] = self._gather_chunk({k: v[a:a + step] for k, v in s.items()}, n_rays, pix[a:a + step],
-                                               seed)
+                                               seed, var[a:a + step])
         return E
 
-    def _gather_chunk(self, s, n_rays: int, pix: np.ndarray, seed: int):
+    def _gather_chunk(self, s, n_rays: int, pix: np.ndarray, seed: int, var: np.ndarray):
         n = len(s["P"])
         o = np.empty((n * n_rays, 3))
         d = np.empty((n * n_rays, 3))
@@ -409,7 +428,7 @@ class _Context:
         e_ind = self._traced_indirect(o, d, h, hu, hv, pix, n_rays, seed)
         E = np.empty((n, 3))
         K.gather_sum(n_rays, o, d, s["NG"], h["geomID"], h["primID"], hu, hv, *self._lookup(), vis, e_ind, s["NS"],
-                     self.env_irradiance, GATHER_ALPHA, E)
+                     self.env_irradiance, GATHER_ALPHA, E, var)
         return E
 
     def _traced_indirect(self, o, d, h, hu, hv, pix, n_rays, seed):
@@ -582,7 +601,8 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         # final gather and glossy lobe sampling; their cache-based counterparts are control
         # variates, so only the (noisy) differences are filtered
         pix64 = pix.astype(np.int64)
-        dE = ctx.gather_E(s, q.gather_rays, pix64, int(seed)) - E
+        var = np.empty(len(pix))
+        dE = ctx.gather_E(s, q.gather_rays, pix64, int(seed), var) - E
         dS = ctx.lobe(s, q.gather_rays, pix64, int(seed)) - mirror
         # both filtered with the same (geometry-only) weights, on the target's bounding box
         spec = bool(ctx.specular[s["comp"]].any())
@@ -595,8 +615,19 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         img = np.zeros((*inst.shape, 6 if spec else 3))
         img[pv - v0, pu - u0] = np.hstack([dE, dS]) if spec else dE
         tmp = np.zeros_like(img)
+        if q.filter_sigma_l > 0.0:
+            var_img = np.zeros(inst.shape)
+            var_img[pv - v0, pu - u0] = var
+            var_tmp = np.zeros_like(var_img)
+            var_blur = np.zeros_like(var_img)
         for k in range(q.filter_passes):
-            K.atrous(img, inst, normal, depth, camera.fx, camera.fy, camera.cx - u0, camera.cy - v0, 1 << k, tmp)
+            if q.filter_sigma_l > 0.0:
+                K.var_blur3(var_img, inst, var_blur)
+                K.atrous_guided(img, var_img, var_blur, inst, normal, depth, camera.fx, camera.fy, camera.cx - u0,
+                                camera.cy - v0, 1 << k, q.filter_sigma_l, tmp, var_tmp)
+                var_img, var_tmp = var_tmp, var_img
+            else:
+                K.atrous(img, inst, normal, depth, camera.fx, camera.fy, camera.cx - u0, camera.cy - v0, 1 << k, tmp)
             img, tmp = tmp, img
         rows = img[pv - v0, pu - u0]
         # per target pixel (row k of s for pixel pix[k]): the filtered irradiance and specular corrections

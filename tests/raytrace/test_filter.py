@@ -1,0 +1,130 @@
+"""The residual filter of ``balanced`` (raytrace._shading.atrous_guided) and the per-pixel
+variance that guides it (raytrace._shading.gather_sum), against closed forms and against the
+spread of independent estimates."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from raytrace import _shading as K
+from raytrace.lighting import Lighting
+from raytrace.shade import _Context
+
+from .test_shading import CAM, _plates, _pose
+
+H, W = 40, 60
+FX = FY = 500.0
+CX, CY = W / 2, H / 2
+# the B3-spline taps of one pass
+TAPS = np.array([1, 4, 6, 4, 1]) / 16.0
+
+
+def _flat_plane():
+    """AOVs of a plane facing the camera at 10 m: one part, equal normals and depths."""
+    inst = np.ones((H, W), dtype=np.int32)
+    normal = np.zeros((H, W, 3))
+    normal[..., 2] = -1.0
+    depth = np.full((H, W), 10.0)
+    return inst, normal, depth
+
+
+def _guided(img, var, passes, sigma_l=4.0):
+    inst, normal, depth = _flat_plane()
+    img, var = img.copy(), var.copy()
+    out, out_var, vblur = np.zeros_like(img), np.zeros_like(var), np.zeros_like(var)
+    for k in range(passes):
+        K.var_blur3(var, inst, vblur)
+        K.atrous_guided(img, var, vblur, inst, normal, depth, FX, FY, CX, CY, 1 << k, sigma_l, out, out_var)
+        img, out = out, img
+        var, out_var = out_var, var
+    return img, var
+
+
+def _geometric(img, passes):
+    inst, normal, depth = _flat_plane()
+    img = img.copy()
+    out = np.zeros_like(img)
+    for k in range(passes):
+        K.atrous(img, inst, normal, depth, FX, FY, CX, CY, 1 << k, out)
+        img, out = out, img
+    return img
+
+
+def test_variance_is_carried_through_a_pass_as_sum_of_squared_weights():
+    # a constant image: every weight is the B3 tap product, so an interior pixel's variance
+    # becomes v (Σ h²)² exactly, and the image is unchanged
+    img = np.full((H, W, 3), 2.5)
+    var = np.full((H, W), 0.3)
+    out, out_var = _guided(img, var, 1)
+    np.testing.assert_allclose(out, 2.5, rtol=1e-12)
+    inner = (slice(2, H - 2), slice(2, W - 2))
+    np.testing.assert_allclose(out_var[inner], 0.3 * (TAPS ** 2).sum() ** 2, rtol=1e-12)
+
+
+def test_a_step_larger_than_the_noise_is_kept_and_noise_is_smoothed():
+    rng = np.random.default_rng(1)
+    sd = 0.1
+    truth = np.where(np.arange(W) < W // 2, 0.0, 5.0)[None, :, None] * np.ones((H, 1, 3))
+    img = truth + rng.normal(0.0, sd, (H, W, 1))
+    var = np.full((H, W), sd * sd)
+    guided, _ = _guided(img, var, 2)
+    geometric = _geometric(img, 2)
+    cols = slice(W // 2 - 3, W // 2 + 3)  # the step's neighbourhood
+    rows = slice(4, H - 4)
+    # the geometry-only filter blurs the step by a large fraction of its height ...
+    assert np.abs(geometric[rows, cols] - truth[rows, cols]).max() > 1.0
+    # ... the guided one keeps it to within the noise
+    assert np.abs(guided[rows, cols] - truth[rows, cols]).max() < 4 * sd
+    # and still smooths the noise away from it
+    flat = (rows, slice(4, W // 2 - 6))
+    assert np.std(guided[flat][..., 0] - truth[flat][..., 0]) < 0.6 * sd
+
+
+def test_heavy_tailed_noise_is_smoothed_without_losing_energy():
+    # each pixel averages n rays of which a few hit a bright part: a Bernoulli estimate with
+    # its own sample variance, the noise of a final gather in a mostly unlit place. A filter
+    # whose neighbours refuse a bright pixel's energy (one-sided edge stopping) darkens the
+    # image; the symmetric z-score keeps the mean.
+    rng = np.random.default_rng(7)
+    n, p, value = 16, 0.05, 100.0
+    hits = rng.binomial(n, p, (H, W))
+    mean = hits / n * value
+    var = (value ** 2 * hits * (1 - hits / n) / (n - 1)) / n  # s²/n of the n Bernoulli terms
+    img = np.repeat(mean[..., None], 3, axis=2)
+    out, _ = _guided(img, var, 2)
+    truth = p * value
+    inner = (slice(4, H - 4), slice(4, W - 4))
+    assert out[inner].mean() == pytest.approx(img[inner].mean(), rel=0.03)
+    assert np.sqrt(((out[inner] - truth) ** 2).mean()) < 0.6 * np.sqrt(((img[inner] - truth) ** 2).mean())
+
+
+def test_gather_variance_matches_the_spread_of_independent_estimates():
+    # plate B lit only by sunlight bounced off plate A: the gather's noise is its hits on A
+    scene = _plates(1.0, 0.5)
+    R, t = _pose(np.array([4.0, -0.3, 1.2]))
+    light = Lighting(sun_dir_body=(0, 0, 1), sun_irradiance_W_m2=1000.0)
+    geo = scene.render_geometry(CAM, R, t)
+    ctx = _Context(scene, light, {})
+    pix = np.flatnonzero(geo.instance.ravel() == 2)[::7][:200]
+    u = (pix % CAM.width).astype(float)
+    v = (pix // CAM.width).astype(float)
+    D_cam = np.column_stack([(u - CAM.cx) / CAM.fx, (v - CAM.cy) / CAM.fy, np.ones(len(pix))])
+    D = D_cam @ R  # body frame: R.T @ d for each row
+    O = np.broadcast_to(-R.T @ t, D.shape).copy()
+    s = ctx.surfaces(O, D, geo.face_index.ravel()[pix].astype(np.int64))
+    luma = np.array([0.2126, 0.7152, 0.0722])
+    n_rays, n_seeds = 16, 40
+    Y = np.empty((n_seeds, len(pix)))
+    V = np.empty((n_seeds, len(pix)))
+    for seed in range(n_seeds):
+        var = np.empty(len(pix))
+        Y[seed] = ctx.gather_E(s, n_rays, pix.astype(np.int64), seed, var) @ luma
+        V[seed] = var
+    assert Y.std() > 0.0 and V.mean() > 0.0
+    # E[s²/N] is the variance of the mean of N independent terms; the gather's rays are
+    # stratified over the hemisphere, which can only lower the spread of the seeds' estimates
+    # (here by 1.7×), so the reported variance is a bound from above, and not a loose one (a
+    # lost π² or 1/N would be off by 10× or more)
+    ratio = V.mean() / Y.var(axis=0, ddof=1).mean()
+    assert 1.0 <= ratio <= 2.5, ratio
