@@ -17,7 +17,7 @@ Documented bounds (relative RMS error over target pixels, noise-corrected), also
                fast    balanced    (``balanced`` with its default 8 gather rays)
 =============  ======  ==========  ==================================================
 bound          25 %    14 %
-tiangong       11 %     8 %        measured 2026-11-21, commit a2d2c42 (thin wings and masts)
+tiangong       11 %     8 %        measured 2026-11-21, commit d381ca7 (thin wings and masts)
 spacedragon     4 %     3 %
 icesat         17 %     9 %        small: 45 % of its pixels are edge pixels
 cassini        11 %     6 %
