@@ -542,15 +542,16 @@ def atrous(img, inst, normal, depth, fx, fy, cx, cy, step, out):
 
 
 @pjit
-def var_blur3(var, inst, out):
-    """Mean of ``var`` over each pixel's 3×3 neighbours on the same part (0 off the target)."""
+def guide_images(img, var, inst, lum, vblur):
+    """The guides of :func:`atrous_guided` for one pass: each target pixel's luminance of
+    channels 0–2 (Rec. 709) and the mean of ``var`` over its 3×3 neighbours on the same part."""
     H, W = inst.shape
     for v in numba.prange(H):
         for u in range(W):
             i0 = inst[v, u]
             if i0 == 0:
-                out[v, u] = 0.0
                 continue
+            lum[v, u] = 0.2126 * img[v, u, 0] + 0.7152 * img[v, u, 1] + 0.0722 * img[v, u, 2]
             sv = 0.0
             nv = 0
             for vv in range(max(v - 1, 0), min(v + 2, H)):
@@ -558,45 +559,50 @@ def var_blur3(var, inst, out):
                     if inst[vv, uu] == i0:
                         sv += var[vv, uu]
                         nv += 1
-            out[v, u] = sv / nv
+            vblur[v, u] = sv / nv
 
 
 @pjit
-def atrous_guided(img, var, vblur, inst, normal, depth, fx, fy, cx, cy, step, sigma_l, out, out_var):
+def atrous_guided(img, var, vblur, lum, inst, normal, depth, fx, fy, cx, cy, step, sigma_l, out, out_var):
     """:func:`atrous` with an edge-stopping term on the residual itself, after SVGF (Schied et
     al. 2017, doi:10.1145/3105762.3105770, eq. 5) but symmetric: a neighbour's weight is further
-    multiplied by exp(−|l − l'| / (σ_l·√(v + v'))), where l is the luminance of channels 0–2 and
-    v the variance of a pixel's estimate (``var``) averaged over its 3×3 same-part neighbours
-    (``vblur``, :func:`var_blur3`). |l − l'|/√(v + v') is the z-score of the difference of two
-    estimates, so a step in the residual larger than the noise — contact shadow, gap, crease —
-    is kept while noise is smoothed, and a noisy bright pixel and its quiet neighbour are
-    averaged both ways (SVGF's one-sided √v would keep the quiet ones from taking the bright
-    one's energy and darken the image). The variance is carried through the pass
-    (v' = Σ w² v / (Σ w)²) for the next."""
+    multiplied by exp(−|l − l'| / (σ_l·√(v + v'))), where l is the luminance of channels 0–2
+    (``lum``) and v the variance of a pixel's estimate (``var``) averaged over its 3×3
+    same-part neighbours (``vblur``; both from :func:`guide_images`). |l − l'|/√(v + v') is the
+    z-score of the difference of two estimates, so a step in the residual larger than the
+    noise — contact shadow, gap, crease — is kept while noise is smoothed, and a noisy bright
+    pixel and its quiet neighbour are averaged both ways (SVGF's one-sided √v would keep the
+    quiet ones from taking the bright one's energy and darken the image). The variance is
+    carried through the pass (v' = Σ w² v / (Σ w)²) for the next."""
     H, W = inst.shape
     C = img.shape[2]
     h = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
     s2 = sigma_l * sigma_l
+    ifx = 1.0 / fx
+    ify = 1.0 / fy
     for v in numba.prange(H):
-        acc = np.empty(C)
+        acc = np.zeros(C)
         for u in range(W):
             i0 = inst[v, u]
             if i0 == 0:
                 continue
             vb0 = vblur[v, u]
-            l0 = 0.2126 * img[v, u, 0] + 0.7152 * img[v, u, 1] + 0.0722 * img[v, u, 2]
+            l0 = lum[v, u]
             z0 = depth[v, u]
             n0x = normal[v, u, 0]
             n0y = normal[v, u, 1]
             n0z = normal[v, u, 2]
-            foot = z0 / fx
-            acc[:] = 0.0
+            # 1 / (pixel footprint · (1 + step)): tangent-plane distances in footprints
+            ik = fx / (z0 * (1.0 + step))
+            for c in range(C):
+                acc[c] = 0.0
             sw = 0.0
             sw2v = 0.0
             for a in range(5):
                 vv = v + (a - 2) * step
                 if vv < 0 or vv >= H:
                     continue
+                ha = h[a]
                 for b in range(5):
                     uu = u + (b - 2) * step
                     if uu < 0 or uu >= W or inst[vv, uu] != i0:
@@ -611,20 +617,20 @@ def atrous_guided(img, var, vblur, inst, normal, depth, fx, fy, cx, cy, step, si
                     wn *= wn
                     wn *= wn
                     z1 = depth[vv, uu]
-                    dxp = ((uu - u) * z1 + (u - cx) * (z1 - z0)) / fx
-                    dyp = ((vv - v) * z1 + (v - cy) * (z1 - z0)) / fy
-                    dzp = z1 - z0
-                    dist = abs(n0x * dxp + n0y * dyp + n0z * dzp) / (foot * (1.0 + step))
-                    l1 = 0.2126 * img[vv, uu, 0] + 0.7152 * img[vv, uu, 1] + 0.0722 * img[vv, uu, 2]
-                    w = h[a] * h[b] * wn * math.exp(-dist - abs(l1 - l0) / (math.sqrt(s2 * (vb0 + vblur[vv, uu]))
-                                                                             + 1e-30))
+                    dz = z1 - z0
+                    dxp = ((uu - u) * z1 + (u - cx) * dz) * ifx
+                    dyp = ((vv - v) * z1 + (v - cy) * dz) * ify
+                    dist = abs(n0x * dxp + n0y * dyp + n0z * dz) * ik
+                    z = abs(lum[vv, uu] - l0) / math.sqrt(s2 * (vb0 + vblur[vv, uu]) + 1e-60)
+                    w = ha * h[b] * wn * math.exp(-dist - z)
                     for c in range(C):
                         acc[c] += w * img[vv, uu, c]
                     sw += w
                     sw2v += w * w * var[vv, uu]
+            isw = 1.0 / sw
             for c in range(C):
-                out[v, u, c] = acc[c] / sw
-            out_var[v, u] = sw2v / (sw * sw)
+                out[v, u, c] = acc[c] * isw
+            out_var[v, u] = sw2v * isw * isw
 
 
 @pjit

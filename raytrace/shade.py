@@ -628,11 +628,12 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
             var_img[pv - v0, pu - u0] = var
             var_tmp = np.zeros_like(var_img)
             var_blur = np.zeros_like(var_img)
+            lum = np.zeros_like(var_img)
         for k in range(q.filter_passes):
             if q.filter_sigma_l > 0.0:
-                K.var_blur3(var_img, inst, var_blur)
-                K.atrous_guided(img, var_img, var_blur, inst, normal, depth, camera.fx, camera.fy, camera.cx - u0,
-                                camera.cy - v0, 1 << k, q.filter_sigma_l, tmp, var_tmp)
+                K.guide_images(img, var_img, inst, lum, var_blur)
+                K.atrous_guided(img, var_img, var_blur, lum, inst, normal, depth, camera.fx, camera.fy,
+                                camera.cx - u0, camera.cy - v0, 1 << k, q.filter_sigma_l, tmp, var_tmp)
                 var_img, var_tmp = var_tmp, var_img
             else:
                 K.atrous(img, inst, normal, depth, camera.fx, camera.fy, camera.cx - u0, camera.cy - v0, 1 << k, tmp)

@@ -33,10 +33,10 @@ def _flat_plane():
 def _guided(img, var, passes, sigma_l=4.0):
     inst, normal, depth = _flat_plane()
     img, var = img.copy(), var.copy()
-    out, out_var, vblur = np.zeros_like(img), np.zeros_like(var), np.zeros_like(var)
+    out, out_var, vblur, lum = np.zeros_like(img), np.zeros_like(var), np.zeros_like(var), np.zeros_like(var)
     for k in range(passes):
-        K.var_blur3(var, inst, vblur)
-        K.atrous_guided(img, var, vblur, inst, normal, depth, FX, FY, CX, CY, 1 << k, sigma_l, out, out_var)
+        K.guide_images(img, var, inst, lum, vblur)
+        K.atrous_guided(img, var, vblur, lum, inst, normal, depth, FX, FY, CX, CY, 1 << k, sigma_l, out, out_var)
         img, out = out, img
         var, out_var = out_var, var
     return img, var
