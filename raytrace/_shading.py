@@ -487,63 +487,8 @@ def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, c
 
 
 @pjit
-def atrous(img, inst, normal, depth, fx, fy, cx, cy, step, out):
-    """One pass of the edge-avoiding à-trous wavelet filter (Dammertz et al. 2010,
-    doi:10.2312/EGGH/HPG10/067-075): a 5×5 B3-spline kernel with holes of ``step`` pixels,
-    weighted by same instance id, normal agreement (n·n')^64 and distance from the centre
-    pixel's tangent plane (in units of the pixel footprint). ``img`` has any number of
-    channels, all filtered with the same weights (they depend on the geometry only);
-    (cx, cy) is the principal point in the coordinates of the (cropped) image."""
-    H, W = inst.shape
-    C = img.shape[2]
-    h = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
-    for v in numba.prange(H):
-        acc = np.empty(C)
-        for u in range(W):
-            i0 = inst[v, u]
-            if i0 == 0:
-                continue
-            z0 = depth[v, u]
-            n0x = normal[v, u, 0]
-            n0y = normal[v, u, 1]
-            n0z = normal[v, u, 2]
-            foot = z0 / fx
-            acc[:] = 0.0
-            sw = 0.0
-            for a in range(5):
-                vv = v + (a - 2) * step
-                if vv < 0 or vv >= H:
-                    continue
-                for b in range(5):
-                    uu = u + (b - 2) * step
-                    if uu < 0 or uu >= W or inst[vv, uu] != i0:
-                        continue
-                    nd = n0x * normal[vv, uu, 0] + n0y * normal[vv, uu, 1] + n0z * normal[vv, uu, 2]
-                    if nd <= 0.0:
-                        continue
-                    wn = nd * nd  # (n·n')^64 by six squarings
-                    wn *= wn
-                    wn *= wn
-                    wn *= wn
-                    wn *= wn
-                    wn *= wn
-                    # distance from the centre's tangent plane, camera frame: X = (u − cx) z / fx
-                    z1 = depth[vv, uu]
-                    dxp = ((uu - u) * z1 + (u - cx) * (z1 - z0)) / fx
-                    dyp = ((vv - v) * z1 + (v - cy) * (z1 - z0)) / fy
-                    dzp = z1 - z0
-                    dist = abs(n0x * dxp + n0y * dyp + n0z * dzp) / (foot * (1.0 + step))
-                    w = h[a] * h[b] * wn * math.exp(-dist)
-                    for c in range(C):
-                        acc[c] += w * img[vv, uu, c]
-                    sw += w
-            for c in range(C):
-                out[v, u, c] = acc[c] / sw
-
-
-@pjit
 def guide_images(img, var, inst, lum, vblur):
-    """The guides of :func:`atrous_guided` for one pass: each target pixel's luminance of
+    """The guides of :func:`atrous` for one pass: each target pixel's luminance of
     channels 0–2 (Rec. 709) and the mean of ``var`` over its 3×3 neighbours on the same part."""
     H, W = inst.shape
     for v in numba.prange(H):
@@ -563,21 +508,30 @@ def guide_images(img, var, inst, lum, vblur):
 
 
 @pjit
-def atrous_guided(img, var, vblur, lum, inst, normal, depth, fx, fy, cx, cy, step, sigma_l, out, out_var):
-    """:func:`atrous` with an edge-stopping term on the residual itself, after SVGF (Schied et
-    al. 2017, doi:10.1145/3105762.3105770, eq. 5) but symmetric: a neighbour's weight is further
+def atrous(img, var, vblur, lum, inst, normal, depth, fx, fy, cx, cy, step, sigma_l, out, out_var):
+    """One pass of the edge-avoiding à-trous wavelet filter (Dammertz et al. 2010,
+    doi:10.2312/EGGH/HPG10/067-075): a 5×5 B3-spline kernel with holes of ``step`` pixels,
+    weighted by same instance id, normal agreement (n·n')^64 and distance from the centre
+    pixel's tangent plane (in units of the pixel footprint). ``img`` has any number of
+    channels, all filtered with the same weights; (cx, cy) is the principal point in the
+    coordinates of the (cropped) image.
+
+    With σ_l > 0 it also stops at edges of the residual itself, after SVGF (Schied et al. 2017,
+    doi:10.1145/3105762.3105770, eq. 5) but symmetric: a neighbour's weight is further
     multiplied by exp(−|l − l'| / (σ_l·√(v + v'))), where l is the luminance of channels 0–2
     (``lum``) and v the variance of a pixel's estimate (``var``) averaged over its 3×3
     same-part neighbours (``vblur``; both from :func:`guide_images`). |l − l'|/√(v + v') is the
     z-score of the difference of two estimates, so a step in the residual larger than the
     noise — contact shadow, gap, crease — is kept while noise is smoothed, and a noisy bright
     pixel and its quiet neighbour are averaged both ways (SVGF's one-sided √v would keep the
-    quiet ones from taking the bright one's energy and darken the image). The variance is
+    quiet ones from taking the bright one's energy and darken the image). With σ_l = 0 the
+    weights depend on the geometry only and ``vblur``, ``lum`` are not read. The variance is
     carried through the pass (v' = Σ w² v / (Σ w)²) for the next."""
     H, W = inst.shape
     C = img.shape[2]
     h = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
     s2 = sigma_l * sigma_l
+    guided = sigma_l > 0.0
     ifx = 1.0 / fx
     ify = 1.0 / fy
     for v in numba.prange(H):
@@ -586,8 +540,8 @@ def atrous_guided(img, var, vblur, lum, inst, normal, depth, fx, fy, cx, cy, ste
             i0 = inst[v, u]
             if i0 == 0:
                 continue
-            vb0 = vblur[v, u]
-            l0 = lum[v, u]
+            vb0 = vblur[v, u] if guided else 0.0
+            l0 = lum[v, u] if guided else 0.0
             z0 = depth[v, u]
             n0x = normal[v, u, 0]
             n0y = normal[v, u, 1]
@@ -621,8 +575,9 @@ def atrous_guided(img, var, vblur, lum, inst, normal, depth, fx, fy, cx, cy, ste
                     dxp = ((uu - u) * z1 + (u - cx) * dz) * ifx
                     dyp = ((vv - v) * z1 + (v - cy) * dz) * ify
                     dist = abs(n0x * dxp + n0y * dyp + n0z * dz) * ik
-                    z = abs(lum[vv, uu] - l0) / math.sqrt(s2 * (vb0 + vblur[vv, uu]) + 1e-60)
-                    w = ha * h[b] * wn * math.exp(-dist - z)
+                    if guided:
+                        dist += abs(lum[vv, uu] - l0) / math.sqrt(s2 * (vb0 + vblur[vv, uu]) + 1e-60)
+                    w = ha * h[b] * wn * math.exp(-dist)
                     for c in range(C):
                         acc[c] += w * img[vv, uu, c]
                     sw += w

@@ -81,7 +81,7 @@ class Quality:
     filter_sigma_l : float
         Edge stopping on the residual itself: a neighbour's weight falls as exp(−z/σ_l), z the
         z-score of the two pixels' difference from their gathers' own variances
-        (:func:`raytrace._shading.atrous_guided`); 0: geometry only (:func:`raytrace._shading.atrous`) [-].
+        (:func:`raytrace._shading.atrous`); 0: geometry only [-].
     aa_grid : int
         Edge pixels get aa_grid² stratified sub-pixel rays [-].
     spp : int
@@ -623,21 +623,16 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         img = np.zeros((*inst.shape, 6 if spec else 3))
         img[pv - v0, pu - u0] = np.hstack([dE, dS]) if spec else dE
         tmp = np.zeros_like(img)
-        if q.filter_sigma_l > 0.0:
-            var_img = np.zeros(inst.shape)
-            var_img[pv - v0, pu - u0] = var
-            var_tmp = np.zeros_like(var_img)
-            var_blur = np.zeros_like(var_img)
-            lum = np.zeros_like(var_img)
+        var_img = np.zeros(inst.shape)
+        var_img[pv - v0, pu - u0] = var
+        var_tmp, var_blur, lum = np.zeros_like(var_img), np.zeros_like(var_img), np.zeros_like(var_img)
         for k in range(q.filter_passes):
             if q.filter_sigma_l > 0.0:
                 K.guide_images(img, var_img, inst, lum, var_blur)
-                K.atrous_guided(img, var_img, var_blur, lum, inst, normal, depth, camera.fx, camera.fy,
-                                camera.cx - u0, camera.cy - v0, 1 << k, q.filter_sigma_l, tmp, var_tmp)
-                var_img, var_tmp = var_tmp, var_img
-            else:
-                K.atrous(img, inst, normal, depth, camera.fx, camera.fy, camera.cx - u0, camera.cy - v0, 1 << k, tmp)
+            K.atrous(img, var_img, var_blur, lum, inst, normal, depth, camera.fx, camera.fy, camera.cx - u0,
+                     camera.cy - v0, 1 << k, q.filter_sigma_l, tmp, var_tmp)
             img, tmp = tmp, img
+            var_img, var_tmp = var_tmp, var_img
         rows = img[pv - v0, pu - u0]
         # per target pixel (row k of s for pixel pix[k]): the filtered irradiance and specular corrections
         residual = (np.ascontiguousarray(rows[:, :3]),

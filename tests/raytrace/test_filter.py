@@ -1,4 +1,4 @@
-"""The residual filter of ``balanced`` (raytrace._shading.atrous_guided) and the per-pixel
+"""The residual filter of ``balanced`` (raytrace._shading.atrous) and the per-pixel
 variance that guides it (raytrace._shading.gather_sum), against closed forms and against the
 spread of independent estimates."""
 
@@ -35,21 +35,16 @@ def _guided(img, var, passes, sigma_l=4.0):
     img, var = img.copy(), var.copy()
     out, out_var, vblur, lum = np.zeros_like(img), np.zeros_like(var), np.zeros_like(var), np.zeros_like(var)
     for k in range(passes):
-        K.guide_images(img, var, inst, lum, vblur)
-        K.atrous_guided(img, var, vblur, lum, inst, normal, depth, FX, FY, CX, CY, 1 << k, sigma_l, out, out_var)
+        if sigma_l > 0.0:
+            K.guide_images(img, var, inst, lum, vblur)
+        K.atrous(img, var, vblur, lum, inst, normal, depth, FX, FY, CX, CY, 1 << k, sigma_l, out, out_var)
         img, out = out, img
         var, out_var = out_var, var
     return img, var
 
 
 def _geometric(img, passes):
-    inst, normal, depth = _flat_plane()
-    img = img.copy()
-    out = np.zeros_like(img)
-    for k in range(passes):
-        K.atrous(img, inst, normal, depth, FX, FY, CX, CY, 1 << k, out)
-        img, out = out, img
-    return img
+    return _guided(img, np.zeros((H, W)), passes, sigma_l=0.0)[0]
 
 
 def test_variance_is_carried_through_a_pass_as_sum_of_squared_weights():
