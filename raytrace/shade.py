@@ -612,7 +612,8 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         var = np.empty(len(pix))
         dE = ctx.gather_E(s, q.gather_rays, pix64, int(seed), var) - E
         dS = ctx.lobe(s, q.gather_rays, pix64, int(seed)) - mirror
-        # both filtered with the same (geometry-only) weights, on the target's bounding box
+        # both filtered with the same weights (the geometry, and from 8 rays the diffuse
+        # residual's own noise), on the target's bounding box
         spec = bool(ctx.specular[s["comp"]].any())
         pv, pu = pix // W, pix % W
         v0, u0 = int(pv.min()), int(pu.min())
