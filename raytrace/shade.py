@@ -167,14 +167,15 @@ def _balanced_aa(samples: int) -> int:
 
 def _filter_passes(samples: int) -> int:
     """À-trous passes on the gathered residual of ``balanced`` with N rays: 3 (N ≤ 4), 2
-    (N ≤ 32), 1. Chosen with the residual-guided filter (σ_l = FILTER_SIGMA_L) on the 12 scenes
+    (N ≤ 16), 1. Chosen with the residual-guided filter (σ_l = FILTER_SIGMA_L) on the 12 scenes
     of ``benchmarks/bench_time_error.py`` at 1280×960 (median error, bias and noise estimated
     without the reference's noise): N = 8: 3 passes 3.71 %, 2 3.70 %; N = 16: 2 passes 2.74 %, 1
-    2.81 %; N = 64: 2 passes 2.07 %, 1 1.95 %; N = 256: 2 passes 1.55 %, 1 1.44 %. With the
+    2.81 %; N = 32: 2 passes 2.34 %, 1 2.23 %; N = 64: 2 passes 2.07 %, 1 1.95 %; N = 256: 2
+    passes 1.55 %, 1 1.44 %. With the
     geometry-only filter the best were N = 8: 2 passes 3.85 %, N = 16: 1 pass 2.82 %, N = 64:
     1 pass 2.14 %, N = 256: 0 passes 1.71 % (a pass removed noise but blurred the residual's
     real steps: at N = 64 the unfiltered bias was 0.6 % on Cassini ``sunlit``, 1.1 % filtered)."""
-    return 3 if samples <= 4 else (2 if samples <= 32 else 1)
+    return 3 if samples <= 4 else (2 if samples <= 16 else 1)
 
 
 # σ_l of the residual-guided filter (Quality.filter_sigma_l): on the 12 scenes at 1280×960,
