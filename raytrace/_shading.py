@@ -286,11 +286,12 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
 @pjit
 def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset, face_normal, corner_normal,
                comp_of_face, mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids,
-               p, tex, out):
+               p, tex, out, out_lbar):
     """out += L̄_in · (F0·A + B): the specular reflection of the environment and other parts,
     with L̄_in blended by the lobe width α from the radiance along the mirror direction
     (sharp lobes, α ≤ 0.05) to E/π, the mean radiance of the point's own indirect irradiance
-    ``E_point`` (wide lobes, α ≥ 0.35), as if it arrived uniformly."""
+    ``E_point`` (wide lobes, α ≥ 0.35), as if it arrived uniformly; L̄_in itself goes to
+    ``out_lbar`` (the control variate of :func:`lobe_sum`)."""
     for j in numba.prange(idx.shape[0]):
         k = idx[j]
         if geom[j] < 0:
@@ -306,6 +307,9 @@ def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset
         b = (1.0 - t) * b + t * E_point[k, 2] / math.pi
         mu = NS[k, 0] * WO[k, 0] + NS[k, 1] * WO[k, 1] + NS[k, 2] * WO[k, 2]
         ar, ag, ab = specular_albedo(table, mu, mat_alpha[c], mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2])
+        out_lbar[k, 0] = r
+        out_lbar[k, 1] = g
+        out_lbar[k, 2] = b
         out[k, 0] += r * ar
         out[k, 1] += g * ag
         out[k, 2] += b * ab
@@ -845,9 +849,19 @@ def lobe_rays(idx, P, NS, NG, WO, comp, mat_f0, mat_alpha, n_rays, seed, pix, ep
 
 @pjit
 def lobe_sum(n_rays, O, D, Wt, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
-             mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, out):
-    """Mean of weight × incoming radiance over each point's lobe rays."""
+             mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, idx, CV,
+             out):
+    """Each listed point's (idx[j]) sampled specular reflection minus its cheap counterpart
+    L̄·A (:func:`add_mirror`, L̄ = ``CV[idx[j]]``, A the split-sum albedo): the mean over the
+    lobe rays of weight × (incoming radiance − L̄).
+
+    L̄ is a control variate with a known mean, E[weight] = A: the difference is unbiased up to
+    L̄ times the split-sum table's error (≤ 0.2 % of A for μ_o ≥ 0.1 and α ≤ 0.6,
+    tests/raytrace/test_brdf.py), and the rays that see L̄ add nothing. Without it the spread
+    of the weights f·cos/pdf alone made a gold sphere under a uniform sky 4 % noisy per pixel
+    at 8 rays; with it, exact."""
     for j in numba.prange(out.shape[0]):
+        k = idx[j]
         sr = 0.0
         sg = 0.0
         sb = 0.0
@@ -862,9 +876,9 @@ def lobe_sum(n_rays, O, D, Wt, geom, prim, hu, hv, face_offset, face_normal, cor
                                    D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
                                    mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0,
                                    -1.0, -1.0, -1.0)
-            sr += Wt[m, 0] * a
-            sg += Wt[m, 1] * b
-            sb += Wt[m, 2] * c
+            sr += Wt[m, 0] * (a - CV[k, 0])
+            sg += Wt[m, 1] * (b - CV[k, 1])
+            sb += Wt[m, 2] * (c - CV[k, 2])
         out[j, 0] = sr / n_rays
         out[j, 1] = sg / n_rays
         out[j, 2] = sb / n_rays

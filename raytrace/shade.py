@@ -295,13 +295,14 @@ class _Context:
                    self.scene.corner_normal, out["P"], out["NS"], out["NG"], out["WO"], out["B"], out["SIDE"])
         return out
 
-    def direct(self, s, E_point, mirror_out=None, *, sun_dirs=None, occluder_t=None):
+    def direct(self, s, E_point, mirror_out=None, *, sun_dirs=None, occluder_t=None, lbar_out=None):
         """Sunlight (shadowed) and the cheap specular term of everything else
         (:func:`raytrace._shading.add_mirror`; ``E_point`` the points' cache irradiance):
         radiance (n, 3) and the Sun's visibility (n,) in {0, 1}. The shadow ray goes towards the
         Sun's centre, or along ``sun_dirs`` (one solar-disc sample per point); ``occluder_t``,
         when given, receives the distance to the occluder of every blocked point. The specular
-        term alone is also written to ``mirror_out``."""
+        term alone is also written to ``mirror_out``, and the radiance L̄ it reflects (the
+        control variate of :meth:`lobe`) to ``lbar_out``."""
         n = len(s["P"])
         L = np.zeros((n, 3))
         vis = np.zeros(n)
@@ -332,8 +333,10 @@ class _Context:
             if len(idx):
                 h = self.scene.intersect(o[idx], d[idx])
                 M = np.zeros((n, 3)) if mirror_out is None else mirror_out
+                lbar = np.zeros((n, 3)) if lbar_out is None else lbar_out
                 K.add_mirror(idx, o[idx], d[idx], h["geomID"], h["primID"], h["u"].astype(np.float64),
-                             h["v"].astype(np.float64), s["NS"], s["WO"], s["comp"], E_point, *self._lookup(), M)
+                             h["v"].astype(np.float64), s["NS"], s["WO"], s["comp"], E_point, *self._lookup(), M,
+                             lbar)
                 L += M
         return L, vis
 
@@ -378,9 +381,10 @@ class _Context:
         L[cand] += (v - vis[cand])[:, None] * full
         vis[cand] = v
 
-    def lobe(self, s, n_rays: int, pix: np.ndarray, seed: int):
+    def lobe(self, s, n_rays: int, pix: np.ndarray, seed: int, lbar: np.ndarray):
         """Specular reflection of everything but the Sun, sampled over each glossy point's GGX
-        lobe with n_rays rays: radiance (n, 3) (0 at non-glossy points)."""
+        lobe with n_rays rays, minus its cheap counterpart (the mirror term of :meth:`direct`,
+        which reflected ``lbar``): radiance (n, 3) (0 at non-glossy points)."""
         n = len(s["P"])
         out = np.zeros((n, 3))
         idx = np.flatnonzero(self.specular[s["comp"]])
@@ -398,7 +402,7 @@ class _Context:
             h = self.scene.intersect(o, d)
             val = np.empty((len(part), 3))
             K.lobe_sum(n_rays, o, d, w, h["geomID"], h["primID"], h["u"].astype(np.float64),
-                       h["v"].astype(np.float64), *self._lookup(), val)
+                       h["v"].astype(np.float64), *self._lookup(), part, lbar, val)
             out[part] = val
         return out
 
@@ -593,11 +597,11 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     O = np.ascontiguousarray(np.broadcast_to(o_body, D.shape))
     face = geo.face_index.ravel()[pix].astype(np.int64)
     s = ctx.surfaces(O, D, face)
-    mirror = np.zeros((len(pix), 3))
+    lbar = np.zeros((len(pix), 3))
     E = ctx.cache_E(s)
     soft = q.sun_rays > 1 and lighting.sun_angular_diameter_rad > 0.0
     occ_t = np.full(len(pix), np.inf) if soft else None  # occluder distances cost a closest-hit query
-    L, vis = ctx.direct(s, E, mirror, occluder_t=occ_t)
+    L, vis = ctx.direct(s, E, occluder_t=occ_t, lbar_out=lbar)
     if soft:
         footprint_m = geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx
         ctx.soft_shadows(s, L, vis, occ_t, footprint_m, pix, H, W, q.sun_rays, int(seed))
@@ -612,7 +616,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         pix64 = pix.astype(np.int64)
         var = np.empty(len(pix))
         dE = ctx.gather_E(s, q.gather_rays, pix64, int(seed), var) - E
-        dS = ctx.lobe(s, q.gather_rays, pix64, int(seed)) - mirror
+        dS = ctx.lobe(s, q.gather_rays, pix64, int(seed), lbar)
         # both filtered with the same weights (the geometry, and from 8 rays the diffuse
         # residual's own noise), on the target's bounding box
         spec = bool(ctx.specular[s["comp"]].any())
@@ -854,8 +858,8 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, D, h, centre, nu
             sx, sy, sz = ctx.lighting.sun_dir_body
             K.sun_disc_dirs(sub_key, S, seed, sx, sy, sz, math.cos(0.5 * ctx.lighting.sun_angular_diameter_rad),
                             sun_dirs)
-        mirror = np.zeros((len(idx), 3))
-        Ls, _ = ctx.direct(s, E, mirror, sun_dirs=sun_dirs)
+        lbar = np.zeros((len(idx), 3))
+        Ls, _ = ctx.direct(s, E, sun_dirs=sun_dirs, lbar_out=lbar)
         if residual is not None:
             row_of_pixel, P_c, N_c, foot = centre_surface
             k = np.empty(len(idx), dtype=np.int64)
@@ -868,7 +872,7 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, D, h, centre, nu
             if len(j) and gather_rays >= _MIN_SUB_GATHER:
                 sj = {k: v[j] for k, v in s.items()}
                 keys = sub_key[j]
-                Ls[j] += ctx.lobe(sj, gather_rays, keys, seed) - mirror[j]  # the lobe replaces the mirror term
+                Ls[j] += ctx.lobe(sj, gather_rays, keys, seed, lbar[j])  # the lobe replaces the mirror term
                 E[j] = ctx.gather_E(sj, gather_rays, keys, seed)
         ctx.add_diffuse(s, E, Ls)
         L[idx] = Ls
