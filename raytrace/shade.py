@@ -29,7 +29,9 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     (gather − cache) is filtered, by an edge-avoiding à-trous filter guided by the exact id,
     normal and depth AOVs and by the residual's own noise (a step between two pixels larger
     than their gathers' spread — a contact shadow, a gap — is kept), so the filter removes
-    noise, not detail. Edge pixels get 4×4
+    noise, not detail. Glossy parts also sample their GGX lobe with N rays, minus the
+    radiance ``fast``'s mirror term reflects (a control variate of known mean, the split-sum
+    albedo), filtered with the same weights. Edge pixels get 4×4
     (N ≤ 8), 6×6 (N ≤ 128) or 8×8 jittered shaded sub-pixel rays, plus 8×8 to 10×10 coverage
     rays where they are mixed (and pixels whose corners disagree with the centre on the Sun's
     visibility, or that a sliver of a triangle — a wire thinner than a pixel — crosses in
@@ -295,14 +297,13 @@ class _Context:
                    self.scene.corner_normal, out["P"], out["NS"], out["NG"], out["WO"], out["B"], out["SIDE"])
         return out
 
-    def direct(self, s, E_point, mirror_out=None, *, sun_dirs=None, occluder_t=None, lbar_out=None):
+    def direct(self, s, E_point, *, sun_dirs=None, occluder_t=None, lbar_out=None):
         """Sunlight (shadowed) and the cheap specular term of everything else
         (:func:`raytrace._shading.add_mirror`; ``E_point`` the points' cache irradiance):
         radiance (n, 3) and the Sun's visibility (n,) in {0, 1}. The shadow ray goes towards the
         Sun's centre, or along ``sun_dirs`` (one solar-disc sample per point); ``occluder_t``,
-        when given, receives the distance to the occluder of every blocked point. The specular
-        term alone is also written to ``mirror_out``, and the radiance L̄ it reflects (the
-        control variate of :meth:`lobe`) to ``lbar_out``."""
+        when given, receives the distance to the occluder of every blocked point; ``lbar_out`` the
+        radiance L̄ the specular term reflects (the control variate of :meth:`lobe`)."""
         n = len(s["P"])
         L = np.zeros((n, 3))
         vis = np.zeros(n)
@@ -332,7 +333,7 @@ class _Context:
             idx = np.flatnonzero(spec)
             if len(idx):
                 h = self.scene.intersect(o[idx], d[idx])
-                M = np.zeros((n, 3)) if mirror_out is None else mirror_out
+                M = np.zeros((n, 3))
                 lbar = np.zeros((n, 3)) if lbar_out is None else lbar_out
                 K.add_mirror(idx, o[idx], d[idx], h["geomID"], h["primID"], h["u"].astype(np.float64),
                              h["v"].astype(np.float64), s["NS"], s["WO"], s["comp"], E_point, *self._lookup(), M,
