@@ -266,7 +266,7 @@ class RenderFrame:
 class _Context:
     """Per-frame constants the kernels need."""
 
-    def __init__(self, scene: Scene, lighting: Lighting, cache_options: dict):
+    def __init__(self, scene: Scene, lighting: Lighting, cache_options: dict, prefiltered_glossy: bool = False):
         self.scene = scene
         self.lighting = lighting
         mats = scene.materials
@@ -282,7 +282,14 @@ class _Context:
         self.cache = scene.radiance_cache(**cache_options)
         # the environment's unoccluded irradiance: the cache's sky term and the final gather's
         # control variate are both its complement over blocked directions
-        self.env_irradiance = K.env.irradiance_table(self.p, self.tex)
+        cells = K.env.environment_cells(self.p, self.tex)
+        self.env_irradiance = K.env.irradiance_table(self.p, self.tex, cells=cells)
+        # ``fast``: the environment prefiltered by each glossy part's lobe for the mirror term's
+        # wide lobes, one table per distinct roughness (raytrace._shading.add_mirror)
+        self.prefiltered_glossy = prefiltered_glossy
+        levels = np.unique(self.alpha[self.specular & (self.alpha > K.GLOSSY_A0)]) if prefiltered_glossy else []
+        self.glossy_level = np.searchsorted(levels, self.alpha).clip(0, max(len(levels) - 1, 0))
+        self.glossy_env = K.env.glossy_table(self.p, levels, cells) if len(levels) else np.zeros((1, 2, 2, 3))
         self.cf = self.cache.solve(lighting, env_irradiance=self.env_irradiance)
         self.sun = np.array([*lighting.sun_dir_body, lighting.sun_irradiance_at_target_W_m2])
 
@@ -336,7 +343,8 @@ class _Context:
                 M = np.zeros((n, 3))
                 lbar = np.zeros((n, 3)) if lbar_out is None else lbar_out
                 K.add_mirror(idx, o[idx], d[idx], h["geomID"], h["primID"], h["u"].astype(np.float64),
-                             h["v"].astype(np.float64), s["NS"], s["WO"], s["comp"], E_point, *self._lookup(), M,
+                             h["v"].astype(np.float64), s["NS"], s["WO"], s["comp"], E_point, *self._lookup(),
+                             self.prefiltered_glossy, self.env_irradiance, self.glossy_env, self.glossy_level, M,
                              lbar)
                 L += M
         return L, vis
@@ -580,7 +588,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         return RenderFrame(geo, rad, q, timings)
 
     t0 = time.perf_counter()
-    ctx = _Context(scene, lighting, cache_options or {})
+    ctx = _Context(scene, lighting, cache_options or {}, prefiltered_glossy=q.gather_rays == 0)
     timings["cache"] = time.perf_counter() - t0
     H, W = camera.height, camera.width
     R_bc = np.ascontiguousarray(R.T)

@@ -17,10 +17,10 @@ Documented bounds (relative RMS error over target pixels, noise-corrected), also
                fast    balanced    (``balanced`` with its default 8 gather rays)
 =============  ======  ==========  ==================================================
 bound          25 %    14 %
-tiangong       11 %     8 %        measured 2026-11-21, commit d381ca7 (thin wings and masts)
-spacedragon     4 %     3 %
-icesat         17 %     9 %        small: 45 % of its pixels are edge pixels
-cassini        11 %     6 %
+tiangong       11 %     7 %        measured 2026-11-21 with the glossy prefilter of ``fast``
+spacedragon     3 %     3 %        (before it 11 / 4 / 17 / 11 %; thin wings and masts)
+icesat         11 %     9 %        small: 45 % of its pixels are edge pixels
+cassini         9 %     6 %
 =============  ======  ==========  ==================================================
 
 and ``balanced`` is never worse than ``fast``. Most of the error sits in edge pixels, which
