@@ -10,8 +10,10 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     stratified shadow rays (16–64 for ``balanced``); the Sun's specular
     highlight exact; sky, Earth and inter-reflected light from the body-space radiance cache
     (:mod:`raytrace.cache`), interpolated at the pixel's surface point; the specular
-    reflection of the environment and other parts along the mirror direction (one ray),
-    weighted by the lobe's directional albedo; anti-aliasing with 3×3 jittered-stratified
+    reflection of the environment prefiltered by the part's GGX lobe (the split-sum
+    approximation, :func:`raytrace.environment.glossy_table`), corrected by what the parts add
+    or hide, and of the other parts along the mirror direction (one ray), weighted by the
+    lobe's directional albedo (:func:`raytrace._shading.add_mirror`); anti-aliasing with 3×3 jittered-stratified
     sub-pixel rays (an unbiased box filter) only where neighbouring pixels disagree
     (silhouette, part, shadow and crease edges); where those sub-samples see more than one
     part (or space), 6×6 more primary rays, unshaded, measure how much of the pixel each part
@@ -30,7 +32,7 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     normal and depth AOVs and by the residual's own noise (a step between two pixels larger
     than their gathers' spread — a contact shadow, a gap — is kept), so the filter removes
     noise, not detail. Glossy parts also sample their GGX lobe with N rays, minus the
-    radiance ``fast``'s mirror term reflects (a control variate of known mean, the split-sum
+    radiance their cheap mirror term reflects (a control variate of known mean, the split-sum
     albedo), filtered with the same weights. Edge pixels get 4×4
     (N ≤ 8), 6×6 (N ≤ 128) or 8×8 jittered shaded sub-pixel rays, plus 8×8 to 10×10 coverage
     rays where they are mixed (and pixels whose corners disagree with the centre on the Sun's
