@@ -770,6 +770,142 @@ def sliver_pixels(V, F, R, t, fx, fy, cx, cy, z_min, max_width, depth, out):
                     out[v, u] = True
 
 
+@jit
+def _edge_top(xa, ha, xb, hb, lo, hi):
+    """Highest point over [lo, hi] of the segment from (xa, ha) to (xb, hb) (x along an axis,
+    h the height), −inf where they do not overlap."""
+    x0 = min(xa, xb)
+    x1 = max(xa, xb)
+    l0 = max(lo, x0)
+    l1 = min(hi, x1)
+    if l0 > l1:
+        return -np.inf
+    if x1 - x0 <= 0.0:
+        return max(ha, hb)
+    f0 = (l0 - xa) / (xb - xa)
+    f1 = (l1 - xa) / (xb - xa)
+    return max(ha + f0 * (hb - ha), ha + f1 * (hb - ha))
+
+
+@jit
+def shadow_map_of_slivers(V, F, e1, e2, s, a0, b0, cell, max_width, grid):
+    """Conservative shadow map of the triangles that are slivers seen from the Sun: in the
+    Sun's view (orthographic along the unit vector ``s`` towards the Sun, axes ``e1``, ``e2``,
+    cells of ``cell`` metres from (a0, b0)), every triangle narrower than ``max_width`` metres
+    (twice its projected area over its longest projected edge) writes into every cell its
+    projection overlaps (separating axes) its greatest height towards the Sun, x·s, over the
+    cell (along the sliver's long axis, the top of its three edges over the cell's extent),
+    keeping the largest: a rod or wire whose shadow is thinner than a pixel, which neither
+    pixel centres nor pixel corners may land in. Serial (a running maximum)."""
+    ny, nx = grid.shape
+    pa = np.empty(3)
+    pb = np.empty(3)
+    ph = np.empty(3)
+    px = np.empty(3)
+    for f in range(F.shape[0]):
+        for k in range(3):
+            i = F[f, k]
+            pa[k] = (e1[0] * V[i, 0] + e1[1] * V[i, 1] + e1[2] * V[i, 2] - a0) / cell
+            pb[k] = (e2[0] * V[i, 0] + e2[1] * V[i, 1] + e2[2] * V[i, 2] - b0) / cell
+            ph[k] = s[0] * V[i, 0] + s[1] * V[i, 1] + s[2] * V[i, 2]
+        cross = (pa[1] - pa[0]) * (pb[2] - pb[0]) - (pa[2] - pa[0]) * (pb[1] - pb[0])
+        longest = 0.0
+        kl = 0
+        for k in range(3):
+            j = (k + 1) % 3
+            ln = math.hypot(pa[j] - pa[k], pb[j] - pb[k])
+            if ln > longest:
+                longest = ln
+                kl = k
+        if abs(cross) >= max_width / cell * longest:
+            continue
+        # the sliver's long axis and each vertex's coordinate along it
+        jl = (kl + 1) % 3
+        ax = 1.0
+        ay = 0.0
+        if longest > 0.0:
+            ax = (pa[jl] - pa[kl]) / longest
+            ay = (pb[jl] - pb[kl]) / longest
+        for k in range(3):
+            px[k] = pa[k] * ax + pb[k] * ay
+        reach = 0.5 * (abs(ax) + abs(ay))  # half a cell's extent along the axis
+        # cell (i, j) spans [j, j + 1] × [i, i + 1] in cell units; row by row, the cells
+        # between the extremes of the triangle's part within the row (a convex polygon whose
+        # x-extent is that of its edges clipped to the row)
+        v0 = max(math.floor(min(pb[0], pb[1], pb[2])), 0)
+        v1 = min(math.floor(max(pb[0], pb[1], pb[2])), ny - 1)
+        for v in range(v0, v1 + 1):
+            xlo = np.inf
+            xhi = -np.inf
+            for k in range(3):
+                j = (k + 1) % 3
+                ya, yb = pb[k], pb[j]
+                t0, t1 = 0.0, 1.0
+                if yb != ya:
+                    ta = (v - ya) / (yb - ya)
+                    tb = (v + 1.0 - ya) / (yb - ya)
+                    t0 = max(t0, min(ta, tb))
+                    t1 = min(t1, max(ta, tb))
+                elif not (v <= ya <= v + 1.0):
+                    continue
+                if t0 > t1:
+                    continue
+                xa = pa[k] + t0 * (pa[j] - pa[k])
+                xb = pa[k] + t1 * (pa[j] - pa[k])
+                xlo = min(xlo, xa, xb)
+                xhi = max(xhi, xa, xb)
+            if xlo > xhi:
+                continue
+            for u in range(max(math.floor(xlo), 0), min(math.floor(xhi), nx - 1) + 1):
+                xc = (u + 0.5) * ax + (v + 0.5) * ay
+                top = -np.inf
+                for k in range(3):
+                    j = (k + 1) % 3
+                    top = max(top, _edge_top(px[k], ph[k], px[j], ph[j], xc - reach, xc + reach))
+                grid[v, u] = max(grid[v, u], top)
+
+
+@pjit
+def near_shadow_slivers(P, NS, WO, lit, foot, e1, e2, s, a0, b0, cell, grid, out):
+    """Lit points (``lit``) whose pixel footprint, seen from the Sun, comes within reach of a
+    sliver of :func:`shadow_map_of_slivers` that stands towards the Sun: the pixel may hold a
+    thin shadow that its centre and corners missed. The footprint (``foot`` metres per pixel at
+    the point, stretched by 1/|n·v| on the surface) spans a disc of radius ρ in the Sun's view;
+    the surface itself rises towards the Sun by at most (ρ√2 + cell)·tanθ_s over the cells
+    looked at (θ_s the Sun's incidence), so only a sliver higher than that by 5 % of ρ
+    counts."""
+    ny, nx = grid.shape
+    for k in numba.prange(P.shape[0]):
+        out[k] = False
+        if not lit[k]:
+            continue
+        cs = NS[k, 0] * s[0] + NS[k, 1] * s[1] + NS[k, 2] * s[2]
+        cv = abs(NS[k, 0] * WO[k, 0] + NS[k, 1] * WO[k, 1] + NS[k, 2] * WO[k, 2])
+        if cs <= 0.05:
+            continue  # grazing Sun: too little light for a thin shadow to matter
+        rho = 0.75 * foot[k] / max(cv, 0.1)
+        # the cells looked at reach ρ√2 from the point, and a cell's top is taken over its
+        # width: the point's own plane may rise by (ρ√2 + cell)·tanθ_s over them
+        h = (s[0] * P[k, 0] + s[1] * P[k, 1] + s[2] * P[k, 2]
+             + (1.4143 * rho + cell) * math.sqrt(1.0 - cs * cs) / cs + 0.05 * rho)
+        a = (e1[0] * P[k, 0] + e1[1] * P[k, 1] + e1[2] * P[k, 2] - a0) / cell
+        b = (e2[0] * P[k, 0] + e2[1] * P[k, 1] + e2[2] * P[k, 2] - b0) / cell
+        r = rho / cell
+        u0 = max(math.floor(a - r), 0)
+        u1 = min(math.floor(a + r), nx - 1)
+        v0 = max(math.floor(b - r), 0)
+        v1 = min(math.floor(b + r), ny - 1)
+        hit = False
+        for v in range(v0, v1 + 1):
+            for u in range(u0, u1 + 1):
+                if grid[v, u] > h:
+                    hit = True
+                    break
+            if hit:
+                break
+        out[k] = hit
+
+
 @pjit
 def subpixel_rays(pix, W, n_grid, seed, R_body_from_cam, fx, fy, cx, cy, out_d):
     """n_grid² jittered-stratified sub-pixel ray directions (body frame, z_cam = 1) per edge
