@@ -755,7 +755,7 @@ def _thin_shadow_pixels(scene: Scene, s, vis, foot, sun_dir) -> np.ndarray:
     if not (np.isfinite(cell) and cell > 0.0):
         return out
     span = max(pa.max() - pa.min(), pb.max() - pb.min())
-    cell = max(cell, span / 4096.0)  # at most 4096² cells (64 MB)
+    cell = max(cell, span / 2048.0)  # at most 2048² cells (34 MB)
     a0, b0 = pa.min() - cell, pb.min() - cell
     nx = int((pa.max() - a0) / cell) + 2
     ny = int((pb.max() - b0) / cell) + 2
