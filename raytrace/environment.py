@@ -261,16 +261,21 @@ def _direction_cells(p, texture, k_t, k_p, sub, L, W, D):
         D[c, 2] = ct
 
 
+@jit
+def _node_direction(m, n_t, n_p):
+    """Unit direction of node m of an n_t × n_p table (θ = π i/(n_t − 1), φ = 2π j/n_p, m =
+    i·n_p + j): the layout :func:`irradiance_lookup` reads."""
+    th = math.pi * (m // n_p) / (n_t - 1)
+    ph = 2.0 * math.pi * (m % n_p) / n_p
+    return math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)
+
+
 @pjit
 def _irradiance_nodes(n_t, n_p, amb, L, W, D, out):
     for m in numba.prange(n_t * n_p):
         i = m // n_p
         j = m % n_p
-        th = math.pi * i / (n_t - 1)
-        ph = 2.0 * math.pi * j / n_p
-        nx = math.sin(th) * math.cos(ph)
-        ny = math.sin(th) * math.sin(ph)
-        nz = math.cos(th)
+        nx, ny, nz = _node_direction(m, n_t, n_p)
         er = math.pi * amb
         eg = er
         eb = er
@@ -334,11 +339,7 @@ def _glossy_nodes(n_t, n_p, amb, alpha, norm, c_min, L, W, D, out):
     for m in numba.prange(n_t * n_p):
         i = m // n_p
         j = m % n_p
-        th = math.pi * i / (n_t - 1)
-        ph = 2.0 * math.pi * j / n_p
-        rx = math.sin(th) * math.cos(ph)
-        ry = math.sin(th) * math.sin(ph)
-        rz = math.cos(th)
+        rx, ry, rz = _node_direction(m, n_t, n_p)
         sr = 0.0
         sg = 0.0
         sb = 0.0
