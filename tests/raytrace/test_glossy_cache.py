@@ -1,0 +1,68 @@
+"""The radiance cache's transfer off glossy parts, against quadrature.
+
+A gold foil plate (2 m × 2 m, GGX α = 0.32) lies in the plane z = 0 under the Sun; a black wall
+stands on its edge x = 1 m, facing it. The wall's indirect irradiance is then the plate's
+single reflection of the Sun, E(x) = ∫ f(ω_sun → ω_yx)·cosθ_sun·E_sun · cosθ_x cosθ_y / r² dA_y,
+which a midpoint rule over the plate gives (the wall's shadow on the plate included). Before the
+cache followed the lobe of glossy parts it spread their reflection uniformly, as if diffuse:
+0.45× the quadrature where the glint points at the wall, 4.4× where it points away."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from raytrace.brdf import brdf_cos
+from raytrace.lighting import Lighting
+from raytrace.materials import MATERIAL_PRESETS
+from raytrace.model import Component, TargetModel
+from raytrace.scene import Scene
+
+
+def _scene():
+    plate = trimesh.creation.box((2.0, 2.0, 0.02))
+    plate.apply_translation((0.0, 0.0, -0.01))
+    wall = trimesh.creation.box((0.02, 2.0, 2.0))
+    wall.apply_translation((1.01, 0.0, 1.0))
+    return Scene(TargetModel("plates", (Component("plate", plate, "gold_mli", "bus", 1.0),
+                                        Component("wall", wall, "black_paint", "bus", 1.0, albedo=(0.0, 0.0, 0.0)))))
+
+
+def _quadrature(x, sun, n=400):
+    gold = MATERIAL_PRESETS["gold_mli"]
+    s = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+    Y = np.stack(np.meshgrid(s, s, indexing="ij"), -1).reshape(-1, 2)
+    P = np.column_stack([Y, np.zeros(len(Y))])
+    v = x - P
+    r = np.linalg.norm(v, axis=1)
+    o = v / r[:, None]
+    cos_y = o[:, 2]
+    cos_x = o[:, 0]  # the wall's face looks along −x: cosθ_x = (y − x)·(−x̂)/r
+    f = np.array([brdf_cos(0.0, 0.0, 1.0, *oo, *sun, *gold.diffuse, *gold.f0, gold.roughness) for oo in o])
+    if sun[0] > 0.0:  # the wall (x = 1 m, 2 m high) shades the plate where the Sun comes from its side
+        f[(1.0 - P[:, 0]) / sun[0] * sun[2] < 2.0] = 0.0
+    dA = (2.0 / n) ** 2
+    return (f * (cos_x * cos_y / r ** 2 * dA)[:, None]).sum(axis=0)
+
+
+# glint_away: the wall shades three quarters of the plate, and the cache resolves that
+# shadow's edge only to its lattice spacing (measured +12 %, the old diffuse stand-in 4.4×)
+@pytest.mark.parametrize("sun, rtol", [((-0.6, 0.0, 0.8), 0.05), ((0.6, 0.0, 0.8), 0.15)],
+                         ids=["glint_on_wall", "glint_away"])
+def test_wall_irradiance_from_a_glossy_plate(sun, rtol):
+    sc = _scene()
+    cache = sc.radiance_cache()
+    E_sun = 1000.0
+    frame = cache.solve(Lighting(sun_dir_body=sun, sun_irradiance_W_m2=E_sun))
+    rows = np.arange(0, cache.n_rows, 2)
+    pos, nrm = cache.positions[rows // 2], cache.normals[rows // 2]
+    # rows on the wall's face towards the plate, away from its edges
+    on = (nrm[:, 0] < -0.99) & (np.abs(pos[:, 1]) < 0.7) & (pos[:, 2] > 0.2) & (pos[:, 2] < 1.6) & cache.valid[rows]
+    assert on.sum() > 50
+    pts = pos[on]
+    pick = pts[np.linspace(0, len(pts) - 1, 24).astype(int)]
+    want = np.mean([_quadrature(p, np.asarray(sun)) * E_sun for p in pick], axis=0)
+    # 24 rows spread over the face, the same for both estimates
+    got24 = frame.indirect_W_m2[rows[on]][np.linspace(0, on.sum() - 1, 24).astype(int)].mean(axis=0)
+    np.testing.assert_allclose(got24, want, rtol=rtol)
