@@ -305,10 +305,11 @@ def _sun_rays(rows, pos, nrm, eps, sx, sy, sz, cos_out, out_o, out_d):
 
 
 @pjit
-def _jacobi_step(indptr, indices, data, Y, X, X0, out):
-    """out = X0 + W Y for a CSR matrix W (rows, rows) and RGB rows Y (= ρ ⊙ X); returns
-    max |out − X|. One row per thread, in a fixed order: the result does not depend on the
-    thread count."""
+def _jacobi_step(indptr, indices, data, Y, g_ptr, g_idx, g_data, Yb, X, X0, out):
+    """out = X0 + W_ss Y + W_g Yb for CSR matrices: W_ss (rows, rows) with RGB rows Y (= ρ ⊙ X),
+    and W_g, the light glossy parts reflect along their lobes, with RGB entries g_data (nnz, 3)
+    and Yb = ρ_bounce ⊙ X (empty without glossy parts); returns max |out − X|. One row per
+    thread, in a fixed order: the result does not depend on the thread count."""
     n = X.shape[0]
     dmax = np.zeros(n)
     for i in numba.prange(n):
@@ -321,6 +322,11 @@ def _jacobi_step(indptr, indices, data, Y, X, X0, out):
             s0 += w * Y[j, 0]
             s1 += w * Y[j, 1]
             s2 += w * Y[j, 2]
+        for k in range(g_ptr[i], g_ptr[i + 1]):
+            j = g_idx[k]
+            s0 += g_data[k, 0] * Yb[j, 0]
+            s1 += g_data[k, 1] * Yb[j, 1]
+            s2 += g_data[k, 2] * Yb[j, 2]
         out[i, 0] = s0
         out[i, 1] = s1
         out[i, 2] = s2
@@ -486,6 +492,7 @@ class RadianceCache:
         rec = {k: [] for k in ("row", "face", "u", "v", "side", "n", "wo")}
         glossy_face = self.glossy_comp[scene.component_of_face]
         any_glossy = bool(glossy_face.any())
+        corner_normal = scene.corner_normal.astype(np.float64) if any_glossy else None
         buried = np.zeros(len(rows_all), dtype=np.int64)
         for a in range(0, len(rows_all), chunk):
             rows = rows_all[a:a + chunk]
@@ -509,7 +516,8 @@ class RadianceCache:
             blk_rows.append(rows[blocked // G])
             blk_cells.append(cells)
             if any_glossy:
-                self._glossy_chunk(rows, o, d, h, glossy_face, a, g_rows, g_cols, g_w, gb_rows, gb_cells, gb_w, rec)
+                self._glossy_chunk(rows, o, d, h, glossy_face, corner_normal, a, g_rows, g_cols, g_w, gb_rows, gb_cells,
+                                   gb_w, rec)
         ok = valid.copy()
         ok[rows_all[buried > _BURIED_FRACTION * G]] = False
         self.alias = self._aliases(valid, ok)
@@ -526,13 +534,17 @@ class RadianceCache:
         self.W_sb = sp.csr_matrix((np.full(int(kb.sum()), 1.0 / G), (br[kb], bc[kb])),
                                   shape=(self.n_rows, self.n_cells ** 2))
         self.W_g, self.W_gb, self.glint = None, None, None
-        if g_rows or gb_rows:
-            gr = np.concatenate(g_rows) if g_rows else np.empty(0, np.int64)
-            gc = self.alias[np.concatenate(g_cols)] if g_cols else np.empty((0, 3), np.int64)
-            gw = np.concatenate(g_w) if g_w else np.empty((0, 3, 3))  # (hit, lattice point, channel)
+        if g_rows:  # _glossy_chunk appends to all its lists or to none
+            gr = np.concatenate(g_rows)
+            gc = self.alias[np.concatenate(g_cols)]
+            gw = np.concatenate(g_w)  # (hit, lattice point, channel)
             kg = ok[gr]
-            self.W_g = [sp.csr_matrix((gw[kg, :, c].ravel() / G, (np.repeat(gr[kg], 3), gc[kg].ravel())),
-                                      shape=(self.n_rows, self.n_rows)) for c in range(3)]
+            # one CSR pattern with RGB entries: (indptr, indices, data (nnz, 3))
+            key = np.repeat(gr[kg], 3) * self.n_rows + gc[kg].ravel()
+            uniq, inv = np.unique(key, return_inverse=True)
+            data = np.column_stack([np.bincount(inv.ravel(), gw[kg, :, c].ravel(), len(uniq)) for c in range(3)]) / G
+            indptr = np.searchsorted(uniq // self.n_rows, np.arange(self.n_rows + 1)).astype(np.int64)
+            self.W_g = (indptr, (uniq % self.n_rows).astype(np.int64), np.ascontiguousarray(data))
             bbr = np.concatenate(gb_rows)
             bbc = np.concatenate(gb_cells)
             bbw = np.concatenate(gb_w)
@@ -547,7 +559,8 @@ class RadianceCache:
             self.glint = glint
         return ok
 
-    def _glossy_chunk(self, rows, o, d, h, glossy_face, key0, g_rows, g_cols, g_w, gb_rows, gb_cells, gb_w, rec):
+    def _glossy_chunk(self, rows, o, d, h, glossy_face, corner_normal, key0, g_rows, g_cols, g_w, gb_rows, gb_cells,
+                      gb_w, rec):
         """The cache rays of one chunk that hit a glossy part (on a side that has a row): one
         ray drawn from the part's lobe at each hit, binned like the cache's own rays (the
         lattice points it hits, or the sky cell it leaves through, with the lobe's RGB weight),
@@ -567,7 +580,7 @@ class RadianceCache:
         hu, hv = h["u"].astype(np.float64), h["v"].astype(np.float64)
         _glossy_bounce(idx, o.astype(np.float64), d.astype(np.float64), h["tfar"].astype(np.float64), geom,
                        h["primID"], hu, hv, scene.face_offset, scene.face_normal,
-                       scene.corner_normal.astype(np.float64), scene.component_of_face, self.f0, self.alpha,
+                       corner_normal, scene.component_of_face, self.f0, self.alpha,
                        self.eps_m, int(key0) * G, o2, d2, w2, n2)
         src = rows[idx // G]
         h2 = scene.intersect(o2, d2)
@@ -661,13 +674,14 @@ class RadianceCache:
         W = self.W_ss
         it = 0
         scale = max(float(np.abs(E0).max()), 1e-30)
-        E0_it = E0.copy() if self.W_g is not None else E0
+        W_g = self.W_g if self.W_g is not None else \
+            (np.zeros(self.n_rows + 1, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
+        Yb = np.empty_like(E) if self.W_g is not None else Y
         for it in range(1, max_iterations + 1):
-            if self.W_g is not None:
-                for c in range(3):
-                    E0_it[:, c] = E0[:, c] + self.W_g[c] @ (self.rho_bounce[:, c] * E[:, c])
             np.multiply(self.rho_ss, E, out=Y)
-            delta = _jacobi_step(W.indptr, W.indices, W.data, Y, E, E0_it, E_new)
+            if self.W_g is not None:
+                np.multiply(self.rho_bounce, E, out=Yb)
+            delta = _jacobi_step(W.indptr, W.indices, W.data, Y, *W_g, Yb, E, E0, E_new)
             E, E_new = E_new, E
             if delta <= tolerance * scale:
                 break
