@@ -158,12 +158,12 @@ def hit_or_miss(geom, out):
 
 
 @pjit_exact
-def put_scaled_rows(idx, X, scale, out):
-    """out[idx[j]] = scale · X[j] (rows of 3)."""
+def put_weighted_rows(idx, X, Wt, out):
+    """out[idx[j]] = Wt[idx[j]] · X[j] per channel (rows of 3)."""
     for j in numba.prange(idx.shape[0]):
         i = idx[j]
         for a in range(3):
-            out[i, a] = scale * X[j, a]
+            out[i, a] = Wt[i, a] * X[j, a]
 
 
 @pjit_exact
@@ -218,7 +218,7 @@ def incoming_env(p, tex, ox, oy, oz, dx, dy, dz):
 
 @numba.njit(cache=True, fastmath=FASTMATH, nogil=True, forceinline=True)
 def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_normal, corner_normal, comp_of_face,
-             mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+             mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
              vis_sun, eir, eig, eib):
     """Radiance arriving along a traced ray (o, d) that hit a surface (``geom`` ≥ 0; for a ray
     that escaped, :func:`incoming_env`): that surface's radiance towards the ray from the
@@ -228,8 +228,11 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
     the hit comes from the cache when ``vis_sun`` < 0, else it is ``vis_sun`` (a shadow ray
     cast from the hit): then the hit's sunlight is exact and only its indirect light comes
     from the cache, so shadows finer than the cache's lattice are not blurred into the light
-    bounced off them; (``eir``, ``eig``, ``eib``) ≥ 0 then also replaces the cache's indirect
-    irradiance at the hit (a traced estimate of it)."""
+    bounced off them. (``eir``, ``eig``, ``eib``) ≥ 0 is a traced continuation of the path from
+    the hit (:func:`bounce2_rays`): on a part that is not ``glossy`` it is an estimate of the
+    hit's indirect irradiance and replaces the cache's; on a glossy part (metal, MLI foil) it
+    is an estimate of the specular reflection of everything but the Sun (one sample of the
+    lobe), which replaces the uniform stand-in, and the small diffuse term keeps the cache."""
     dn = math.sqrt(dx * dx + dy * dy + dz * dz)
     dx /= dn
     dy /= dn
@@ -252,17 +255,20 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
     ny /= nn
     nz /= nn
     cs = nx * sun[0] + ny * sun[1] + nz * sun[2]
+    traced_spec = eir >= 0.0 and glossy[c]
     if vis_sun >= 0.0:  # exact sunlight replaces the cache's
         ex = vis_sun * sun[3] * cs if cs > 0.0 else 0.0
-        if eir >= 0.0:  # and a traced estimate its indirect light
-            er = eir + ex
-            eg = eig + ex
-            eb = eib + ex
-        else:
-            er = max(er - es, 0.0) + ex
-            eg = max(eg - es, 0.0) + ex
-            eb = max(eb - es, 0.0) + ex
-        es = ex
+    else:
+        ex = es
+    if eir >= 0.0 and not traced_spec:  # a traced estimate replaces the indirect light
+        er = eir + ex
+        eg = eig + ex
+        eb = eib + ex
+    elif vis_sun >= 0.0:
+        er = max(er - es, 0.0) + ex
+        eg = max(eg - es, 0.0) + ex
+        eb = max(eb - es, 0.0) + ex
+    es = ex
     lr = mat_diff[c, 0] / math.pi * er
     lg = mat_diff[c, 1] / math.pi * eg
     lb = mat_diff[c, 2] / math.pi * eb
@@ -276,10 +282,15 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
                 lr += sr * sun[3] * vis
                 lg += sg * sun[3] * vis
                 lb += sb * sun[3] * vis
-            ar, ag, ab = specular_albedo(table, mu, mat_alpha[c], mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2])
-            lr += ar * max(er - es, 0.0) / math.pi
-            lg += ag * max(eg - es, 0.0) / math.pi
-            lb += ab * max(eb - es, 0.0) / math.pi
+            if traced_spec:
+                lr += eir
+                lg += eig
+                lb += eib
+            else:
+                ar, ag, ab = specular_albedo(table, mu, mat_alpha[c], mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2])
+                lr += ar * max(er - es, 0.0) / math.pi
+                lg += ag * max(eg - es, 0.0) / math.pi
+                lb += ab * max(eb - es, 0.0) / math.pi
     return lr, lg, lb
 
 
@@ -299,8 +310,8 @@ GLOSSY_HIT = 0.7
 
 @pjit
 def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset, face_normal, corner_normal,
-               comp_of_face, mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids,
-               p, tex, prefiltered, E_unocc, glossy_env, glossy_level, out, out_lbar):
+               comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start,
+               lat_ids, p, tex, prefiltered, E_unocc, glossy_env, glossy_level, out, out_lbar):
     """out += L̄_in · (F0·A + B): the specular reflection of the environment and other parts.
 
     ``prefiltered`` (``fast``, where this term is the answer): L̄_in is blended by the lobe
@@ -328,8 +339,8 @@ def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset
             r, g, b = incoming_env(p, tex, O[j, 0], O[j, 1], O[j, 2], D[j, 0], D[j, 1], D[j, 2])
         else:
             r, g, b = incoming(geom[j], prim[j], hu[j], hv[j], O[j, 0], O[j, 1], O[j, 2], D[j, 0], D[j, 1], D[j, 2],
-                               face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, table,
-                               sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0, -1.0, -1.0, -1.0)
+                               face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy,
+                               table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0, -1.0, -1.0, -1.0)
         c = comp[k]
         if not prefiltered:
             t = min(max((mat_alpha[c] - 0.05) / 0.3, 0.0), 1.0)
@@ -408,11 +419,14 @@ def bounce_sun_rays(O, D, tfar, geom, prim, face_offset, face_normal, sx, sy, sz
 
 
 @pjit
-def bounce2_rays(O, D, tfar, geom, prim, hu, hv, face_offset, face_normal, corner_normal, keys, seed, eps, want,
-                 out_o, out_d):
-    """A second bounce from the hits of traced rays: one cosine-weighted direction about the
-    hit's shading normal (facing the ray's origin), from a hash of (keys[m], seed); wanted
-    where it leaves the surface (above the geometric normal)."""
+def bounce2_rays(O, D, tfar, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face, glossy,
+                 mat_f0, mat_alpha, keys, seed, eps, want, out_o, out_d, out_w):
+    """A second bounce from the hits of traced rays, one direction per hit from a hash of
+    (keys[m], seed), about the hit's shading normal (facing the ray's origin): cosine-weighted
+    with weight π (the hit's irradiance is π·L_in), or on a ``glossy`` part a draw from its GGX
+    lobe (visible normals) about the mirror of the ray with weight f_s·cos/pdf (RGB; the
+    specular reflection is weight·L_in, :func:`incoming`). Wanted where the draw succeeds and
+    leaves the surface (above the geometric normal)."""
     for m in numba.prange(D.shape[0]):
         want[m] = False
         if geom[m] < 0:
@@ -428,8 +442,22 @@ def bounce2_rays(O, D, tfar, geom, prim, hu, hv, face_offset, face_normal, corne
         nn = math.sqrt(nx * nx + ny * ny + nz * nz)
         if nn < 1e-12 or nx * dx + ny * dy + nz * dz > 0.0:
             nx, ny, nz, nn = ngx, ngy, ngz, 1.0
-        wx, wy, wz = cosine_direction(nx / nn, ny / nn, nz / nn, _hash01(keys[m], 4 * seed + 31),
-                                      _hash01(keys[m], 4 * seed + 32))
+        nx /= nn
+        ny /= nn
+        nz /= nn
+        u1 = _hash01(keys[m], 4 * seed + 31)
+        u2 = _hash01(keys[m], 4 * seed + 32)
+        c = comp_of_face[f]
+        if glossy[c]:
+            dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+            wx, wy, wz, wr, wg, wb, ok = sample_brdf(nx, ny, nz, -dx / dn, -dy / dn, -dz / dn, 0.0, 0.0, 0.0,
+                                                     mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2], mat_alpha[c], 0.0,
+                                                     u1, u2)
+            if not ok:
+                continue
+        else:
+            wx, wy, wz = cosine_direction(nx, ny, nz, u1, u2)
+            wr = wg = wb = math.pi
         if wx * ngx + wy * ngy + wz * ngz <= 0.0:
             continue
         want[m] = True
@@ -440,11 +468,14 @@ def bounce2_rays(O, D, tfar, geom, prim, hu, hv, face_offset, face_normal, corne
         out_d[m, 0] = wx
         out_d[m, 1] = wy
         out_d[m, 2] = wz
+        out_w[m, 0] = wr
+        out_w[m, 1] = wg
+        out_w[m, 2] = wb
 
 
 @pjit
 def incoming_rays(O, D, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
-                  mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis, e_ind, out):
+                  mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis, e_ind, out):
     """:func:`incoming` along each ray (the Sun's visibility at its hit from ``vis``, its
     indirect irradiance from ``e_ind`` where ≥ 0, else from the cache)."""
     for m in numba.prange(D.shape[0]):
@@ -453,13 +484,13 @@ def incoming_rays(O, D, geom, prim, hu, hv, face_offset, face_normal, corner_nor
             continue
         out[m, 0], out[m, 1], out[m, 2] = incoming(
             geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1], D[m, 2], face_offset,
-            face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid,
-            face_s, lat_start, lat_ids, p, tex, vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
+            face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun,
+            valid, face_s, lat_start, lat_ids, p, tex, vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
 
 
 @pjit
 def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
-               mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis,
+               mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis,
                e_ind, NS, E_unocc, alpha, out, out_var):
     """Irradiance estimate per point from its n_rays cosine-weighted rays (about NS; rays under
     the geometric surface carry nothing), with the environment as a control variate:
@@ -508,7 +539,7 @@ def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, c
             if not below:
                 r, g, b = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
                                    D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
-                                   mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+                                   mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
                                    vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
                 sr += r
                 sg += g
@@ -1027,8 +1058,8 @@ def lobe_rays(idx, P, NS, NG, WO, comp, mat_f0, mat_alpha, n_rays, seed, pix, ep
 
 @pjit
 def lobe_sum(n_rays, O, D, Wt, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
-             mat_diff, mat_f0, mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, idx, CV,
-             out):
+             mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, idx, CV,
+             vis, e_ind, out, out_var):
     """Each listed point's (idx[j]) sampled specular reflection minus its cheap counterpart
     L̄·A (:func:`add_mirror`, L̄ = ``CV[idx[j]]``, A the split-sum albedo): the mean over the
     lobe rays of weight × (incoming radiance − L̄).
@@ -1043,6 +1074,7 @@ def lobe_sum(n_rays, O, D, Wt, geom, prim, hu, hv, face_offset, face_normal, cor
         sr = 0.0
         sg = 0.0
         sb = 0.0
+        sy2 = 0.0  # Σ (luminance of the ray's term)²
         for r in range(n_rays):
             m = j * n_rays + r
             if Wt[m, 0] == 0.0 and Wt[m, 1] == 0.0 and Wt[m, 2] == 0.0:
@@ -1052,11 +1084,22 @@ def lobe_sum(n_rays, O, D, Wt, geom, prim, hu, hv, face_offset, face_normal, cor
             else:
                 a, b, c = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
                                    D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
-                                   mat_alpha, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0,
-                                   -1.0, -1.0, -1.0)
-            sr += Wt[m, 0] * (a - CV[k, 0])
-            sg += Wt[m, 1] * (b - CV[k, 1])
-            sb += Wt[m, 2] * (c - CV[k, 2])
+                                   mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+                                   vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
+            tr = Wt[m, 0] * (a - CV[k, 0])
+            tg = Wt[m, 1] * (b - CV[k, 1])
+            tb = Wt[m, 2] * (c - CV[k, 2])
+            sr += tr
+            sg += tg
+            sb += tb
+            y = 0.2126 * tr + 0.7152 * tg + 0.0722 * tb
+            sy2 += y * y
         out[j, 0] = sr / n_rays
         out[j, 1] = sg / n_rays
         out[j, 2] = sb / n_rays
+        # variance of the mean of the N terms: (Σy² − N ȳ²) / (N (N − 1))
+        if n_rays > 1:
+            ym = (0.2126 * sr + 0.7152 * sg + 0.0722 * sb) / n_rays
+            out_var[j] = max((sy2 - n_rays * ym * ym) / (n_rays * (n_rays - 1.0)), 0.0)
+        else:
+            out_var[j] = 0.0

@@ -154,6 +154,9 @@ _GATHER_BOUNCES = 4
 _NEAR_SPACINGS = 2.0
 # weight of the environment control variate in the final gather (raytrace._shading.gather_sum)
 GATHER_ALPHA = 1.0
+# XORed into the seed of the paths traced from lobe-ray hits, so that they do not repeat the
+# final gather's paths from the same pixel (both are keyed by pixel and ray number)
+_LOBE_STREAM = 0x2545F491
 # rays per chunk of the final gather and the lobe sampling: their float64 ray, hit and bounce
 # arrays stay a few MB and are reused by the allocator instead of being mapped fresh (a whole
 # 1280×960 gather at 16 rays is 2.6 M rays, ~60 MB per array, and the page faults of writing
@@ -288,6 +291,9 @@ class _Context:
         self.p_background = self.p.copy()
         self.p_background[K.env.P_AMBIENT] = 0.0  # the sky lights the target but is not drawn
         self.cache = scene.radiance_cache(**cache_options)
+        # parts whose specular albedo exceeds their diffuse one (metals, MLI foils): traced
+        # paths continue along their lobe, as the cache's transfer does
+        self.glossy = self.cache.glossy_comp
         # the environment's unoccluded irradiance: the cache's sky term and the final gather's
         # control variate are both its complement over blocked directions
         cells = K.env.environment_cells(self.p, self.tex)
@@ -398,12 +404,18 @@ class _Context:
         L[cand] += (v - vis[cand])[:, None] * full
         vis[cand] = v
 
-    def lobe(self, s, n_rays: int, pix: np.ndarray, seed: int, lbar: np.ndarray):
+    def lobe(self, s, n_rays: int, pix: np.ndarray, seed: int, lbar: np.ndarray, var: np.ndarray | None = None):
         """Specular reflection of everything but the Sun, sampled over each glossy point's GGX
         lobe with n_rays rays, minus its cheap counterpart (the mirror term of :meth:`direct`,
-        which reflected ``lbar``): radiance (n, 3) (0 at non-glossy points)."""
+        which reflected ``lbar``): radiance (n, 3) (0 at non-glossy points). A lobe ray that
+        hits a part sees it as a final-gather ray does: the Sun exact there (a shadow ray) and
+        the hit's indirect light traced (:meth:`_bounces`), not the cache's, whose lattice blurs
+        the shadows and edges a sharp lobe reflects. ``var`` (n,), if given, receives each
+        estimate's luminance variance (:func:`raytrace._shading.lobe_sum`)."""
         n = len(s["P"])
         out = np.zeros((n, 3))
+        if var is not None:
+            var.fill(0.0)
         idx = np.flatnonzero(self.specular[s["comp"]])
         if len(idx) == 0:
             return out
@@ -418,9 +430,18 @@ class _Context:
                         self.eps, o, d, w)
             h = self.scene.intersect(o, d)
             val = np.empty((len(part), 3))
-            K.lobe_sum(n_rays, o, d, w, h["geomID"], h["primID"], h["u"].astype(np.float64),
-                       h["v"].astype(np.float64), *self._lookup(), part, lbar, val)
+            hu, hv = h["u"].astype(np.float64), h["v"].astype(np.float64)
+            # the hits' sunlight exact and their indirect light traced, as for the final gather
+            # (their own stream of samples: another seed term of the same keys)
+            vis = self._bounce_sun(o, d, h)
+            keys = np.repeat(pix[part].astype(np.int64), n_rays) * n_rays + np.tile(np.arange(n_rays), len(part))
+            e_ind = self._bounces(o, d, h, hu, hv, keys, seed ^ _LOBE_STREAM, _GATHER_BOUNCES)
+            v = np.empty(len(part))
+            K.lobe_sum(n_rays, o, d, w, h["geomID"], h["primID"], hu, hv, *self._lookup(), part, lbar, vis, e_ind, val,
+                       v)
             out[part] = val
+            if var is not None:
+                var[part] = v
         return out
 
     def cache_E(self, s):
@@ -468,7 +489,10 @@ class _Context:
         ray) at every vertex, the cache beyond the last (E ≈ π·L_in at each vertex). Light
         bounced several times within a gap narrower than the cache's lattice is then traced,
         not interpolated: the cache's error there reaches the pixel multiplied once more by
-        the gap's albedo-weighted view factor at every traced bounce."""
+        the gap's albedo-weighted view factor at every traced bounce. At a glossy hit the path
+        follows the part's lobe instead and estimates its specular reflection
+        (:func:`raytrace._shading.bounce2_rays`): a gold foil facing a lit wall reflects the wall,
+        not the average of its surroundings."""
         keys = (np.repeat(pix.astype(np.int64), n_rays) * n_rays + np.tile(np.arange(n_rays), len(pix)))
         return self._bounces(o, d, h, hu, hv, keys, seed, _GATHER_BOUNCES)
 
@@ -483,9 +507,11 @@ class _Context:
         want = np.empty(m, dtype=bool)
         o2 = np.empty((m, 3))
         d2 = np.empty((m, 3))
+        w2 = np.empty((m, 3))
         sc = self.scene
         K.bounce2_rays(o, d, h["tfar"].astype(np.float64), h["geomID"], h["primID"], hu, hv, sc.face_offset,
-                       sc.face_normal, sc.corner_normal, keys, seed, self.eps, want, o2, d2)
+                       sc.face_normal, sc.corner_normal, sc.component_of_face, self.glossy, self.f0, self.alpha,
+                       keys, seed, self.eps, want, o2, d2, w2)
         idx = np.flatnonzero(want)
         if len(idx):
             o2c, d2c = np.empty((len(idx), 3)), np.empty((len(idx), 3))
@@ -497,14 +523,21 @@ class _Context:
             vis2 = self._bounce_sun(o2, d2, h2)
             e2 = np.full((len(idx), 3), -1.0)  # beyond the last traced bounce: the cache
             if levels > 1:
-                near = np.flatnonzero(h2["tfar"] < _NEAR_SPACINGS * self.cache.spacing_m)  # d2 is unit
+                # continued: hits within _NEAR_SPACINGS lattice spacings (d2 is unit), and every
+                # glossy hit, whose reflection the cache's irradiance cannot stand in for
+                go = h2["tfar"] < _NEAR_SPACINGS * self.cache.spacing_m
+                hit2 = h2["geomID"] >= 0
+                if self.glossy.any() and hit2.any():
+                    f2 = sc.face_offset[h2["geomID"][hit2]] + h2["primID"][hit2]
+                    go[hit2] |= self.glossy[sc.component_of_face[f2]]
+                near = np.flatnonzero(go)
                 if len(near):
                     # keys * 4 + 1: the next bounce's samples, distinct per sample and depth
                     e2[near] = self._bounces(o2[near], d2[near], {k: v[near] for k, v in h2.items()}, hu2[near],
                                              hv2[near], keys[idx][near] * 4 + 1, seed, levels - 1)
             L2 = np.empty((len(idx), 3))
             K.incoming_rays(o2, d2, h2["geomID"], h2["primID"], hu2, hv2, *self._lookup(), vis2, e2, L2)
-            K.put_scaled_rows(idx, L2, math.pi, e_ind)
+            K.put_weighted_rows(idx, L2, w2, e_ind)
         return e_ind
 
     def _bounce_sun(self, o, d, h):
@@ -530,11 +563,32 @@ class _Context:
         """Arguments of :func:`raytrace._shading.incoming` after the ray."""
         sc, c = self.scene, self.cache
         return (sc.face_offset, sc.face_normal, sc.corner_normal, sc.component_of_face, self.diff, self.f0,
-                self.alpha, self.table, self.sun, self.cf.irradiance_W_m2, self.cf.sun_irradiance_W_m2, c.valid,
+                self.alpha, self.glossy, self.table, self.sun, self.cf.irradiance_W_m2, self.cf.sun_irradiance_W_m2, c.valid,
                 c.face_s, c.lat_start, c.lat_ids, self.p, self.tex)
 
     def add_diffuse(self, s, E, L):
         K.add_diffuse(E, s["comp"], self.diff, L)
+
+
+def _filter_residual(rows, var, inst, at, guide, passes: int, sigma_l: float) -> np.ndarray:
+    """The per-pixel rows (n, 3) of a gathered residual, with their luminance variances
+    ``var`` (n,), filtered by ``passes`` à-trous passes (:func:`raytrace._shading.atrous`) on
+    the image of ids ``inst`` (pixel k at (at[0][k], at[1][k]); pixels whose id is 0 neither
+    take nor give), ``guide`` = (normals, depths, fx, fy, cx, cy) of that image: rows (n, 3)."""
+    img = np.zeros((*inst.shape, 3))
+    img[at] = rows
+    tmp = np.zeros_like(img)
+    var_img = np.zeros(inst.shape)
+    var_img[at] = var
+    var_tmp, var_blur, lum = np.zeros_like(var_img), np.zeros_like(var_img), np.zeros_like(var_img)
+    normal, depth, fx, fy, cx, cy = guide
+    for k in range(passes):
+        if sigma_l > 0.0:
+            K.guide_images(img, var_img, inst, lum, var_blur)
+        K.atrous(img, var_img, var_blur, lum, inst, normal, depth, fx, fy, cx, cy, 1 << k, sigma_l, tmp, var_tmp)
+        img, tmp = tmp, img
+        var_img, var_tmp = var_tmp, var_img
+    return np.ascontiguousarray(img[at])
 
 
 def _check_finite(stage: str, a: np.ndarray) -> None:
@@ -633,33 +687,30 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         pix64 = pix.astype(np.int64)
         var = np.empty(len(pix))
         dE = ctx.gather_E(s, q.gather_rays, pix64, int(seed), var) - E
-        dS = ctx.lobe(s, q.gather_rays, pix64, int(seed), lbar)
-        # both filtered with the same weights (the geometry, and from 8 rays the diffuse
-        # residual's own noise), on the target's bounding box
+        var_s = np.empty(len(pix))
+        dS = ctx.lobe(s, q.gather_rays, pix64, int(seed), lbar, var_s)
+        # each filtered on the target's bounding box with weights from the geometry and, from 8
+        # rays, its own noise: the specular residual apart from the diffuse one, on specular
+        # pixels only (its steps are reflected edges and shadows, not the diffuse light's)
         spec = bool(ctx.specular[s["comp"]].any())
         pv, pu = pix // W, pix % W
         v0, u0 = int(pv.min()), int(pu.min())
         box = (slice(v0, int(pv.max()) + 1), slice(u0, int(pu.max()) + 1))
         inst = np.ascontiguousarray(geo.instance[box])
-        normal = geo.normal_cam[box].astype(np.float64)
-        depth = np.where(np.isfinite(geo.depth_m[box]), geo.depth_m[box], 0.0).astype(np.float64)
-        img = np.zeros((*inst.shape, 6 if spec else 3))
-        img[pv - v0, pu - u0] = np.hstack([dE, dS]) if spec else dE
-        tmp = np.zeros_like(img)
-        var_img = np.zeros(inst.shape)
-        var_img[pv - v0, pu - u0] = var
-        var_tmp, var_blur, lum = np.zeros_like(var_img), np.zeros_like(var_img), np.zeros_like(var_img)
-        for k in range(q.filter_passes):
-            if q.filter_sigma_l > 0.0:
-                K.guide_images(img, var_img, inst, lum, var_blur)
-            K.atrous(img, var_img, var_blur, lum, inst, normal, depth, camera.fx, camera.fy, camera.cx - u0,
-                     camera.cy - v0, 1 << k, q.filter_sigma_l, tmp, var_tmp)
-            img, tmp = tmp, img
-            var_img, var_tmp = var_tmp, var_img
-        rows = img[pv - v0, pu - u0]
+        guide = (geo.normal_cam[box].astype(np.float64),
+                 np.where(np.isfinite(geo.depth_m[box]), geo.depth_m[box], 0.0).astype(np.float64),
+                 camera.fx, camera.fy, camera.cx - u0, camera.cy - v0)
+        at = (pv - v0, pu - u0)
+        rows_E = _filter_residual(dE, var, inst, at, guide, q.filter_passes, q.filter_sigma_l)
+        if spec:
+            spec_px = ctx.specular[s["comp"]]
+            inst_s = np.zeros_like(inst)
+            inst_s[at[0][spec_px], at[1][spec_px]] = inst[at[0][spec_px], at[1][spec_px]]
+            rows_S = _filter_residual(dS, var_s, inst_s, at, guide, q.filter_passes, q.filter_sigma_l)
+        else:
+            rows_S = np.zeros((len(pix), 3))
         # per target pixel (row k of s for pixel pix[k]): the filtered irradiance and specular corrections
-        residual = (np.ascontiguousarray(rows[:, :3]),
-                    np.ascontiguousarray(rows[:, 3:]) if spec else np.zeros((len(pix), 3)))
+        residual = (rows_E, rows_S)
         E = E + residual[0]
         L += residual[1]
     ctx.add_diffuse(s, E, L)
