@@ -17,10 +17,10 @@ Documented bounds (relative RMS error over target pixels, noise-corrected), also
                fast    balanced    (``balanced`` with its default 8 gather rays)
 =============  ======  ==========  ==================================================
 bound          25 %    14 %
-tiangong       11 %     7 %        measured 2026-11-21 with the glossy prefilter of ``fast``
-spacedragon     3 %     3 %        (before it 11 / 4 / 17 / 11 %; thin wings and masts)
-icesat         11 %     9 %        small: 45 % of its pixels are edge pixels
-cassini         9 %     6 %
+tiangong       11 %     8 %        measured 2026-11-21 (seed 3; ``balanced`` with traced paths
+spacedragon     3 %     2 %        through glossy parts: 7.7 / 2.5 / 8.3 / 5.6 % before, within
+icesat          9 %     8 %        this size's noise; thin wings and masts; ICESat is small,
+cassini         8 %     5 %        45 % of its pixels are edge pixels)
 =============  ======  ==========  ==================================================
 
 and ``balanced`` is never worse than ``fast``. Most of the error sits in edge pixels, which
