@@ -326,8 +326,9 @@ def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset
     indirect irradiance ``E_point`` minus the environment's unoccluded irradiance on its plane
     (``E_unocc``), spread as if uniformly (the light the parts add, less the sky they hide).
     On an open surface that second term vanishes and the reflection of Earth's disc, its limb
-    and terminator follows the lobe. Otherwise (``balanced``, where this term is only the
-    control variate of the sampled lobe, :func:`lobe_sum`) L̄_in blends from the mirror ray
+    and terminator follows the lobe. Otherwise (``balanced``, where this term is the control
+    variate of the sampled lobe, :func:`lobe_sum`, or the answer on parts whose specular albedo
+    is too small to be worth sampling, ``shade.LOBE_MIN_SPECULAR``) L̄_in blends from the mirror ray
     (α ≤ 0.05) to E/π (α ≥ 0.35), the environment as if it arrived uniformly: smooth, it kept
     ``balanced``'s filtered residual nearer the truth on the four targets with real materials
     (8 rays, 640×480: 7.55 / 2.12 / 7.31 / 5.41 % against 7.62 / 2.08 / 7.39 / 5.64 % with the

@@ -58,3 +58,24 @@ def test_glossy_reflection_in_balanced_matches_the_path_tracer(plate_and_wall, p
     assert sel.sum() > 300
     ratio = x[sel].mean(axis=0) / ref[sel].mean(axis=0)
     np.testing.assert_allclose(ratio, 1.0, atol=0.01, err_msg=f"{name}: balanced / reference per channel")
+
+
+def test_balanced_casts_no_mirror_ray_it_would_weight_by_zero(plate_and_wall, monkeypatch):
+    """``balanced`` blends its mirror term from the mirror ray to E/π by t(α) and casts no
+    mirror ray where t = 1 (the white wall, α = 0.5): the image must be bit for bit the one
+    with every mirror ray cast (the two places compute t alike)."""
+    from raytrace import shade
+
+    sc, cam, R, t, light, _ref = plate_and_wall
+    ctx = shade._Context(sc, light, {})
+    assert ctx.mirror_weighted.tolist() == [True, False]  # gold α = 0.32 is cast, paint is not
+    a = render(sc, cam, R, t, light, quality="balanced", samples=8, seed=3).radiance
+    init = shade._Context.__init__
+
+    def every_ray(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        self.mirror_weighted = np.ones_like(self.mirror_weighted)
+
+    monkeypatch.setattr(shade._Context, "__init__", every_ray)
+    b = render(sc, cam, R, t, light, quality="balanced", samples=8, seed=3).radiance
+    assert np.array_equal(a, b)
