@@ -605,18 +605,28 @@ def _filter_residual(rows, var, inst, at, guide, passes: int, sigma_l: float) ->
     take nor give), ``guide`` = (normals, depths, fx, fy, cx, cy) of that image: rows (n, 3)."""
     img = np.zeros((*inst.shape, 3))
     img[at] = rows
-    tmp = np.zeros_like(img)
     var_img = np.zeros(inst.shape)
     var_img[at] = var
-    var_tmp, var_blur, lum = np.zeros_like(var_img), np.zeros_like(var_img), np.zeros_like(var_img)
+    img, _ = _atrous_passes(img, var_img, inst, guide, passes, sigma_l)
+    return np.ascontiguousarray(img[at])
+
+
+def _atrous_passes(img, var, inst, guide, passes: int, sigma_l: float):
+    """``passes`` à-trous passes (:func:`raytrace._shading.atrous`, pass k with holes of 2^k
+    pixels) over the image ``img`` (H, W, C) with per-pixel variances ``var`` (H, W), ids
+    ``inst`` and ``guide`` = (normals, depths, fx, fy, cx, cy): the filtered image and its
+    variances (new arrays; σ_l = 0: geometry only)."""
+    img, var = img.copy(), var.copy()
+    tmp, var_tmp = np.zeros_like(img), np.zeros_like(var)
+    var_blur, lum = np.zeros_like(var), np.zeros_like(var)
     normal, depth, fx, fy, cx, cy = guide
     for k in range(passes):
         if sigma_l > 0.0:
-            K.guide_images(img, var_img, inst, lum, var_blur)
-        K.atrous(img, var_img, var_blur, lum, inst, normal, depth, fx, fy, cx, cy, 1 << k, sigma_l, tmp, var_tmp)
+            K.guide_images(img, var, inst, lum, var_blur)
+        K.atrous(img, var, var_blur, lum, inst, normal, depth, fx, fy, cx, cy, 1 << k, sigma_l, tmp, var_tmp)
         img, tmp = tmp, img
-        var_img, var_tmp = var_tmp, var_img
-    return np.ascontiguousarray(img[at])
+        var, var_tmp = var_tmp, var
+    return img, var
 
 
 def _check_finite(stage: str, a: np.ndarray) -> None:

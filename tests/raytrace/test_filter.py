@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 from scipy.ndimage import binary_erosion
 
-from raytrace import _shading as K
 from raytrace.lighting import Lighting
-from raytrace.shade import _Context, render
+from raytrace.shade import _atrous_passes, _Context, render
 
 from .test_shading import CAM, _form_factor_to_floor, _plates, _pose
 
@@ -32,15 +31,7 @@ def _flat_plane():
 
 def _guided(img, var, passes, sigma_l=4.0):
     inst, normal, depth = _flat_plane()
-    img, var = img.copy(), var.copy()
-    out, out_var, vblur, lum = np.zeros_like(img), np.zeros_like(var), np.zeros_like(var), np.zeros_like(var)
-    for k in range(passes):
-        if sigma_l > 0.0:
-            K.guide_images(img, var, inst, lum, vblur)
-        K.atrous(img, var, vblur, lum, inst, normal, depth, FX, FY, CX, CY, 1 << k, sigma_l, out, out_var)
-        img, out = out, img
-        var, out_var = out_var, var
-    return img, var
+    return _atrous_passes(img, var, inst, (normal, depth, FX, FY, CX, CY), passes, sigma_l)
 
 
 def _geometric(img, passes):
