@@ -7,7 +7,10 @@ kernels with Embree calls; ``prange`` only on outer pixel/ray loops.
   pixel's result never depends on where it sits in the cast rectangle (SIMD body vs scalar
   remainder): culled and full-frame renders are identical bit for bit.
 * ``pjit`` / ``jit``: fastmath without ``nnan``/``ninf`` (misses are ``inf`` and must stay
-  so), for shading kernels where the last bit does not matter.
+  so), for shading kernels where the last bit does not matter. Not for kernels whose output
+  feeds thresholds that amplify the last bit (the residual filter's edge-stopping weights):
+  under fastmath the code numba caches can round differently from the code it has just
+  compiled, and the first render after an install then differs from every later one.
 """
 
 from __future__ import annotations

@@ -306,6 +306,11 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
 GLOSSY_A0 = 0.05
 GLOSSY_A1 = 0.2
 GLOSSY_HIT = 0.7
+# ``balanced``'s mirror term (add_mirror) blends from the mirror ray to E/π by
+# t = (α − MIRROR_BLEND_A0) / MIRROR_BLEND_WIDTH clamped to [0, 1]; where t = 1 it casts no
+# mirror ray (shade._Context.mirror_weighted, the same expression)
+MIRROR_BLEND_A0 = 0.05
+MIRROR_BLEND_WIDTH = 0.3
 
 
 @pjit
@@ -344,7 +349,7 @@ def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset
                                table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0, -1.0, -1.0, -1.0)
         c = comp[k]
         if not prefiltered:
-            t = min(max((mat_alpha[c] - 0.05) / 0.3, 0.0), 1.0)
+            t = min(max((mat_alpha[c] - MIRROR_BLEND_A0) / MIRROR_BLEND_WIDTH, 0.0), 1.0)
             r = (1.0 - t) * r + t * E_point[k, 0] / math.pi
             g = (1.0 - t) * g + t * E_point[k, 1] / math.pi
             b = (1.0 - t) * b + t * E_point[k, 2] / math.pi
@@ -564,7 +569,10 @@ def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, c
             out[k, 2] += a * eb
 
 
-@pjit
+# the filter kernels are compiled without fastmath: with it, the code numba loads from its cache
+# and the code it has just compiled rounded differently (the same seed gave a first render after
+# an install that differed from every later one; tests/raytrace/test_filter.py)
+@pjit_exact
 def guide_images(img, var, inst, lum, vblur):
     """The guides of :func:`atrous` for one pass: each target pixel's luminance of
     channels 0–2 (Rec. 709) and the mean of ``var`` over its 3×3 neighbours on the same part."""
@@ -585,7 +593,7 @@ def guide_images(img, var, inst, lum, vblur):
             vblur[v, u] = sv / nv
 
 
-@pjit
+@pjit_exact
 def atrous(img, var, vblur, lum, inst, normal, depth, fx, fy, cx, cy, step, sigma_l, out, out_var):
     """One pass of the edge-avoiding à-trous wavelet filter (Dammertz et al. 2010,
     doi:10.2312/EGGH/HPG10/067-075): a 5×5 B3-spline kernel with holes of ``step`` pixels,

@@ -300,7 +300,8 @@ class _Context:
         self.lobe_sampled = self.specular & (spec_albedo @ lum >= LOBE_MIN_SPECULAR * (self.diff @ lum))
         # parts whose mirror ray ``balanced``'s mirror term weights by more than 0 (the same
         # expression as raytrace._shading.add_mirror's blend, so t = 1 exactly where False)
-        self.mirror_weighted = np.minimum(np.maximum((self.alpha - 0.05) / 0.3, 0.0), 1.0) < 1.0
+        t = np.minimum(np.maximum((self.alpha - K.MIRROR_BLEND_A0) / K.MIRROR_BLEND_WIDTH, 0.0), 1.0)
+        self.mirror_weighted = t < 1.0
         self.table = split_sum_table()
         self.eps = 2e-5 * max(scene.scale_m, 1e-3)
         self.p, self.tex = lighting.packed()

@@ -140,3 +140,48 @@ def test_few_gather_rays_are_still_smoothed_per_pixel(samples):
     # measured: 13 % RMS at one ray (geometry-only filter), 171 % if that pixel's zero
     # variance were allowed to guide the filter
     assert np.sqrt(np.mean(np.square(rel))) < 0.25, rel
+
+
+_FILTER_RUN = """
+import sys
+import numpy as np
+from raytrace import _shading as K
+from raytrace.shade import _atrous_passes
+rng = np.random.default_rng(0)
+H, W = 96, 128
+inst = np.ones((H, W), np.uint16)
+inst[:, :40] = 2
+inst[:8] = 0
+img = rng.normal(size=(H, W, 3))
+var = rng.uniform(0.1, 1.0, (H, W))
+normal = np.zeros((H, W, 3))
+normal[..., 2] = -1.0
+normal[..., 0] = rng.normal(scale=0.05, size=(H, W))
+normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+depth = rng.uniform(9.0, 11.0, (H, W))
+out, out_var = _atrous_passes(img, var, inst, (normal, depth, 500.0, 500.0, 64.0, 48.0), 2, 4.0)
+np.save(sys.argv[1], np.concatenate([out.ravel(), out_var.ravel()]))
+"""
+
+
+def test_filter_gives_the_same_bits_compiled_fresh_and_loaded_from_numba_cache(tmp_path):
+    """The same seed must give the same bytes whether numba compiles the kernels in this run
+    or loads them from its cache. With fastmath the à-trous kernel did not: the code numba
+    cached and the code it had just compiled rounded differently (1e-15 here; after the
+    filter's edge-stopping weights, 57 pixels of a Tiangong frame by up to 0.012 W/(m²·sr)), so
+    the first render after an install differed from every later one. The filter kernels are
+    compiled without fastmath; this runs them twice in a fresh cache folder, compiling then
+    loading."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    outs = []
+    for k in range(2):
+        path = tmp_path / f"out{k}.npy"
+        subprocess.run([sys.executable, "-c", _FILTER_RUN, str(path)], check=True, env=env, cwd=root)
+        outs.append(path.read_bytes())
+    assert any((tmp_path / "numba").rglob("*.nbc")), "the first run wrote no numba cache"
+    assert outs[0] == outs[1]
