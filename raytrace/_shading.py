@@ -16,7 +16,7 @@ from . import environment as env
 from ._jit import FASTMATH, jit, pjit, pjit_exact
 from ._kernels import moller_trumbore
 from .brdf import brdf_cos, cosine_direction, onb, sample_brdf, specular_albedo
-from .cache import _hash01, interpolate_rows, lattice_rows
+from .cache import _hash01, glossy_draw, hit_normals, interpolate_rows, lattice_rows
 
 
 @pjit
@@ -439,33 +439,20 @@ def bounce2_rays(O, D, tfar, geom, prim, hu, hv, face_offset, face_normal, corne
             continue
         f = face_offset[geom[m]] + prim[m]
         dx, dy, dz = D[m, 0], D[m, 1], D[m, 2]
-        sgn = -1.0 if face_normal[f, 0] * dx + face_normal[f, 1] * dy + face_normal[f, 2] * dz > 0.0 else 1.0
-        ngx, ngy, ngz = sgn * face_normal[f, 0], sgn * face_normal[f, 1], sgn * face_normal[f, 2]
-        b0 = 1.0 - hu[m] - hv[m]
-        nx = sgn * (b0 * corner_normal[f, 0, 0] + hu[m] * corner_normal[f, 1, 0] + hv[m] * corner_normal[f, 2, 0])
-        ny = sgn * (b0 * corner_normal[f, 0, 1] + hu[m] * corner_normal[f, 1, 1] + hv[m] * corner_normal[f, 2, 1])
-        nz = sgn * (b0 * corner_normal[f, 0, 2] + hu[m] * corner_normal[f, 1, 2] + hv[m] * corner_normal[f, 2, 2])
-        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if nn < 1e-12 or nx * dx + ny * dy + nz * dz > 0.0:
-            nx, ny, nz, nn = ngx, ngy, ngz, 1.0
-        nx /= nn
-        ny /= nn
-        nz /= nn
+        nx, ny, nz, ngx, ngy, ngz = hit_normals(face_normal, corner_normal, f, hu[m], hv[m], dx, dy, dz)
         u1 = _hash01(keys[m], 4 * seed + 31)
         u2 = _hash01(keys[m], 4 * seed + 32)
         c = comp_of_face[f]
         if glossy[c]:
-            dn = math.sqrt(dx * dx + dy * dy + dz * dz)
-            wx, wy, wz, wr, wg, wb, ok = sample_brdf(nx, ny, nz, -dx / dn, -dy / dn, -dz / dn, 0.0, 0.0, 0.0,
-                                                     mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2], mat_alpha[c], 0.0,
-                                                     u1, u2)
+            wx, wy, wz, wr, wg, wb, ok = glossy_draw(nx, ny, nz, ngx, ngy, ngz, dx, dy, dz, mat_f0[c, 0],
+                                                     mat_f0[c, 1], mat_f0[c, 2], mat_alpha[c], u1, u2)
             if not ok:
                 continue
         else:
             wx, wy, wz = cosine_direction(nx, ny, nz, u1, u2)
             wr = wg = wb = math.pi
-        if wx * ngx + wy * ngy + wz * ngz <= 0.0:
-            continue
+            if wx * ngx + wy * ngy + wz * ngz <= 0.0:
+                continue
         want[m] = True
         t = tfar[m]
         out_o[m, 0] = O[m, 0] + t * dx + eps * ngx

@@ -187,40 +187,51 @@ def _bin_hits(G, d, geom, prim, hu, hv, face_offset, face_normal, two_sided_face
     return nh
 
 
+@jit
+def hit_normals(face_normal, corner_normal, f, b1, b2, dx, dy, dz):
+    """Shading and geometric normals (unit) at a ray's hit on face f (barycentrics b1, b2), both
+    turned towards the ray's origin (d the ray's direction); the geometric normal stands in where
+    the interpolated one is degenerate or faces away from the ray."""
+    sg = -1.0 if face_normal[f, 0] * dx + face_normal[f, 1] * dy + face_normal[f, 2] * dz > 0.0 else 1.0
+    gx, gy, gz = sg * face_normal[f, 0], sg * face_normal[f, 1], sg * face_normal[f, 2]
+    b0 = 1.0 - b1 - b2
+    nx = sg * (b0 * corner_normal[f, 0, 0] + b1 * corner_normal[f, 1, 0] + b2 * corner_normal[f, 2, 0])
+    ny = sg * (b0 * corner_normal[f, 0, 1] + b1 * corner_normal[f, 1, 1] + b2 * corner_normal[f, 2, 1])
+    nz = sg * (b0 * corner_normal[f, 0, 2] + b1 * corner_normal[f, 1, 2] + b2 * corner_normal[f, 2, 2])
+    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if nn < 1e-12 or nx * dx + ny * dy + nz * dz > 0.0:
+        return gx, gy, gz, gx, gy, gz
+    return nx / nn, ny / nn, nz / nn, gx, gy, gz
+
+
+@jit
+def glossy_draw(nx, ny, nz, gx, gy, gz, dx, dy, dz, fr, fg, fb, alpha, u1, u2):
+    """A path's next direction at a glossy hit (normals from :func:`hit_normals`, d the arriving
+    ray's direction): one draw from the GGX lobe (visible normals) about the mirror of the ray,
+    with uniforms u1, u2. Returns (lx, ly, lz, wr, wg, wb, ok): weight f_s·cos/pdf (RGB); ok False
+    where the draw fails or goes under the geometric surface."""
+    dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+    lx, ly, lz, wr, wg, wb, ok = sample_brdf(nx, ny, nz, -dx / dn, -dy / dn, -dz / dn, 0.0, 0.0, 0.0, fr, fg, fb,
+                                             alpha, 0.0, u1, u2)
+    return lx, ly, lz, wr, wg, wb, ok and lx * gx + ly * gy + lz * gz > 0.0
+
+
 @pjit
 def _glossy_bounce(idx, o, d, tfar, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
                    f0, alpha, eps, key0, out_o, out_d, out_w, out_n):
     """For each listed cache ray (idx) that hit a glossy surface: one direction drawn from the
-    surface's GGX lobe (visible normals) about the mirror of the ray, its weight f_s·cos/pdf
-    (RGB; 0 if the draw fails or goes under the surface), the ray's origin at the hit, and the
+    surface's GGX lobe (:func:`glossy_draw`), its weight (0 if the draw fails or goes under the
+    surface, the direction then the geometric normal), the ray's origin at the hit, and the
     hit's shading normal turned towards the ray."""
     for k in numba.prange(idx.shape[0]):
         j = idx[k]
         f = face_offset[geom[j]] + prim[j]
         c = comp_of_face[f]
-        b1 = hu[j]
-        b2 = hv[j]
-        b0 = 1.0 - b1 - b2
-        nx = b0 * corner_normal[f, 0, 0] + b1 * corner_normal[f, 1, 0] + b2 * corner_normal[f, 2, 0]
-        ny = b0 * corner_normal[f, 0, 1] + b1 * corner_normal[f, 1, 1] + b2 * corner_normal[f, 2, 1]
-        nz = b0 * corner_normal[f, 0, 2] + b1 * corner_normal[f, 1, 2] + b2 * corner_normal[f, 2, 2]
-        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-        sg = 1.0 if d[j, 0] * face_normal[f, 0] + d[j, 1] * face_normal[f, 1] + d[j, 2] * face_normal[f, 2] < 0.0 \
-            else -1.0
-        nx *= sg / nn
-        ny *= sg / nn
-        nz *= sg / nn
-        gx = sg * face_normal[f, 0]
-        gy = sg * face_normal[f, 1]
-        gz = sg * face_normal[f, 2]
-        dn = math.sqrt(d[j, 0] * d[j, 0] + d[j, 1] * d[j, 1] + d[j, 2] * d[j, 2])
-        ox = -d[j, 0] / dn
-        oy = -d[j, 1] / dn
-        oz = -d[j, 2] / dn
+        nx, ny, nz, gx, gy, gz = hit_normals(face_normal, corner_normal, f, hu[j], hv[j], d[j, 0], d[j, 1], d[j, 2])
         key = (key0 + j) & 0x7FFFFFFF
-        lx, ly, lz, wr, wg, wb, ok = sample_brdf(nx, ny, nz, ox, oy, oz, 0.0, 0.0, 0.0, f0[c, 0], f0[c, 1], f0[c, 2],
-                                                 alpha[c], 0.0, _hash01(key, 41), _hash01(key, 42))
-        if not ok or lx * gx + ly * gy + lz * gz <= 0.0:
+        lx, ly, lz, wr, wg, wb, ok = glossy_draw(nx, ny, nz, gx, gy, gz, d[j, 0], d[j, 1], d[j, 2], f0[c, 0],
+                                                 f0[c, 1], f0[c, 2], alpha[c], _hash01(key, 41), _hash01(key, 42))
+        if not ok:
             wr = 0.0
             wg = 0.0
             wb = 0.0
@@ -469,6 +480,7 @@ class RadianceCache:
         self.row_component = np.repeat(comp, 2)
         mats = scene.materials
         bounce = np.array([bounce_albedo(m.diffuse, m.f0, m.roughness) for m in mats])
+        self.bounce_albedo = bounce  # per material (component), RGB
         self.rho_bounce = np.repeat(bounce[comp], 2, axis=0)  # (rows, 3)
         diffuse = np.array([m.diffuse for m in mats], dtype=np.float64)
         # glossy parts (specular albedo above diffuse: metals, MLI foils): the light they

@@ -61,7 +61,7 @@ import numpy as np
 
 from . import _shading as K
 from ._kernels import rows_times_matrix
-from .brdf import bounce_albedo, split_sum_table
+from .brdf import split_sum_table
 from .camera import Camera
 from .lighting import Lighting
 from .scene import GeometryFrame, Scene, _check_pose
@@ -292,12 +292,6 @@ class _Context:
         self.f0 = np.array([m.f0 for m in mats], dtype=np.float64)
         self.alpha = np.array([m.roughness for m in mats], dtype=np.float64)
         self.specular = self.f0.max(axis=1) > 0.0
-        # ``balanced`` samples the lobe of parts whose specular albedo is at least
-        # LOBE_MIN_SPECULAR of their diffuse one (luminance); elsewhere the cheap mirror term
-        # (:meth:`direct`) stands alone
-        lum = np.array([0.2126, 0.7152, 0.0722])
-        spec_albedo = np.array([bounce_albedo(m.diffuse, m.f0, m.roughness) for m in mats]) - self.diff
-        self.lobe_sampled = self.specular & (spec_albedo @ lum >= LOBE_MIN_SPECULAR * (self.diff @ lum))
         # parts whose mirror ray ``balanced``'s mirror term weights by more than 0 (the same
         # expression as raytrace._shading.add_mirror's blend, so t = 1 exactly where False)
         t = np.minimum(np.maximum((self.alpha - K.MIRROR_BLEND_A0) / K.MIRROR_BLEND_WIDTH, 0.0), 1.0)
@@ -311,6 +305,12 @@ class _Context:
         # parts whose specular albedo exceeds their diffuse one (metals, MLI foils): traced
         # paths continue along their lobe, as the cache's transfer does
         self.glossy = self.cache.glossy_comp
+        # ``balanced`` samples the lobe of parts whose specular albedo is at least
+        # LOBE_MIN_SPECULAR of their diffuse one (luminance); elsewhere the cheap mirror term
+        # (:meth:`direct`) stands alone
+        lum = np.array([0.2126, 0.7152, 0.0722])
+        spec_albedo = self.cache.bounce_albedo - self.diff
+        self.lobe_sampled = self.specular & (spec_albedo @ lum >= LOBE_MIN_SPECULAR * (self.diff @ lum))
         # the environment's unoccluded irradiance: the cache's sky term and the final gather's
         # control variate are both its complement over blocked directions
         cells = K.env.environment_cells(self.p, self.tex)
