@@ -737,6 +737,62 @@ def donor_rows(centre, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c, foot, bo
         out[m] = best
 
 
+@pjit_exact
+def add_interpolated_rows(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c,
+                          foot, A, B, outA, outB):
+    """For the listed sub-samples i (ray direction D[i], body frame; part ``comp``, point P,
+    shading normal NS): outA[i] += Σ_j w_j A[k_j] (and B into outB), over the (up to) four
+    pixel centres k_j around the sub-sample's image point on its own surface (the test of
+    :func:`donor_rows`), w_j their bilinear weights renormalised over those found (pixel
+    centres at integer image coordinates). Nothing is added where none of the four is on its
+    surface."""
+    for t in numba.prange(sel.shape[0]):
+        m = sel[t]
+        xc = R_cam_from_body[0, 0] * D[m, 0] + R_cam_from_body[0, 1] * D[m, 1] + R_cam_from_body[0, 2] * D[m, 2]
+        yc = R_cam_from_body[1, 0] * D[m, 0] + R_cam_from_body[1, 1] * D[m, 1] + R_cam_from_body[1, 2] * D[m, 2]
+        zc = R_cam_from_body[2, 0] * D[m, 0] + R_cam_from_body[2, 1] * D[m, 1] + R_cam_from_body[2, 2] * D[m, 2]
+        uf = fx * xc / zc + cx
+        vf = fy * yc / zc + cy
+        u0 = int(math.floor(uf))
+        v0 = int(math.floor(vf))
+        fu = uf - u0
+        fv = vf - v0
+        sw = 0.0
+        a0 = a1 = a2 = b0 = b1 = b2 = 0.0
+        for j in range(4):
+            uu = u0 + (j & 1)
+            vv = v0 + (j >> 1)
+            if vv < 0 or vv >= H or uu < 0 or uu >= W:
+                continue
+            q = vv * W + uu
+            k = row_of_pixel[q]
+            if k < 0 or inst[q] - 1 != comp[m]:
+                continue
+            nd = NS[m, 0] * N_c[k, 0] + NS[m, 1] * N_c[k, 1] + NS[m, 2] * N_c[k, 2]
+            if nd <= 0.9:
+                continue
+            dx = P[m, 0] - P_c[k, 0]
+            dy = P[m, 1] - P_c[k, 1]
+            dz = P[m, 2] - P_c[k, 2]
+            if abs(dx * N_c[k, 0] + dy * N_c[k, 1] + dz * N_c[k, 2]) > foot[k]:
+                continue
+            w = (fu if j & 1 else 1.0 - fu) * (fv if j >> 1 else 1.0 - fv)
+            sw += w
+            a0 += w * A[k, 0]
+            a1 += w * A[k, 1]
+            a2 += w * A[k, 2]
+            b0 += w * B[k, 0]
+            b1 += w * B[k, 1]
+            b2 += w * B[k, 2]
+        if sw > 0.0:
+            outA[m, 0] += a0 / sw
+            outA[m, 1] += a1 / sw
+            outA[m, 2] += a2 / sw
+            outB[m, 0] += b0 / sw
+            outB[m, 1] += b1 / sw
+            outB[m, 2] += b2 / sw
+
+
 @pjit
 def sliver_pixels(V, F, R, t, fx, fy, cx, cy, z_min, max_width, depth, out):
     """Pixels touched by triangles whose projection is a sliver: narrower than ``max_width``

@@ -9,7 +9,7 @@ import pytest
 from scipy.ndimage import binary_erosion
 
 from raytrace.lighting import Lighting
-from raytrace.shade import _atrous_passes, _Context, render
+from raytrace.shade import _atrous_passes, _Context, _filter_residual, render
 
 from .test_shading import CAM, _form_factor_to_floor, _plates, _pose
 
@@ -84,6 +84,58 @@ def test_heavy_tailed_noise_is_smoothed_without_losing_energy():
     inner = (slice(4, H - 4), slice(4, W - 4))
     assert out[inner].mean() == pytest.approx(img[inner].mean(), rel=0.03)
     assert np.sqrt(((out[inner] - truth) ** 2).mean()) < 0.6 * np.sqrt(((img[inner] - truth) ** 2).mean())
+
+
+def _two_parts():
+    """The plane of :func:`_flat_plane` split into two parts at column W // 2."""
+    inst, normal, depth = _flat_plane()
+    inst[:, W // 2:] = 2
+    return inst, normal, depth
+
+
+@pytest.mark.parametrize("passes", [1, 2])
+def test_local_linear_filter_keeps_a_ramp_at_a_part_edge_where_the_weighted_mean_cannot(passes):
+    # a residual rising linearly towards a part edge (the light of the neighbouring part, a
+    # contact shadow): the weighted mean over a one-sided kernel at the edge is low by the
+    # ramp's slope times the kernel's offset; the local-linear estimate is the ramp itself
+    inst, normal, depth = _two_parts()
+    vv, uu = np.mgrid[0:H, 0:W].astype(float)
+    truth = np.where(inst == 1, 0.3 * uu + 0.1 * vv, 2.0 - 0.05 * uu)[..., None] * np.array([1.0, 0.5, 0.25])
+    at = np.nonzero(inst > 0)
+    var = np.full(len(at[0]), 0.01)
+    guide = (normal, depth, FX, FY, CX, CY)
+    rows = truth[at]
+    edge = (at[1] == W // 2 - 1) & (at[0] >= 4) & (at[0] < H - 4)  # the last column of part 1, inner rows
+    mean_only = _filter_residual(rows, var, inst, at, guide, passes, 0.0)
+    linear = _filter_residual(rows, var, inst, at, guide, passes, 0.0, linear=1.0)
+    # the one-sided kernel's centroid is ≥ 6/11 px inside the part (one pass: taps 1, 4, 6 of
+    # 16 at −2, −1, 0), so the mean is low by ≥ 0.3 × 6/11 at the edge
+    assert np.all(truth[at][edge, 0] - mean_only[edge, 0] > 0.16)
+    # the plane is exact up to the ridge's pull on its slope (0.01 px² against the kernel's
+    # spread: ≤ 0.005 at the image's corners and the part edge, where the kernel is one-sided; the
+    # weighted mean is off by 0.16–1.3 at the edge)
+    np.testing.assert_allclose(linear, rows, rtol=1e-3, atol=1e-2)
+    assert np.abs(linear - rows)[edge].max() < 5e-3
+    # β scales the slope: halfway between the mean and the plane
+    half = _filter_residual(rows, var, inst, at, guide, passes, 0.0, linear=0.5)
+    np.testing.assert_allclose(half, 0.5 * (mean_only + linear), rtol=1e-9, atol=1e-12)
+
+
+def test_local_linear_filter_of_pure_noise_is_unbiased_and_still_smooths():
+    rng = np.random.default_rng(7)
+    inst, normal, depth = _two_parts()
+    at = np.nonzero(inst > 0)
+    sd = 1.0
+    guide = (normal, depth, FX, FY, CX, CY)
+    outs = []
+    for _ in range(40):
+        rows = rng.normal(0.0, sd, (len(at[0]), 3))
+        outs.append(_filter_residual(rows, np.full(len(at[0]), sd * sd), inst, at, guide, 2, 3.0, linear=0.7))
+    outs = np.array(outs)
+    # mean over 40 frames × 2400 pixels × 3 channels: 0 within 5 standard errors of a smoothed
+    # estimate (its sd ≤ sd), and the per-pixel spread well below the input's
+    assert abs(outs.mean()) < 5 * sd / np.sqrt(outs.size / 25)
+    assert outs.std() < 0.6 * sd
 
 
 def test_gather_variance_matches_the_spread_of_independent_estimates():

@@ -1,0 +1,66 @@
+"""Edge sub-samples take the gather corrections of the pixel centres around them on their own
+surface, interpolated bilinearly (raytrace._shading.add_interpolated_rows)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from raytrace import _shading as K
+
+H, W = 4, 6
+
+
+def _plane(parts):
+    """Pixel centres of a plane z = 10 m facing the camera, 0.01 m per pixel; ``parts`` (H, W)
+    the part id + 1 of every pixel."""
+    vv, uu = np.mgrid[0:H, 0:W].astype(float)
+    P_c = np.column_stack([0.01 * uu.ravel(), 0.01 * vv.ravel(), np.full(H * W, 10.0)])
+    N_c = np.tile([0.0, 0.0, -1.0], (H * W, 1))
+    foot = np.full(H * W, 0.01)
+    return P_c, N_c, foot, np.arange(H * W, dtype=np.int32), parts.ravel().astype(np.int32)
+
+
+FX = FY = 1000.0
+CX, CY = 2.5, 1.5
+
+
+def _interp(uf, vf, comp, parts, A, B):
+    """A and B interpolated at sub-samples on image points (uf, vf) of parts ``comp``; the
+    camera looks along +z (R = I), so the ray through (uf, vf) is ((uf − cx)/fx, (vf − cy)/fy, 1)."""
+    P_c, N_c, foot, row_of_pixel, inst = _plane(parts)
+    D = np.column_stack([(uf - CX) / FX, (vf - CY) / FY, np.ones(len(uf))])
+    P = np.column_stack([0.01 * uf, 0.01 * vf, np.full(len(uf), 10.0)])
+    NS = np.tile([0.0, 0.0, -1.0], (len(uf), 1))
+    outA = np.zeros((len(uf), 3))
+    outB = np.zeros((len(uf), 3))
+    K.add_interpolated_rows(np.arange(len(uf), dtype=np.int64), D, np.eye(3), FX, FY, CX, CY, W, H, comp, P, NS,
+                            row_of_pixel, inst, P_c, N_c, foot, A, B, outA, outB)
+    return outA, outB
+
+
+def test_interpolated_corrections_reproduce_a_linear_residual_at_any_sub_pixel_position():
+    rng = np.random.default_rng(3)
+    parts = np.ones((H, W), dtype=int)
+    n = 500
+    uf = rng.uniform(0.0, W - 1.0, n)
+    vf = rng.uniform(0.0, H - 1.0, n)
+    vv, uu = np.mgrid[0:H, 0:W].astype(float)
+    A = np.column_stack([1.0 + 0.2 * uu.ravel() - 0.3 * vv.ravel()] * 3)  # a linear residual
+    outA, outB = _interp(uf, vf, np.zeros(n, dtype=np.int64), parts, A, 2.0 * A)
+    want = 1.0 + 0.2 * uf - 0.3 * vf
+    np.testing.assert_allclose(outA[:, 0], want, rtol=1e-9)
+    np.testing.assert_allclose(outB[:, 2], 2.0 * want, rtol=1e-9)
+
+
+def test_centres_on_another_part_are_left_out_and_the_weights_renormalised():
+    parts = np.ones((H, W), dtype=int)
+    parts[:, 3:] = 2  # part 1 from column 3
+    vv, uu = np.mgrid[0:H, 0:W].astype(float)
+    A = np.column_stack([uu.ravel(), vv.ravel(), np.ones(H * W)])
+    # a sub-sample of part 0 at (2.25, 1.5), between the centres of columns 2 (part 0) and
+    # 3 (part 1): columns 2's two centres, rows 1 and 2, half each
+    outA, _ = _interp(np.array([2.25]), np.array([1.5]), np.array([0]), parts, A, A)
+    np.testing.assert_allclose(outA[0], [2.0, 1.5, 1.0], rtol=1e-12)
+    # a sub-sample of a part none of the four centres lies on gets nothing
+    outA, _ = _interp(np.array([2.25]), np.array([1.5]), np.array([4]), parts, A, A)
+    assert np.all(outA == 0.0)
