@@ -13,7 +13,7 @@ import numba
 import numpy as np
 
 from . import environment as env
-from ._jit import FASTMATH, jit, pjit, pjit_exact
+from ._jit import FASTMATH, jit, jit_exact, pjit, pjit_exact
 from ._kernels import moller_trumbore
 from .brdf import brdf_cos, cosine_direction, onb, sample_brdf, specular_albedo
 from .cache import _hash01, glossy_draw, hit_normals, interpolate_rows, lattice_rows
@@ -693,6 +693,24 @@ def edge_pixels(inst, lit_img, normal, depth, earth_px, rect, out):
             out[v, u] = flag
 
 
+@jit_exact
+def _centre_on_surface(q, m, row_of_pixel, inst, comp, P, NS, P_c, N_c, foot):
+    """The row of pixel q's centre if sub-sample m (part ``comp``, point P, shading normal NS)
+    lies on its surface — same part, normals within ~25°, within a pixel footprint of the
+    centre's tangent plane —, else −1."""
+    k = row_of_pixel[q]
+    if k < 0 or inst[q] - 1 != comp[m]:
+        return -1
+    if NS[m, 0] * N_c[k, 0] + NS[m, 1] * N_c[k, 1] + NS[m, 2] * N_c[k, 2] <= 0.9:
+        return -1
+    dx = P[m, 0] - P_c[k, 0]
+    dy = P[m, 1] - P_c[k, 1]
+    dz = P[m, 2] - P_c[k, 2]
+    if abs(dx * N_c[k, 0] + dy * N_c[k, 1] + dz * N_c[k, 2]) > foot[k]:
+        return -1
+    return k
+
+
 @pjit
 def donor_rows(centre, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c, foot, borrow, out):
     """For each sub-sample (pixel ``centre``, part ``comp``, point P, shading normal NS): the
@@ -715,21 +733,15 @@ def donor_rows(centre, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c, foot, bo
             uu = u + du
             if vv < 0 or vv >= H or uu < 0 or uu >= W:
                 continue
-            q = vv * W + uu
-            k = row_of_pixel[q]
-            if k < 0 or inst[q] - 1 != comp[m]:
-                continue
-            nd = NS[m, 0] * N_c[k, 0] + NS[m, 1] * N_c[k, 1] + NS[m, 2] * N_c[k, 2]
-            if nd <= 0.9:
-                continue
-            dx = P[m, 0] - P_c[k, 0]
-            dy = P[m, 1] - P_c[k, 1]
-            dz = P[m, 2] - P_c[k, 2]
-            if abs(dx * N_c[k, 0] + dy * N_c[k, 1] + dz * N_c[k, 2]) > foot[k]:
+            k = _centre_on_surface(vv * W + uu, m, row_of_pixel, inst, comp, P, NS, P_c, N_c, foot)
+            if k < 0:
                 continue
             if a == 0:
                 best = k
                 break
+            dx = P[m, 0] - P_c[k, 0]
+            dy = P[m, 1] - P_c[k, 1]
+            dz = P[m, 2] - P_c[k, 2]
             d2 = dx * dx + dy * dy + dz * dz
             if d2 < best_d2:
                 best_d2 = d2
@@ -742,8 +754,8 @@ def add_interpolated_rows(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P
                           foot, A, B, outA, outB):
     """For the listed sub-samples i (ray direction D[i], body frame; part ``comp``, point P,
     shading normal NS): outA[i] += Σ_j w_j A[k_j] (and B into outB), over the (up to) four
-    pixel centres k_j around the sub-sample's image point on its own surface (the test of
-    :func:`donor_rows`), w_j their bilinear weights renormalised over those found (pixel
+    pixel centres k_j around the sub-sample's image point on its own surface
+    (:func:`_centre_on_surface`), w_j their bilinear weights renormalised over those found (pixel
     centres at integer image coordinates). Nothing is added where none of the four is on its
     surface."""
     for t in numba.prange(sel.shape[0]):
@@ -764,17 +776,8 @@ def add_interpolated_rows(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P
             vv = v0 + (j >> 1)
             if vv < 0 or vv >= H or uu < 0 or uu >= W:
                 continue
-            q = vv * W + uu
-            k = row_of_pixel[q]
-            if k < 0 or inst[q] - 1 != comp[m]:
-                continue
-            nd = NS[m, 0] * N_c[k, 0] + NS[m, 1] * N_c[k, 1] + NS[m, 2] * N_c[k, 2]
-            if nd <= 0.9:
-                continue
-            dx = P[m, 0] - P_c[k, 0]
-            dy = P[m, 1] - P_c[k, 1]
-            dz = P[m, 2] - P_c[k, 2]
-            if abs(dx * N_c[k, 0] + dy * N_c[k, 1] + dz * N_c[k, 2]) > foot[k]:
+            k = _centre_on_surface(vv * W + uu, m, row_of_pixel, inst, comp, P, NS, P_c, N_c, foot)
+            if k < 0:
                 continue
             w = (fu if j & 1 else 1.0 - fu) * (fv if j >> 1 else 1.0 - fv)
             sw += w

@@ -1,0 +1,103 @@
+"""Error of ``balanced`` split into bias and noise on the 12 scenes of bench_time_error.py.
+
+    python benchmarks/bench_bias_noise.py --ref-dir DIR [--width 1280] [--ref-spp 256]
+        [--presets balanced:8 balanced:16 fast] [--targets ...] [--views ...]
+
+The scenes are those of ``benchmarks/bench_time_error.py`` (Lambertian stand-ins, three views
+per built-in target). The reference is our path tracer at ``--ref-spp`` samples per pixel with
+two seeds (kept in ``--ref-dir`` and reused); each preset is rendered with two seeds of its
+own. Per pixel class (edge: the 3×3 neighbourhood holds another id or space; interior: the
+rest), over the target's pixels, relative to Σ I_ref²:
+
+* noise² of one render: ‖x₁ − x₂‖² / 2;
+* bias²: ‖(x₁ + x₂)/2 − I_ref‖² − noise²/2 − (the reference's own noise², ‖a − b‖²/4);
+* error = √(bias² + noise²), the expected error of one render against the exact image.
+
+Prints one row per scene and preset and, per preset, the median error and time over the
+scenes (time: the faster of the two renders, after a warm-up; run nothing else meanwhile).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import maximum_filter, minimum_filter
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_time_error import viewpoints, write_scene  # noqa: E402
+
+from raytrace.scene import Scene  # noqa: E402
+from raytrace.scenefile import load_scene_file  # noqa: E402
+from raytrace.shade import render  # noqa: E402
+from raytrace.targets import BUILTIN_TARGETS  # noqa: E402
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--ref-dir", required=True)
+    ap.add_argument("--width", type=int, default=1280)
+    ap.add_argument("--ref-spp", type=int, default=256)
+    ap.add_argument("--presets", nargs="*", default=["balanced:8", "balanced:16"])
+    ap.add_argument("--targets", nargs="*", default=list(BUILTIN_TARGETS))
+    ap.add_argument("--views", nargs="*", default=[v[0] for v in viewpoints()])
+    args = ap.parse_args()
+    folder = Path(args.ref_dir) / f"w{args.width}"
+    rows = {p: [] for p in args.presets}
+    for tg in args.targets:
+        scene = None
+        for view, path in write_scene(tg, folder / tg, args.width):
+            if view not in args.views:
+                continue
+            spec = load_scene_file(str(path))
+            if scene is None:
+                scene = Scene(spec.model)
+                scene.radiance_cache()
+            pose = (scene, spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting)
+            ref_file = folder / f"ref_{tg}_{view}_{args.ref_spp}.npz"
+            if not ref_file.exists():
+                rs = [render(*pose, quality="reference", samples=args.ref_spp, seed=s) for s in (1, 2)]
+                np.savez(ref_file, a=rs[0].radiance, b=rs[1].radiance, mask=rs[0].geometry.mask,
+                         inst=rs[0].geometry.instance)
+            z = np.load(ref_file)
+            a, b, m, inst = z["a"].astype(float), z["b"].astype(float), z["mask"], z["inst"].astype(np.int64)
+            ref = (a + b) / 2
+            edge = (maximum_filter(inst, 3) != minimum_filter(inst, 3)) & m
+            den = (ref[m] ** 2).sum()
+            for p in args.presets:
+                name, _, n = p.partition(":")
+                n = int(n) if n else None
+                render(*pose, quality=name, samples=n, seed=7)
+                xs, ts = [], []
+                for s in (11, 12):
+                    t0 = time.perf_counter()
+                    xs.append(render(*pose, quality=name, samples=n, seed=s).radiance.astype(float))
+                    ts.append(time.perf_counter() - t0)
+                split = {}
+                for cls, mk in (("all", m), ("edge", edge), ("interior", m & ~edge)):
+                    n2 = ((xs[0] - xs[1])[mk] ** 2).sum() / 2 / den
+                    d2 = (((xs[0] + xs[1]) / 2 - ref)[mk] ** 2).sum() / den
+                    b2 = d2 - n2 / 2 - ((a - b)[mk] ** 2).sum() / 4 / den
+                    split[cls] = (b2, n2)
+                b2, n2 = split["all"]
+                err = float(np.sqrt(max(b2 + n2, 0.0)))
+                rows[p].append((min(ts), err))
+                print(f"{tg:11s} {view:7s} {p:12s} {min(ts):6.3f} s  error {100 * err:5.2f} %  "
+                      f"bias {100 * np.sqrt(max(b2, 0)):5.2f} %  noise {100 * np.sqrt(n2):5.2f} %  | edge bias² "
+                      f"{1e4 * split['edge'][0]:6.2f} noise² {1e4 * split['edge'][1]:6.2f}  interior bias² "
+                      f"{1e4 * split['interior'][0]:6.2f} noise² {1e4 * split['interior'][1]:6.2f} (×1e-4)",
+                      flush=True)
+    for p, r in rows.items():
+        print(f"== {p}: median {statistics.median(t for t, _ in r):.3f} s, median error "
+              f"{100 * statistics.median(e for _, e in r):.2f} %")
+
+
+if __name__ == "__main__":
+    main()
