@@ -233,10 +233,11 @@ def _filter_linear(samples: int) -> float:
     """β of the local-linear residual filter for N gather rays (:attr:`Quality.filter_linear`):
     0.7 for 8 < N ≤ 16 (two passes, σ_l = 3), else 0 (the weighted mean). Measured on the 12
     scenes of ``benchmarks/bench_time_error.py`` at 1280×960 (median error, bias and noise
-    estimated without the reference's noise): N = 16 2.76 → 2.54 % (bias² over the 12 scenes
-    −32 %, noise² +27 %; σ_l = 4, β = 1: 2.59 %; three passes: 2.63 %); N = 8 3.68 → 3.66 %,
-    N = 64 (one pass) 1.94 → 1.93 %: there the noise the plane adds eats what it takes from
-    the bias, and it is not used."""
+    estimated without the reference's noise, ``benchmarks/bench_bias_noise.py``): N = 16
+    2.76 → 2.54 % with a ridge of 0.1 px² (bias² over the 12 scenes −32 %, noise² +27 %;
+    σ_l = 4, β = 1: 2.59 %; three passes: 2.63 %), 2.50 % with the ridge of 0.01 px² and the
+    interpolated sub-sample corrections; N = 8 3.68 → 3.66 %, N = 64 (one pass) 1.94 → 1.93 %:
+    there the noise the plane adds eats what it takes from the bias, and it is not used."""
     return 0.7 if 8 < samples <= 16 else 0.0
 
 
@@ -644,28 +645,25 @@ def _filter_residual(rows, var, inst, at, guide, passes: int, sigma_l: float, li
     local-linear estimate has no such first-order bias. The plane comes from the same passes:
     the filter is linear in its channels for given weights, so filtering y, y·u, y·v, u, v, u²,
     u·v and v² together gives the weighted moments of the regression."""
-    if linear <= 0.0 or passes <= 0:
-        img = np.zeros((*inst.shape, 3))
-        img[at] = rows
-        var_img = np.zeros(inst.shape)
-        var_img[at] = var
-        img, _ = _atrous_passes(img, var_img, inst, guide, passes, sigma_l)
-        return np.ascontiguousarray(img[at])
-    # image coordinates in units of _LL_UNIT pixels (moments of order 2 stay well scaled)
-    u = at[1].astype(np.float64) / _LL_UNIT
-    v = at[0].astype(np.float64) / _LL_UNIT
-    img = np.zeros((*inst.shape, 14))
+    linear_fit = linear > 0.0 and passes > 0
+    img = np.zeros((*inst.shape, 14 if linear_fit else 3))
     img[at[0], at[1], 0:3] = rows
-    img[at[0], at[1], 3:6] = rows * u[:, None]
-    img[at[0], at[1], 6:9] = rows * v[:, None]
-    img[at[0], at[1], 9] = u
-    img[at[0], at[1], 10] = v
-    img[at[0], at[1], 11] = u * u
-    img[at[0], at[1], 12] = u * v
-    img[at[0], at[1], 13] = v * v
+    if linear_fit:
+        # image coordinates in units of _LL_UNIT pixels (moments of order 2 stay well scaled)
+        u = at[1].astype(np.float64) / _LL_UNIT
+        v = at[0].astype(np.float64) / _LL_UNIT
+        img[at[0], at[1], 3:6] = rows * u[:, None]
+        img[at[0], at[1], 6:9] = rows * v[:, None]
+        img[at[0], at[1], 9] = u
+        img[at[0], at[1], 10] = v
+        img[at[0], at[1], 11] = u * u
+        img[at[0], at[1], 12] = u * v
+        img[at[0], at[1], 13] = v * v
     var_img = np.zeros(inst.shape)
     var_img[at] = var
     img, _ = _atrous_passes(img, var_img, inst, guide, passes, sigma_l)
+    if not linear_fit:
+        return np.ascontiguousarray(img[at])
     f = img[at]
     mu, mv = f[:, 9], f[:, 10]
     # weighted covariances; a small ridge keeps a kernel one pixel wide (a thin strip) solvable,
