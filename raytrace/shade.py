@@ -661,7 +661,7 @@ def _filter_residual(rows, var, inst, at, guide, passes: int, sigma_l: float, li
         img[at[0], at[1], 13] = v * v
     var_img = np.zeros(inst.shape)
     var_img[at] = var
-    img, _ = _atrous_passes(img, var_img, inst, guide, passes, sigma_l)
+    img, _ = _atrous_passes(img, var_img, inst, guide, passes, sigma_l, overwrite=True)
     if not linear_fit:
         return np.ascontiguousarray(img[at])
     f = img[at]
@@ -681,12 +681,14 @@ def _filter_residual(rows, var, inst, at, guide, passes: int, sigma_l: float, li
     return np.ascontiguousarray(mean + linear * (b * (u - mu)[:, None] + c * (v - mv)[:, None]))
 
 
-def _atrous_passes(img, var, inst, guide, passes: int, sigma_l: float):
+def _atrous_passes(img, var, inst, guide, passes: int, sigma_l: float, overwrite: bool = False):
     """``passes`` à-trous passes (:func:`raytrace._shading.atrous`, pass k with holes of 2^k
     pixels) over the image ``img`` (H, W, C) with per-pixel variances ``var`` (H, W), ids
     ``inst`` and ``guide`` = (normals, depths, fx, fy, cx, cy): the filtered image and its
-    variances (new arrays; σ_l = 0: geometry only)."""
-    img, var = img.copy(), var.copy()
+    variances (σ_l = 0: geometry only). They are new arrays, or, with ``overwrite``, may be
+    ``img`` and ``var`` themselves (one image less in memory)."""
+    if not overwrite:
+        img, var = img.copy(), var.copy()
     tmp, var_tmp = np.zeros_like(img), np.zeros_like(var)
     var_blur, lum = np.zeros_like(var), np.zeros_like(var)
     normal, depth, fx, fy, cx, cy = guide
