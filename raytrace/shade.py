@@ -980,7 +980,7 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     footprint of the centre's tangent plane: ``centre_surface`` = (row of each pixel, −1 off
     the target, and per row the centre's point, normal and footprint; ``residual`` is per row
     too, and needs it)) also gets the corrections of the (up to) four pixel centres around it
-    on that surface, interpolated bilinearly at its image position (``uv``),
+    on that surface, interpolated bilinearly at its image position,
     so edge pixels carry the same
     indirect light as their neighbours; any other sub-sample (another part, the far side of a
     crease, another rod of a truss) gets its own final gather and lobe samples (the centre's
@@ -1003,8 +1003,9 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     h = scene.intersect(o_body + z0 * D, D)
     centre = np.repeat(epix, S)
     number = np.tile(np.arange(S), len(epix))
-    L = _shade_subsamples(ctx, scene, o_body, geo, D, h, centre, number, S, seed, residual, gather_rays,
-                          centre_surface, borrow, camera, np.ascontiguousarray(R, dtype=np.float64))
+    R_cam = np.ascontiguousarray(R, dtype=np.float64)
+    L = _shade_subsamples(ctx, scene, o_body, geo, camera, R_cam, D, h, centre, number, S, seed, residual,
+                          gather_rays, centre_surface, borrow)
     out = L.reshape(len(epix), S, 3).mean(axis=1)
     if cov_grid <= n_grid:
         return out
@@ -1041,7 +1042,7 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
         order = np.argsort(slot_c, kind="stable")
         first = order[np.searchsorted(slot_c[order], np.flatnonzero(need))]
         hx = {k: v[first] for k, v in hc.items()}
-        Lx = _shade_subsamples(ctx, scene, o_body, geo, Dc[first], hx, np.repeat(mpix, C)[first],
+        Lx = _shade_subsamples(ctx, scene, o_body, geo, camera, R_cam, Dc[first], hx, np.repeat(mpix, C)[first],
                                S + first % C, S + C, seed, residual, gather_rays, centre_surface, borrow)
         total[slot_c[first]] += Lx
         n_shaded[slot_c[first]] += 1.0
@@ -1051,12 +1052,11 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     return out
 
 
-def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, D, h, centre, number, S, seed, residual,
-                      gather_rays, centre_surface, borrow, camera=None, R_cam=None):
-    """Radiance along sub-pixel rays D (hits h) of pixels ``centre``; ``number`` (< S) is each
-    ray's index within its pixel (it keys the solar-disc and gather samples). With ``camera``
-    and ``R_cam`` (R_cam_from_body) a sub-sample on its own pixel centre's surface takes the
-    corrections of the centres around it interpolated at its image point, else its centre's."""
+def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, camera: Camera, R_cam, D, h, centre, number, S, seed,
+                      residual, gather_rays, centre_surface, borrow):
+    """Radiance along sub-pixel rays D (hits h) of pixels ``centre`` of ``camera`` (pose
+    R_cam = R_cam_from_body); ``number`` (< S) is each ray's index within its pixel (it keys the
+    solar-disc and gather samples)."""
     hit = h["geomID"] >= 0
     L = np.zeros((len(D), 3))
     idx = np.flatnonzero(hit)
@@ -1082,15 +1082,14 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, D, h, centre, nu
             H, W = geo.instance.shape
             K.donor_rows(centre[idx].astype(np.int64), W, H, s["comp"], s["P"], s["NS"], row_of_pixel,
                          geo.instance.ravel(), P_c, N_c, foot, borrow, k)
-            if camera is not None:
-                # on its own pixel centre's surface: the corrections of the (up to) four centres
-                # around it on that surface, interpolated bilinearly, not the centre's alone (a
-                # contact shadow or the light of a neighbouring part varies within the pixel)
-                own = np.flatnonzero((k >= 0) & (k == row_of_pixel[centre[idx]]))
-                K.add_interpolated_rows(own, Dh, R_cam, camera.fx, camera.fy, camera.cx, camera.cy, W, H, s["comp"],
-                                        s["P"], s["NS"], row_of_pixel, geo.instance.ravel(), P_c, N_c, foot,
-                                        residual[0], residual[1], E, Ls)
-                k[own] = -2  # done; −1: none
+            # on its own pixel centre's surface: the corrections of the (up to) four centres
+            # around it on that surface, interpolated bilinearly, not the centre's alone (a
+            # contact shadow or the light of a neighbouring part varies within the pixel)
+            own = np.flatnonzero((k >= 0) & (k == row_of_pixel[centre[idx]]))
+            K.add_interpolated_rows(own, Dh, R_cam, camera.fx, camera.fy, camera.cx, camera.cy, W, H, s["comp"],
+                                    s["P"], s["NS"], row_of_pixel, geo.instance.ravel(), P_c, N_c, foot,
+                                    residual[0], residual[1], E, Ls)
+            k[own] = -2  # done; −1: none
             K.add_rows(k, residual[0], residual[1], E, Ls)  # where k ≥ 0: a (neighbouring) centre's correction
             # below _MIN_SUB_GATHER rays an unfiltered gather is noisier than the cache is wrong
             j = np.flatnonzero(k == -1)
