@@ -994,17 +994,31 @@ def near_shadow_slivers(P, NS, WO, lit, foot, e1, e2, s, a0, b0, cell, grid, out
 
 @pjit
 def subpixel_rays(pix, W, n_grid, seed, R_body_from_cam, fx, fy, cx, cy, out_d):
-    """n_grid² jittered-stratified sub-pixel ray directions (body frame, z_cam = 1) per edge
-    pixel: one uniform point in each cell of an n_grid × n_grid grid over the pixel, from a
-    hash of (seed, pixel, cell), so the box-filter estimate is unbiased for any content."""
+    """n_grid² sub-pixel ray directions (body frame, z_cam = 1) per edge pixel, correlated
+    multi-jittered (Kensler 2013, "Correlated Multi-Jittered Sampling", Pixar TM 13-01): one
+    point in each cell of the n_grid × n_grid grid over the pixel *and* one in each of the
+    n_grid² columns and n_grid² rows of the fine grid (n-rooks), the fine offsets permuted per
+    pixel from a hash of (seed, pixel), jittered within the fine cell. Unbiased for any
+    content, like plain jittered stratification, but a near-horizontal or near-vertical edge
+    or shadow stripe is sampled at n_grid² distinct offsets, not n_grid."""
     S = n_grid * n_grid
     for k in numba.prange(pix.shape[0]):
         v = pix[k] // W
         u = pix[k] % W
+        perm_a = np.arange(n_grid)
+        perm_b = np.arange(n_grid)
+        key0 = pix[k] & 0x7FFFFFFF
+        for i in range(n_grid - 1, 0, -1):  # Fisher–Yates, keyed by (seed, pixel)
+            r = int(_hash01(key0 * 64 + i, 2 * seed + 13) * (i + 1))
+            perm_a[i], perm_a[r] = perm_a[r], perm_a[i]
+            r = int(_hash01(key0 * 64 + i, 2 * seed + 14) * (i + 1))
+            perm_b[i], perm_b[r] = perm_b[r], perm_b[i]
         for j in range(S):
             key = (pix[k] * S + j) & 0x7FFFFFFF
-            du = ((j % n_grid) + _hash01(key, 2 * seed + 11)) / n_grid - 0.5
-            dv = ((j // n_grid) + _hash01(key, 2 * seed + 12)) / n_grid - 0.5
+            cu = j % n_grid
+            cv = j // n_grid
+            du = (cu + (perm_a[cv] + _hash01(key, 2 * seed + 11)) / n_grid) / n_grid - 0.5
+            dv = (cv + (perm_b[cu] + _hash01(key, 2 * seed + 12)) / n_grid) / n_grid - 0.5
             x = (u + du - cx) / fx
             y = (v + dv - cy) / fy
             m = k * S + j

@@ -13,7 +13,7 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     reflection of the environment prefiltered by the part's GGX lobe (the split-sum
     approximation, :func:`raytrace.environment.glossy_table`), corrected by what the parts add
     or hide, and of the other parts along the mirror direction (one ray), weighted by the
-    lobe's directional albedo (:func:`raytrace._shading.add_mirror`); anti-aliasing with 3×3 jittered-stratified
+    lobe's directional albedo (:func:`raytrace._shading.add_mirror`); anti-aliasing with 3×3 correlated multi-jittered
     sub-pixel rays (an unbiased box filter) only where neighbouring pixels disagree
     (silhouette, part, shadow and crease edges); where those sub-samples see more than one
     part (or space), 6×6 more primary rays, unshaded, measure how much of the pixel each part
@@ -34,7 +34,7 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     noise, not detail. Glossy parts also sample their GGX lobe with N rays, minus the
     radiance their cheap mirror term reflects (a control variate of known mean, the split-sum
     albedo), filtered with the same weights. Edge pixels get 4×4
-    (N ≤ 8), 6×6 (N ≤ 128) or 8×8 jittered shaded sub-pixel rays, plus 8×8 to 10×10 coverage
+    (N ≤ 8), 6×6 (N ≤ 128) or 8×8 multi-jittered shaded sub-pixel rays, plus 8×8 to 10×10 coverage
     rays where they are mixed (and pixels whose corners disagree with the centre on the Sun's
     visibility, or that a sliver of a triangle — a wire thinner than a pixel — crosses in
     front of the centre's surface, are edge pixels too); a sub-sample on its pixel centre's
@@ -973,11 +973,12 @@ def _corner_edges(scene: Scene, camera: Camera, R, t, o_body, geo, lit=None, sun
 
 def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,
                  residual=None, gather_rays: int = 0, centre_surface=None, cov_grid: int = 0, borrow: bool = False):
-    """Box-filtered radiance of the listed pixels from n_grid² jittered-stratified sub-pixel
-    rays. Each sub-sample is shaded like a ``fast`` pixel (exact Sun, cache, mirror term); with
-    ``residual`` (the filtered final-gather and lobe corrections, ``balanced``) a sub-sample on
-    the same surface as its pixel centre (same part, normals within 25°, within a pixel
-    footprint of the centre's tangent plane: ``centre_surface`` = (row of each pixel, −1 off
+    """Box-filtered radiance of the listed pixels from n_grid² correlated multi-jittered
+    sub-pixel rays (:func:`raytrace._shading.subpixel_rays`). Each sub-sample is shaded like a
+    ``fast`` pixel (exact Sun, cache, mirror term); with ``residual`` (the filtered
+    final-gather and lobe corrections, ``balanced``) a sub-sample on the same surface as its
+    pixel centre (same part, normals within 25°, within a pixel footprint of the centre's
+    tangent plane: ``centre_surface`` = (row of each pixel, −1 off
     the target, and per row the centre's point, normal and footprint; ``residual`` is per row
     too, and needs it)) also gets the corrections of the (up to) four pixel centres around it
     on that surface, interpolated bilinearly at its image position,

@@ -1,0 +1,50 @@
+"""The sub-pixel sample pattern of anti-aliased pixels (raytrace._shading.subpixel_rays):
+correlated multi-jittered (Kensler 2013) — one sample per coarse cell and per fine row and
+column of the pixel, uniform over the pixel across seeds."""
+import numpy as np
+import pytest
+
+from raytrace import _shading as K
+
+FX, FY, CX, CY, W = 800.0, 700.0, 40.0, 30.0, 80
+
+
+def _offsets(pix, n, seed):
+    """Sub-pixel offsets (du, dv) in [-0.5, 0.5) of the rays of pixels ``pix``, read back from
+    their directions through the pinhole (identity pose)."""
+    pix = np.asarray(pix, dtype=np.int64)
+    d = np.empty((len(pix) * n * n, 3))
+    K.subpixel_rays(pix, W, n, seed, np.eye(3), FX, FY, CX, CY, d)
+    u = d[:, 0] / d[:, 2] * FX + CX
+    v = d[:, 1] / d[:, 2] * FY + CY
+    pu = np.repeat(pix % W, n * n)
+    pv = np.repeat(pix // W, n * n)
+    return (u - pu).reshape(len(pix), n * n), (v - pv).reshape(len(pix), n * n)
+
+
+@pytest.mark.parametrize("n", [1, 3, 4, 6, 8])
+def test_every_coarse_cell_and_every_fine_row_and_column_holds_one_sample(n):
+    du, dv = _offsets([0, 17, 1234, 5555], n, seed=3)
+    assert np.all((du >= -0.5) & (du < 0.5) & (dv >= -0.5) & (dv < 0.5))
+    for a, b in zip(du, dv):
+        x, y = a + 0.5, b + 0.5
+        coarse = np.floor(x * n).astype(int) + n * np.floor(y * n).astype(int)
+        assert sorted(coarse) == list(range(n * n))  # jittered stratification
+        assert sorted(np.floor(x * n * n).astype(int)) == list(range(n * n))  # n-rooks in u
+        assert sorted(np.floor(y * n * n).astype(int)) == list(range(n * n))  # n-rooks in v
+
+
+def test_pattern_is_uniform_over_the_pixel_across_seeds_and_differs_between_pixels():
+    n = 4
+    xs = np.concatenate([_offsets([321], n, seed=s)[0].ravel() for s in range(400)]) + 0.5
+    # each of 64 bins of width 1/64 (four per fine column of 1/16, which holds one sample per
+    # seed) gets 1/64 of the samples: χ² of 6400 draws with the fine columns' totals fixed,
+    # 48 d.o.f.; a jitter that is not uniform within the fine cell (e.g. always its middle)
+    # gives far more than 48 ± 3·10
+    counts = np.bincount(np.floor(xs * 64).astype(int), minlength=64)
+    assert counts.sum() == 6400
+    chi2 = ((counts - 100.0) ** 2 / 100.0).sum()
+    assert 20.0 < chi2 < 110.0
+    a = _offsets([100, 101], n, seed=5)[0]
+    assert not np.allclose(np.sort(a[0]), np.sort(a[1]))
+    assert np.array_equal(_offsets([100], n, seed=5)[0], _offsets([100], n, seed=5)[0])
