@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ._jit import jit_exact
+from ._jit import inline, jit_exact
 
 
 @jit_exact
@@ -36,7 +36,7 @@ def make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, v0, w, h, z0, out_o, 
                 out_o[k, a] = o_body[a] + z0 * d
 
 
-@jit_exact
+@inline
 def moller_trumbore(ox, oy, oz, dx, dy, dz, V, F, f):
     """Float64 Möller–Trumbore of the ray o + t·d with triangle f: (t, b1, b2, ok); ok is
     False when the ray lies in the triangle's plane (|det| ≤ 1e-12·|e1||e2||d|)."""

@@ -13,13 +13,13 @@ import numba
 import numpy as np
 
 from . import environment as env
-from ._jit import FASTMATH, jit, jit_exact, pjit, pjit_exact
+from ._jit import FASTMATH, inline, jit, jit_exact, pjit, pjit_exact
 from ._kernels import moller_trumbore
 from .brdf import brdf_cos, cosine_direction, onb, sample_brdf, specular_albedo
 from .cache import _hash01, glossy_draw, hit_normals, interpolate_rows, lattice_rows
 
 
-@pjit
+@pjit_exact
 def surfaces(O, D, face, V, F, face_normal, corner_normal, P, NS, NG, WO, B, SIDE):
     """Hit point, shading and geometric normals (facing the ray), direction to the viewer,
     barycentrics and the side of the triangle seen (0 front, 1 back) for rays (O, D) known to
@@ -203,7 +203,7 @@ def mirror_rays(NS, NG, WO, P, eps, want, out_o, out_d):
             out_o[k, a] = P[k, a] + eps * NG[k, a]
 
 
-@jit
+@inline
 def incoming_env(p, tex, ox, oy, oz, dx, dy, dz):
     """Radiance arriving along a ray (o, d) that escaped the target (d need not be unit): the
     environment's.
@@ -693,7 +693,7 @@ def edge_pixels(inst, lit_img, normal, depth, earth_px, rect, out):
             out[v, u] = flag
 
 
-@jit_exact
+@inline
 def _centre_on_surface(q, m, row_of_pixel, inst, comp, P, NS, P_c, N_c, foot):
     """The row of pixel q's centre if sub-sample m (part ``comp``, point P, shading normal NS)
     lies on its surface — same part, normals within ~25°, within a pixel footprint of the
@@ -711,7 +711,7 @@ def _centre_on_surface(q, m, row_of_pixel, inst, comp, P, NS, P_c, N_c, foot):
     return k
 
 
-@pjit
+@pjit_exact
 def donor_rows(centre, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c, foot, borrow, out):
     """For each sub-sample (pixel ``centre``, part ``comp``, point P, shading normal NS): the
     row of the pixel centre whose filtered correction it takes, −1 for none. Its own pixel's

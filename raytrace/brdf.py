@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import inline, jit
 
 __all__ = [
     "bounce_albedo",
@@ -261,7 +261,7 @@ def split_sum_table() -> np.ndarray:
     return _split_sum(_MU_BINS, _MU_BINS, 4096)
 
 
-@jit
+@inline
 def specular_albedo(table, mu, alpha, fr, fg, fb):
     """Directional albedo of the specular lobe, F0·A + B, RGB, bilinear in (μ, α)."""
     n_mu = table.shape[0]

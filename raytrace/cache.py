@@ -61,7 +61,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import environment as env
-from ._jit import jit, pjit
+from ._jit import inline, jit, pjit
 from .brdf import bounce_albedo, brdf_cos, cosine_direction, sample_brdf
 
 __all__ = ["CacheFrame", "RadianceCache"]
@@ -187,7 +187,7 @@ def _bin_hits(G, d, geom, prim, hu, hv, face_offset, face_normal, two_sided_face
     return nh
 
 
-@jit
+@inline
 def hit_normals(face_normal, corner_normal, f, b1, b2, dx, dy, dz):
     """Shading and geometric normals (unit) at a ray's hit on face f (barycentrics b1, b2), both
     turned towards the ray's origin (d the ray's direction); the geometric normal stands in where
@@ -345,7 +345,7 @@ def _jacobi_step(indptr, indices, data, Y, g_ptr, g_idx, g_data, Yb, X, X0, out)
     return dmax.max() if n else 0.0
 
 
-@jit
+@inline
 def lattice_rows(valid, face_s, lat_start, lat_ids, f, b1, b2, side):
     """The three cache rows around barycentrics (b1, b2) of face f on ``side`` (0 front, 1
     back) and their linear interpolation weights; rows that do not exist get weight 0 (the
@@ -370,7 +370,7 @@ def lattice_rows(valid, face_s, lat_start, lat_ids, f, b1, b2, side):
     return r0, r1, r2, w0, w1, w2
 
 
-@jit
+@inline
 def interpolate_rows(values, valid, face_s, lat_start, lat_ids, f, b1, b2, side):
     """Value (RGB) of a per-row array at barycentrics (b1, b2) of face f on ``side``."""
     r0, r1, r2, w0, w1, w2 = lattice_rows(valid, face_s, lat_start, lat_ids, f, b1, b2, side)

@@ -22,7 +22,7 @@ import math
 import numba
 import numpy as np
 
-from ._jit import jit, pjit
+from ._jit import inline, jit, pjit
 
 # parameter vector layout
 P_HAS_EARTH, P_EX, P_EY, P_EZ, P_DIST, P_RADIUS, P_ALBEDO = 0, 1, 2, 3, 4, 5, 6
@@ -106,7 +106,7 @@ def procedural_albedo(mx, my, mz):
     return r, g, b
 
 
-@jit
+@inline
 def earth_albedo(p, texture, mx, my, mz):
     """Albedo (RGB) at the body-frame outward unit normal m of Earth's surface."""
     kind = int(p[P_TEXTURE])
@@ -129,7 +129,7 @@ def earth_albedo(p, texture, mx, my, mz):
     return texture[row, col, 0] * s, texture[row, col, 1] * s, texture[row, col, 2] * s
 
 
-@jit
+@inline
 def earth_hit(p, ox, oy, oz, dx, dy, dz):
     """Distance along the unit ray (o, d) to Earth's sphere, or -1 when it misses."""
     if p[P_HAS_EARTH] == 0.0:
@@ -151,7 +151,7 @@ def earth_hit(p, ox, oy, oz, dx, dy, dz):
     return b - math.sqrt(r * r - q2)
 
 
-@jit
+@inline
 def env_radiance(p, texture, ox, oy, oz, dx, dy, dz):
     """Radiance (RGB) arriving at o from direction d (unit): Earth's where the ray meets it,
     else the ambient sky [W/(m²·sr)]."""
@@ -388,7 +388,7 @@ def glossy_table(p, alphas, cells, n_t: int = 17, n_p: int = 32):
     return out
 
 
-@jit
+@inline
 def irradiance_lookup(table, nx, ny, nz):
     """Bilinear interpolation of :func:`irradiance_table` at the unit normal n."""
     n_t = table.shape[0]
