@@ -384,17 +384,45 @@ def _strata(n):
     return g
 
 
+@inline
+def _shuffle(perm, key, stream):
+    """perm[:] = a permutation of 0 … len − 1 from a hash of (key, stream) (Fisher–Yates)."""
+    n = perm.shape[0]
+    for i in range(n):
+        perm[i] = i
+    for i in range(n - 1, 0, -1):
+        r = min(int(_hash01(key * 64 + i, stream) * (i + 1)), i)
+        perm[i], perm[r] = perm[r], perm[i]
+
+
+@inline
+def _cmj_point(j, gx, gy, perm_x, perm_y, jx, jy):
+    """Point j (< gx·gy) of a correlated multi-jittered pattern on [0, 1)² (Kensler 2013,
+    "Correlated Multi-Jittered Sampling", Pixar TM 13-01): cell (j mod gx, j div gx) of the
+    gx × gy grid, and within it the fine column perm_y[row] and fine row perm_x[column], so the
+    gx·gy points also fall one in each of the gx·gy fine columns and rows (n-rooks); (jx, jy)
+    ∈ [0, 1)² the jitter within the fine cell."""
+    i = j % gx
+    r = j // gx
+    return (i + (perm_y[r] + jx) / gy) / gx, (r + (perm_x[i] + jy) / gx) / gy
+
+
 @pjit
 def gather_rays(P, NS, NG, n_rays, seed, pix, eps, out_o, out_d):
-    """n_rays cosine-weighted directions about the shading normal per point, stratified in
-    (radius², azimuth) on an exact gx × gy grid, jittered per pixel and seed."""
+    """n_rays cosine-weighted directions about the shading normal per point, correlated
+    multi-jittered (Kensler 2013) in (radius², azimuth) on an exact gx × gy grid: one point in
+    every cell and in every one of the n_rays fine rows and columns, permuted and jittered per
+    pixel and seed."""
     gx = _strata(n_rays)
     gy = n_rays // gx
     for k in numba.prange(P.shape[0]):
         key = pix[k] * 1009 + seed
-        for j in range(n_rays):  # jittered: an independent point in every stratum
-            u1 = ((j % gx) + _hash01(key, 2 * j + 11)) / gx
-            u2 = ((j // gx) + _hash01(key, 2 * j + 12)) / gy
+        perm_x = np.empty(gx, np.int64)
+        perm_y = np.empty(gy, np.int64)
+        _shuffle(perm_x, key, 2 * seed + 15)
+        _shuffle(perm_y, key, 2 * seed + 16)
+        for j in range(n_rays):
+            u1, u2 = _cmj_point(j, gx, gy, perm_x, perm_y, _hash01(key, 2 * j + 11), _hash01(key, 2 * j + 12))
             m = k * n_rays + j
             out_d[m, 0], out_d[m, 1], out_d[m, 2] = cosine_direction(NS[k, 0], NS[k, 1], NS[k, 2], u1, u2)
             for a in range(3):
@@ -1005,20 +1033,17 @@ def subpixel_rays(pix, W, n_grid, seed, R_body_from_cam, fx, fy, cx, cy, out_d):
     for k in numba.prange(pix.shape[0]):
         v = pix[k] // W
         u = pix[k] % W
-        perm_a = np.arange(n_grid)
-        perm_b = np.arange(n_grid)
+        perm_a = np.empty(n_grid, np.int64)
+        perm_b = np.empty(n_grid, np.int64)
         key0 = pix[k] & 0x7FFFFFFF
-        for i in range(n_grid - 1, 0, -1):  # Fisher–Yates, keyed by (seed, pixel)
-            r = int(_hash01(key0 * 64 + i, 2 * seed + 13) * (i + 1))
-            perm_a[i], perm_a[r] = perm_a[r], perm_a[i]
-            r = int(_hash01(key0 * 64 + i, 2 * seed + 14) * (i + 1))
-            perm_b[i], perm_b[r] = perm_b[r], perm_b[i]
+        _shuffle(perm_a, key0, 2 * seed + 13)
+        _shuffle(perm_b, key0, 2 * seed + 14)
         for j in range(S):
             key = (pix[k] * S + j) & 0x7FFFFFFF
-            cu = j % n_grid
-            cv = j // n_grid
-            du = (cu + (perm_a[cv] + _hash01(key, 2 * seed + 11)) / n_grid) / n_grid - 0.5
-            dv = (cv + (perm_b[cu] + _hash01(key, 2 * seed + 12)) / n_grid) / n_grid - 0.5
+            fu, fv = _cmj_point(j, n_grid, n_grid, perm_b, perm_a, _hash01(key, 2 * seed + 11),
+                                _hash01(key, 2 * seed + 12))
+            du = fu - 0.5
+            dv = fv - 0.5
             x = (u + du - cx) / fx
             y = (v + dv - cy) / fy
             m = k * S + j
@@ -1094,8 +1119,8 @@ def env_along(o_body, D, p, tex, out):
 
 @pjit
 def lobe_rays(idx, P, NS, NG, WO, comp, mat_f0, mat_alpha, n_rays, seed, pix, eps, out_o, out_d, out_w):
-    """n_rays directions per listed point drawn from its GGX lobe (visible normals, stratified,
-    jittered per pixel), with weights f_spec·cos/pdf (RGB; 0 where the draw fails or goes
+    """n_rays directions per listed point drawn from its GGX lobe (visible normals, correlated
+    multi-jittered per pixel and seed, :func:`_cmj_point`), with weights f_spec·cos/pdf (RGB; 0 where the draw fails or goes
     under the geometric surface)."""
     gx = _strata(n_rays)
     gy = n_rays // gx
@@ -1103,9 +1128,12 @@ def lobe_rays(idx, P, NS, NG, WO, comp, mat_f0, mat_alpha, n_rays, seed, pix, ep
         k = idx[j]
         c = comp[k]
         key = pix[k] * 1013 + seed
+        perm_x = np.empty(gx, np.int64)
+        perm_y = np.empty(gy, np.int64)
+        _shuffle(perm_x, key, 2 * seed + 23)
+        _shuffle(perm_y, key, 2 * seed + 24)
         for r in range(n_rays):
-            u1 = ((r % gx) + _hash01(key, 2 * r + 21)) / gx
-            u2 = ((r // gx) + _hash01(key, 2 * r + 22)) / gy
+            u1, u2 = _cmj_point(r, gx, gy, perm_x, perm_y, _hash01(key, 2 * r + 21), _hash01(key, 2 * r + 22))
             lx, ly, lz, wr, wg, wb, ok = sample_brdf(NS[k, 0], NS[k, 1], NS[k, 2], WO[k, 0], WO[k, 1], WO[k, 2],
                                                      0.0, 0.0, 0.0, mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2],
                                                      mat_alpha[c], 0.0, u1, u2)

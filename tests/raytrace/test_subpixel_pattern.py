@@ -1,6 +1,7 @@
-"""The sub-pixel sample pattern of anti-aliased pixels (raytrace._shading.subpixel_rays):
+"""Sample patterns: the sub-pixel samples of anti-aliased pixels (raytrace._shading.subpixel_rays)
+and the final gather's directions (gather_rays):
 correlated multi-jittered (Kensler 2013) — one sample per coarse cell and per fine row and
-column of the pixel, uniform over the pixel across seeds."""
+column of the domain, uniform over it across seeds."""
 import numpy as np
 import pytest
 
@@ -48,3 +49,28 @@ def test_pattern_is_uniform_over_the_pixel_across_seeds_and_differs_between_pixe
     a = _offsets([100, 101], n, seed=5)[0]
     assert not np.allclose(np.sort(a[0]), np.sort(a[1]))
     assert np.array_equal(_offsets([100], n, seed=5)[0], _offsets([100], n, seed=5)[0])
+
+
+@pytest.mark.parametrize("n_rays", [4, 8, 16, 32])
+def test_final_gather_directions_are_multi_jittered_in_radius_squared_and_azimuth(n_rays):
+    """raytrace._shading.gather_rays about the normal +z: u1 = 1 − cos²θ (the squared radius
+    on the unit disc) and u2 = φ / 2π of each point's rays fall one per cell of the gx × gy
+    grid and one per fine row and column of the n_rays × n_rays grid."""
+    n_pts = 5
+    P = np.zeros((n_pts, 3))
+    N = np.tile([0.0, 0.0, 1.0], (n_pts, 1))
+    o = np.empty((n_pts * n_rays, 3))
+    d = np.empty((n_pts * n_rays, 3))
+    K.gather_rays(P, N, N, n_rays, 9, np.arange(100, 100 + n_pts, dtype=np.int64), 1e-6, o, d)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-12)
+    u1 = (1.0 - d[:, 2] ** 2).reshape(n_pts, n_rays)
+    u2 = (np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi) % 1.0).reshape(n_pts, n_rays)
+    gx = int(np.sqrt(n_rays))
+    while n_rays % gx:
+        gx -= 1
+    gy = n_rays // gx
+    for a, b in zip(u1, u2):
+        cell = np.floor(a * gx).astype(int) + gx * np.floor(b * gy).astype(int)
+        assert sorted(cell) == list(range(n_rays))
+        assert sorted(np.floor(a * n_rays).astype(int)) == list(range(n_rays))
+        assert sorted(np.floor(b * n_rays).astype(int)) == list(range(n_rays))
