@@ -1120,8 +1120,8 @@ def env_along(o_body, D, p, tex, out):
 @pjit
 def lobe_rays(idx, P, NS, NG, WO, comp, mat_f0, mat_alpha, n_rays, seed, pix, eps, out_o, out_d, out_w):
     """n_rays directions per listed point drawn from its GGX lobe (visible normals, correlated
-    multi-jittered per pixel and seed, :func:`_cmj_point`), with weights f_spec·cos/pdf (RGB; 0 where the draw fails or goes
-    under the geometric surface)."""
+    multi-jittered per pixel and seed, :func:`_cmj_point`), with weights f_spec·cos/pdf (RGB;
+    0 where the draw fails or goes under the geometric surface)."""
     gx = _strata(n_rays)
     gy = n_rays // gx
     for j in numba.prange(idx.shape[0]):

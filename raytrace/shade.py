@@ -13,9 +13,9 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     reflection of the environment prefiltered by the part's GGX lobe (the split-sum
     approximation, :func:`raytrace.environment.glossy_table`), corrected by what the parts add
     or hide, and of the other parts along the mirror direction (one ray), weighted by the
-    lobe's directional albedo (:func:`raytrace._shading.add_mirror`); anti-aliasing with 3×3 correlated multi-jittered
-    sub-pixel rays (an unbiased box filter) only where neighbouring pixels disagree
-    (silhouette, part, shadow and crease edges); where those sub-samples see more than one
+    lobe's directional albedo (:func:`raytrace._shading.add_mirror`); anti-aliasing with 3×3
+    correlated multi-jittered sub-pixel rays (an unbiased box filter; Kensler 2013) only where
+    neighbouring pixels disagree (silhouette, part, shadow and crease edges); where those sub-samples see more than one
     part (or space), 6×6 more primary rays, unshaded, measure how much of the pixel each part
     covers, and the shaded sub-samples give each part's radiance (coverage and shading
     estimated apart, as multisample anti-aliasing does).
@@ -33,11 +33,12 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     than their gathers' spread — a contact shadow, a gap — is kept), so the filter removes
     noise, not detail. Glossy parts also sample their GGX lobe with N rays, minus the
     radiance their cheap mirror term reflects (a control variate of known mean, the split-sum
-    albedo), filtered with the same weights. Edge pixels get 4×4
-    (N ≤ 8), 6×6 (N ≤ 128) or 8×8 multi-jittered shaded sub-pixel rays, plus 8×8 to 10×10 coverage
-    rays where they are mixed (and pixels whose corners disagree with the centre on the Sun's
-    visibility, or that a sliver of a triangle — a wire thinner than a pixel — crosses in
-    front of the centre's surface, are edge pixels too); a sub-sample on its pixel centre's
+    albedo), filtered with the same weights. Gather and lobe directions are correlated
+    multi-jittered per pixel. Edge pixels get 4×4 (N ≤ 8), 6×6 (N ≤ 128) or 8×8 multi-jittered
+    shaded sub-pixel rays, plus 8×8 to 10×10 coverage rays where they are mixed (and pixels
+    whose corners disagree with the centre on the Sun's visibility, or that a sliver of a
+    triangle — a wire thinner than a pixel — crosses in front of the centre's surface, are edge
+    pixels too); a sub-sample on its pixel centre's
     surface is shaded like ``fast`` plus the filtered gather corrections of the pixel centres
     around it on that surface, interpolated bilinearly at its position; one on
     another surface takes the
