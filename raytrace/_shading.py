@@ -396,6 +396,17 @@ def _shuffle(perm, key, stream):
 
 
 @inline
+def _cmj_perms(gx, gy, key, stream):
+    """The two permutations of a correlated multi-jittered pattern (:func:`_cmj_point`): of
+    the gx columns and of the gy rows, from hashes of (key, stream) and (key, stream + 1)."""
+    perm_x = np.empty(gx, np.int64)
+    perm_y = np.empty(gy, np.int64)
+    _shuffle(perm_x, key, stream)
+    _shuffle(perm_y, key, stream + 1)
+    return perm_x, perm_y
+
+
+@inline
 def _cmj_point(j, gx, gy, perm_x, perm_y, jx, jy):
     """Point j (< gx·gy) of a correlated multi-jittered pattern on [0, 1)² (Kensler 2013,
     "Correlated Multi-Jittered Sampling", Pixar TM 13-01): cell (j mod gx, j div gx) of the
@@ -417,10 +428,7 @@ def gather_rays(P, NS, NG, n_rays, seed, pix, eps, out_o, out_d):
     gy = n_rays // gx
     for k in numba.prange(P.shape[0]):
         key = pix[k] * 1009 + seed
-        perm_x = np.empty(gx, np.int64)
-        perm_y = np.empty(gy, np.int64)
-        _shuffle(perm_x, key, 2 * seed + 15)
-        _shuffle(perm_y, key, 2 * seed + 16)
+        perm_x, perm_y = _cmj_perms(gx, gy, key, 2 * seed + 15)
         for j in range(n_rays):
             u1, u2 = _cmj_point(j, gx, gy, perm_x, perm_y, _hash01(key, 2 * j + 11), _hash01(key, 2 * j + 12))
             m = k * n_rays + j
@@ -1033,11 +1041,7 @@ def subpixel_rays(pix, W, n_grid, seed, R_body_from_cam, fx, fy, cx, cy, out_d):
     for k in numba.prange(pix.shape[0]):
         v = pix[k] // W
         u = pix[k] % W
-        perm_a = np.empty(n_grid, np.int64)
-        perm_b = np.empty(n_grid, np.int64)
-        key0 = pix[k] & 0x7FFFFFFF
-        _shuffle(perm_a, key0, 2 * seed + 13)
-        _shuffle(perm_b, key0, 2 * seed + 14)
+        perm_a, perm_b = _cmj_perms(n_grid, n_grid, pix[k] & 0x7FFFFFFF, 2 * seed + 13)
         for j in range(S):
             key = (pix[k] * S + j) & 0x7FFFFFFF
             fu, fv = _cmj_point(j, n_grid, n_grid, perm_b, perm_a, _hash01(key, 2 * seed + 11),
@@ -1128,10 +1132,7 @@ def lobe_rays(idx, P, NS, NG, WO, comp, mat_f0, mat_alpha, n_rays, seed, pix, ep
         k = idx[j]
         c = comp[k]
         key = pix[k] * 1013 + seed
-        perm_x = np.empty(gx, np.int64)
-        perm_y = np.empty(gy, np.int64)
-        _shuffle(perm_x, key, 2 * seed + 23)
-        _shuffle(perm_y, key, 2 * seed + 24)
+        perm_x, perm_y = _cmj_perms(gx, gy, key, 2 * seed + 23)
         for r in range(n_rays):
             u1, u2 = _cmj_point(r, gx, gy, perm_x, perm_y, _hash01(key, 2 * r + 21), _hash01(key, 2 * r + 22))
             lx, ly, lz, wr, wg, wb, ok = sample_brdf(NS[k, 0], NS[k, 1], NS[k, 2], WO[k, 0], WO[k, 1], WO[k, 2],
