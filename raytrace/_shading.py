@@ -86,18 +86,75 @@ def sun_rays(P, NS, NG, sx, sy, sz, eps, want, out_o):
             out_o[k, a] = P[k, a] + eps * NG[k, a]
 
 
+@jit
+def _hash32(i, k):
+    """A 32-bit hash of the integers (i, k) (the mixing of :func:`raytrace.cache._hash01`)."""
+    h = (i * 0x9E3779B1 + k * 0x85EBCA77 + 0x27D4EB2F) & 0xFFFFFFFF
+    h ^= h >> 15
+    h = (h * 0x2C1B3C6D) & 0xFFFFFFFF
+    h ^= h >> 12
+    h = (h * 0x297A2D39) & 0xFFFFFFFF
+    h ^= h >> 15
+    return h
+
+
+@jit
+def permute(i, n, p):
+    """Element i of a pseudo-random permutation of 0 … n − 1 chosen by the 32-bit key p,
+    without storing it: Kensler's hash permutation (2013, "Correlated Multi-Jittered
+    Sampling", Pixar TM 13-01, §3), invertible operations on the bits below the next power of
+    two, cycle-walked until the result falls below n, then rotated by p."""
+    M = 0xFFFFFFFF
+    w = n - 1
+    w |= w >> 1
+    w |= w >> 2
+    w |= w >> 4
+    w |= w >> 8
+    w |= w >> 16
+    p &= M
+    while True:
+        i ^= p
+        i = (i * 0xE170893D) & M
+        i ^= p >> 16
+        i ^= (i & w) >> 4
+        i ^= p >> 8
+        i = (i * 0x0929EB3F) & M
+        i ^= p >> 23
+        i ^= (i & w) >> 1
+        i = (i * (1 | (p >> 27))) & M
+        i = (i * 0x6935FA69) & M
+        i ^= (i & w) >> 11
+        i = (i * 0x74DCB303) & M
+        i ^= (i & w) >> 2
+        i = (i * 0x9E501CC3) & M
+        i ^= (i & w) >> 2
+        i = (i * 0xC860A3DF) & M
+        i &= w
+        i ^= i >> 5
+        if i < n:
+            break
+    return (i + p) % n
+
+
 @pjit
-def sun_disc_dirs(keys, n_strata, seed, sx, sy, sz, cos_half, out_d):
+def sun_disc_dirs(pixel, number, n_strata, seed, sx, sy, sz, cos_half, out_d):
     """Directions uniform over the solar disc (the cone of half-angle acos(cos_half) about
-    the Sun's centre direction): point m takes stratum m % n_strata of an exact gx × gy grid in
-    (1 − cos θ, φ), jittered from a hash of (keys[m], seed)."""
+    the Sun's centre direction): sample ``number[m]`` (< n_strata) of ``pixel[m]`` takes
+    stratum permute(number, n_strata) of an exact gx × gy grid in (1 − cos θ, φ), the
+    permutation drawn per pixel and seed (:func:`permute`), jittered from a hash of (pixel,
+    number, seed). The permutation decouples the disc stratum from the sample's number, which
+    also indexes its sub-pixel cell (:func:`subpixel_rays`): with stratum = number, sub-samples
+    in the pixel's left column always took the disc's inner ring, and a penumbra crossing the
+    pixel was estimated from 6 correlated pairs, not 36 samples (measured: Cassini ``earth``,
+    ``balanced``-16, ±30 % from seed to seed on the dish's shadow edge)."""
     gx = _strata(n_strata)
     gy = n_strata // gx
     tx, ty, tz, bx, by, bz = onb(sx, sy, sz)
-    for m in numba.prange(keys.shape[0]):
-        j = m % n_strata
-        u1 = ((j % gx) + _hash01(keys[m], 4 * seed + 21)) / gx
-        u2 = ((j // gx) + _hash01(keys[m], 4 * seed + 22)) / gy
+    for m in numba.prange(pixel.shape[0]):
+        j = permute(number[m], n_strata, _hash32(pixel[m], 4 * seed + 23))
+        key = pixel[m] * n_strata + number[m]
+        u1 = ((j % gx) + _hash01(key, 4 * seed + 21)) / gx
+        u2 = ((j // gx) + _hash01(key, 4 * seed + 22)) / gy
         ct = 1.0 - u1 * (1.0 - cos_half)
         st = math.sqrt(max(0.0, 1.0 - ct * ct))
         c = st * math.cos(2.0 * math.pi * u2)

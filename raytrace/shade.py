@@ -456,9 +456,9 @@ class _Context:
         cand = np.flatnonzero(near & facing)
         if not len(cand):
             return
-        keys = (np.repeat(pix[cand].astype(np.int64), n_rays) * n_rays + np.tile(np.arange(n_rays), len(cand)))
-        d = np.empty((len(keys), 3))
-        K.sun_disc_dirs(keys, n_rays, seed, sx, sy, sz, math.cos(half), d)
+        d = np.empty((len(cand) * n_rays, 3))
+        K.sun_disc_dirs(np.repeat(pix[cand].astype(np.int64), n_rays), np.tile(np.arange(n_rays), len(cand)), n_rays,
+                        seed, sx, sy, sz, math.cos(half), d)
         o = np.repeat(s["P"][cand] + self.eps * s["NG"][cand], n_rays, axis=0)
         v = 1.0 - self.scene.occluded(o, d).reshape(len(cand), n_rays).mean(axis=1)
         full = np.zeros((len(cand), 3))
@@ -1074,12 +1074,13 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, camera: Camera, 
         sub_key = (centre[idx] * S + number[idx]).astype(np.int64)
         sun_dirs = None
         if ctx.lighting.sun_angular_diameter_rad > 0.0 and S > 1:
-            # one solar-disc sample per sub-sample, stratified over the pixel's S sub-samples
+            # one solar-disc sample per sub-sample, stratified over the pixel's S sub-samples in
+            # strata permuted per pixel, independent of the sub-samples' cells
             # (float32: they only steer shadow rays)
             sun_dirs = np.empty((len(idx), 3), np.float32)
             sx, sy, sz = ctx.lighting.sun_dir_body
-            K.sun_disc_dirs(sub_key, S, seed, sx, sy, sz, math.cos(0.5 * ctx.lighting.sun_angular_diameter_rad),
-                            sun_dirs)
+            K.sun_disc_dirs(centre[idx].astype(np.int64), number[idx].astype(np.int64), S, seed, sx, sy, sz,
+                            math.cos(0.5 * ctx.lighting.sun_angular_diameter_rad), sun_dirs)
         lbar = np.zeros((len(idx), 3))
         Ls, _ = ctx.direct(s, E, sun_dirs=sun_dirs, lbar_out=lbar)
         if residual is not None:

@@ -74,3 +74,55 @@ def test_final_gather_directions_are_multi_jittered_in_radius_squared_and_azimut
         assert sorted(cell) == list(range(n_rays))
         assert sorted(np.floor(a * n_rays).astype(int)) == list(range(n_rays))
         assert sorted(np.floor(b * n_rays).astype(int)) == list(range(n_rays))
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 16, 36, 100, 257])
+def test_hash_permutation_is_a_permutation_and_depends_on_its_key(n):
+    """raytrace._shading.permute (Kensler 2013, §3): for every key, i ↦ permute(i, n, key)
+    maps 0 … n − 1 onto itself one to one; different keys give different orders."""
+    orders = set()
+    for key in (0, 1, 7, 0x9E3779B9, 0xFFFFFFFF, 123456789):
+        perm = [K.permute(i, n, key) for i in range(n)]
+        assert sorted(perm) == list(range(n))
+        orders.add(tuple(perm))
+    if n >= 5:
+        assert len(orders) >= 5
+
+
+def _disc_strata(pixels, n, seed):
+    """Stratum (a, b) of the (1 − cos θ, φ) grid of sun_disc_dirs for sample j of each pixel,
+    read back from the directions about the Sun at +z."""
+    half = 0.0046
+    pixel = np.repeat(np.asarray(pixels, dtype=np.int64), n)
+    number = np.tile(np.arange(n, dtype=np.int64), len(pixels))
+    d = np.empty((len(pixel), 3))
+    K.sun_disc_dirs(pixel, number, n, seed, 0.0, 0.0, 1.0, np.cos(half), d)
+    gx = K._strata(n)
+    gy = n // gx
+    u1 = (1.0 - d[:, 2]) / (1.0 - np.cos(half))
+    u2 = (np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi)) % 1.0
+    # the azimuth is measured from the basis raytrace.brdf.onb builds about the Sun
+    t = K.onb(0.0, 0.0, 1.0)
+    u2 = (u2 - np.arctan2(t[1], t[0]) / (2 * np.pi)) % 1.0
+    a = np.minimum(np.floor(u1 * gx), gx - 1).astype(int)
+    b = np.minimum(np.floor(u2 * gy), gy - 1).astype(int)
+    return a.reshape(len(pixels), n), b.reshape(len(pixels), n), gx, gy
+
+
+def test_solar_disc_samples_are_stratified_per_pixel_and_independent_of_the_sub_pixel_cell():
+    """The S solar-disc samples of a pixel's S sub-samples fill the S strata of the disc, one
+    each, and which stratum sample j takes does not follow from j (which also fixes its
+    sub-pixel cell, subpixel_rays): over 600 pixels, sample j's radial stratum is spread evenly
+    over the gx rings (χ² per j), where taking stratum j would always put it in ring j mod gx."""
+    n = 36
+    a, b, gx, gy = _disc_strata(np.arange(600) * 7 + 3, n, seed=4)
+    for k in range(len(a)):
+        assert sorted(a[k] + gx * b[k]) == list(range(n))
+    chi2 = []
+    for j in range(n):
+        counts = np.bincount(a[:, j], minlength=gx)
+        e = len(a) / gx
+        chi2.append(((counts - e) ** 2 / e).sum())
+    # 5 d.o.f. each: mean 5; ring = j mod gx would give 3000
+    assert 2.0 < np.mean(chi2) < 9.0
+    assert max(chi2) < 30.0
