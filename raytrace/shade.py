@@ -62,7 +62,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _shading as K
-from ._kernels import rows_times_matrix
+from ._kernels import ray_origins32, rows_times_matrix
 from .brdf import split_sum_table
 from .camera import Camera
 from .lighting import Lighting
@@ -370,11 +370,13 @@ class _Context:
                    self.scene.corner_normal, out["P"], out["NS"], out["NG"], out["WO"], out["B"], out["SIDE"])
         return out
 
-    def direct(self, s, E_point, *, sun_dirs=None, occluder_t=None, lbar_out=None):
+    def direct(self, s, E_point, *, disc=None, occluder_t=None, lbar_out=None):
         """Sunlight (shadowed) and the cheap specular term of everything else
         (:func:`raytrace._shading.add_mirror`; ``E_point`` the points' cache irradiance):
         radiance (n, 3) and the Sun's visibility (n,) in {0, 1}. The shadow ray goes towards the
-        Sun's centre, or along ``sun_dirs`` (one solar-disc sample per point); ``occluder_t``,
+        Sun's centre, or, with ``disc`` = (pixel, number, n_strata, seed) per point, towards
+        one solar-disc sample per point (:func:`raytrace._shading.sun_disc_dirs`), drawn only
+        for the points facing the Sun; ``occluder_t``,
         when given, receives the distance to the occluder of every blocked point; ``lbar_out`` the
         radiance L̄ the specular term reflects (the control variate of :meth:`lobe`)."""
         n = len(s["P"])
@@ -389,7 +391,14 @@ class _Context:
             K.sun_rays(s["P"], s["NS"], s["NG"], sx, sy, sz, self.eps, want, o)
             idx = np.flatnonzero(want)
             if len(idx):
-                d = np.broadcast_to(np.float32([sx, sy, sz]), (len(idx), 3)) if sun_dirs is None else sun_dirs[idx]
+                if disc is None:
+                    d = np.broadcast_to(np.float32([sx, sy, sz]), (len(idx), 3))
+                else:
+                    # (float32: they only steer shadow rays)
+                    d = np.empty((len(idx), 3), np.float32)
+                    pixel, number, n_strata, seed = disc
+                    K.sun_disc_dirs(pixel[idx], number[idx], n_strata, seed, sx, sy, sz,
+                                    math.cos(0.5 * light.sun_angular_diameter_rad), d)
                 if occluder_t is None:
                     blocked = self.scene.occluded(o[idx], d)
                 else:
@@ -1006,7 +1015,7 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     z0 = 0.0 if geo.camera_inside_hull else scene._near_plane(scene.hull_vertices @ R.T + t)
     D = np.empty((len(epix) * S, 3))
     K.subpixel_rays(epix.astype(np.int64), W, n_grid, seed, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, D)
-    h = scene.intersect(o_body + z0 * D, D)
+    h = _intersect_from(scene, o_body, z0, D)
     centre = np.repeat(epix, S)
     number = np.tile(np.arange(S), len(epix))
     R_cam = np.ascontiguousarray(R, dtype=np.float64)
@@ -1034,7 +1043,7 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     Dc = np.empty((len(mpix) * C, 3))
     K.subpixel_rays(mpix.astype(np.int64), W, cov_grid, (seed + 0x3C6EF372) & 0x7FFFFFFF, R_bc, camera.fx,
                     camera.fy, camera.cx, camera.cy, Dc)
-    hc = scene.intersect(o_body + z0 * Dc, Dc)
+    hc = _intersect_from(scene, o_body, z0, Dc)
     slot = np.repeat(np.arange(len(mpix)), S) * n_groups + g_s[mixed].ravel()
     slot_c = np.repeat(np.arange(len(mpix)), C) * n_groups + group(hc)
     m = len(mpix) * n_groups
@@ -1058,6 +1067,15 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     return out
 
 
+def _intersect_from(scene: Scene, o_body, z0: float, D):
+    """Closest hits of the rays from the camera centre o_body along D (float64), started at
+    the plane z_cam = z0 (:meth:`Scene.intersect`)."""
+    o32 = np.empty(D.shape, np.float32)
+    d32 = np.empty(D.shape, np.float32)
+    ray_origins32(np.asarray(o_body, dtype=np.float64), float(z0), D, o32, d32)
+    return scene.intersect(o32, d32)
+
+
 def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, camera: Camera, R_cam, D, h, centre, number, S, seed,
                       residual, gather_rays, centre_surface, borrow):
     """Radiance along sub-pixel rays D (hits h) of pixels ``centre`` of ``camera`` (pose
@@ -1072,17 +1090,13 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, camera: Camera, 
         s = ctx.surfaces(np.ascontiguousarray(np.broadcast_to(o_body, Dh.shape)), Dh, face)
         E = ctx.cache_E(s)
         sub_key = (centre[idx] * S + number[idx]).astype(np.int64)
-        sun_dirs = None
+        disc = None
         if ctx.lighting.sun_angular_diameter_rad > 0.0 and S > 1:
             # one solar-disc sample per sub-sample, stratified over the pixel's S sub-samples in
             # strata permuted per pixel, independent of the sub-samples' cells
-            # (float32: they only steer shadow rays)
-            sun_dirs = np.empty((len(idx), 3), np.float32)
-            sx, sy, sz = ctx.lighting.sun_dir_body
-            K.sun_disc_dirs(centre[idx].astype(np.int64), number[idx].astype(np.int64), S, seed, sx, sy, sz,
-                            math.cos(0.5 * ctx.lighting.sun_angular_diameter_rad), sun_dirs)
+            disc = (centre[idx].astype(np.int64), number[idx].astype(np.int64), S, seed)
         lbar = np.zeros((len(idx), 3))
-        Ls, _ = ctx.direct(s, E, sun_dirs=sun_dirs, lbar_out=lbar)
+        Ls, _ = ctx.direct(s, E, disc=disc, lbar_out=lbar)
         if residual is not None:
             row_of_pixel, P_c, N_c, foot = centre_surface
             k = np.empty(len(idx), dtype=np.int64)
