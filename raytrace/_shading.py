@@ -1258,3 +1258,96 @@ def lobe_sum(n_rays, O, D, Wt, geom, prim, hu, hv, face_offset, face_normal, cor
             out_var[j] = max((sy2 - n_rays * ym * ym) / (n_rays * (n_rays - 1.0)), 0.0)
         else:
             out_var[j] = 0.0
+
+
+@pjit_exact
+def ray_groups(geom, prim, face_offset, component_of_face, out):
+    """The group of each ray's hit for coverage counting: its part + 1, or 0 on a miss."""
+    for k in numba.prange(geom.shape[0]):
+        g = geom[k]
+        out[k] = 0 if g < 0 else component_of_face[face_offset[g] + prim[k]] + 1
+
+
+@inline
+def _slot(groups, n, g):
+    """Index of g among groups[:n], −1 if absent."""
+    for k in range(n):
+        if groups[k] == g:
+            return k
+    return -1
+
+
+@pjit_exact
+def coverage_unshaded_first(g_s, g_c, out):
+    """out[i, j]: coverage ray j of pixel i is the first of that pixel's coverage rays to see
+    a group (part, or space) that none of its shaded sub-samples saw (g_s (n, S), g_c (n, C):
+    groups, :func:`ray_groups`)."""
+    n, S = g_s.shape
+    C = g_c.shape[1]
+    for i in numba.prange(n):
+        groups = np.empty(S + C, np.int64)
+        d = 0
+        for a in range(S):
+            if _slot(groups, d, g_s[i, a]) < 0:
+                groups[d] = g_s[i, a]
+                d += 1
+        for b in range(C):
+            g = g_c[i, b]
+            k = _slot(groups, d, g)
+            out[i, b] = k < 0
+            if k < 0:
+                groups[d] = g
+                d += 1
+
+
+@pjit_exact
+def coverage_combine(g_s, L_s, g_c, shaded_c, L_c, out):
+    """Radiance of anti-aliased pixels from their shaded sub-samples and coverage rays
+    (multisample anti-aliasing): each group (part, or space) seen in pixel i weighs the mean
+    radiance of its shaded rays — the S sub-samples (groups g_s (n, S), radiance L_s (n, S, 3))
+    and the coverage rays flagged in shaded_c (n, C) (radiance L_c (n, C, 3)) — by the
+    fraction of all S + C rays that saw it (g_c (n, C) the coverage rays' groups). Every
+    group seen must have a shaded ray (:func:`coverage_unshaded_first`). out (n, 3)."""
+    n, S = g_s.shape
+    C = g_c.shape[1]
+    inv = 1.0 / (S + C)
+    for i in numba.prange(n):
+        groups = np.empty(S + C, np.int64)
+        cnt = np.zeros(S + C)
+        nsh = np.zeros(S + C)
+        tot = np.zeros((S + C, 3))
+        d = 0
+        for a in range(S):
+            g = g_s[i, a]
+            k = _slot(groups, d, g)
+            if k < 0:
+                k = d
+                groups[d] = g
+                d += 1
+            cnt[k] += 1.0
+            nsh[k] += 1.0
+            for c in range(3):
+                tot[k, c] += L_s[i, a, c]
+        for b in range(C):
+            g = g_c[i, b]
+            k = _slot(groups, d, g)
+            if k < 0:
+                k = d
+                groups[d] = g
+                d += 1
+            cnt[k] += 1.0
+            if shaded_c[i, b]:
+                nsh[k] += 1.0
+                for c in range(3):
+                    tot[k, c] += L_c[i, b, c]
+        r0 = 0.0
+        r1 = 0.0
+        r2 = 0.0
+        for k in range(d):
+            w = cnt[k] * inv / max(nsh[k], 1.0)
+            r0 += w * tot[k, 0]
+            r1 += w * tot[k, 1]
+            r2 += w * tot[k, 2]
+        out[i, 0] = r0
+        out[i, 1] = r1
+        out[i, 2] = r2

@@ -1024,17 +1024,15 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     out = L.reshape(len(epix), S, 3).mean(axis=1)
     if cov_grid <= n_grid:
         return out
-    n_groups = len(scene.model.components) + 1
 
-    def group(hh):
-        g = np.zeros(len(hh["geomID"]), dtype=np.int64)
-        ok = hh["geomID"] >= 0
-        g[ok] = scene.component_of_face[scene.face_offset[hh["geomID"][ok]] + hh["primID"][ok]] + 1
+    def groups(hh):
+        g = np.empty(len(hh["geomID"]), dtype=np.int64)
+        K.ray_groups(hh["geomID"], hh["primID"], scene.face_offset, scene.component_of_face, g)
         return g
 
     # coverage rays only where the shaded sub-samples saw more than one part (or space):
     # shadow edges and creases within one part need none
-    g_s = group(h).reshape(len(epix), S)
+    g_s = groups(h).reshape(len(epix), S)
     mixed = np.flatnonzero((g_s != g_s[:, :1]).any(axis=1))
     if not len(mixed):
         return out
@@ -1044,26 +1042,22 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     K.subpixel_rays(mpix.astype(np.int64), W, cov_grid, (seed + 0x3C6EF372) & 0x7FFFFFFF, R_bc, camera.fx,
                     camera.fy, camera.cx, camera.cy, Dc)
     hc = _intersect_from(scene, o_body, z0, Dc)
-    slot = np.repeat(np.arange(len(mpix)), S) * n_groups + g_s[mixed].ravel()
-    slot_c = np.repeat(np.arange(len(mpix)), C) * n_groups + group(hc)
-    m = len(mpix) * n_groups
-    n_shaded = np.bincount(slot, minlength=m).astype(np.float64)
-    count = n_shaded + np.bincount(slot_c, minlength=m)
-    Lm = L.reshape(len(epix), S, 3)[mixed].reshape(-1, 3)
-    total = np.column_stack([np.bincount(slot, Lm[:, c], minlength=m) for c in range(3)])
+    g_c = groups(hc).reshape(len(mpix), C)
+    g_m = np.ascontiguousarray(g_s[mixed])
     # parts seen only by coverage rays: shade the first such ray of each
-    need = (n_shaded == 0) & (count > 0)
-    if need.any():
-        order = np.argsort(slot_c, kind="stable")
-        first = order[np.searchsorted(slot_c[order], np.flatnonzero(need))]
+    first_of = np.zeros((len(mpix), C), dtype=bool)
+    K.coverage_unshaded_first(g_m, g_c, first_of)
+    L_c = np.zeros((len(mpix) * C, 3))
+    first = np.flatnonzero(first_of.ravel())
+    if len(first):
         hx = {k: v[first] for k, v in hc.items()}
-        Lx = _shade_subsamples(ctx, scene, o_body, geo, camera, R_cam, Dc[first], hx, np.repeat(mpix, C)[first],
-                               S + first % C, S + C, seed, residual, gather_rays, centre_surface, borrow)
-        total[slot_c[first]] += Lx
-        n_shaded[slot_c[first]] += 1.0
-    frac = count / float(S + C)
-    mean = total / np.maximum(n_shaded, 1.0)[:, None]
-    out[mixed] = (frac[:, None] * mean).reshape(len(mpix), n_groups, 3).sum(axis=1)
+        L_c[first] = _shade_subsamples(ctx, scene, o_body, geo, camera, R_cam, Dc[first], hx,
+                                       np.repeat(mpix, C)[first], S + first % C, S + C, seed, residual, gather_rays,
+                                       centre_surface, borrow)
+    res = np.empty((len(mpix), 3))
+    K.coverage_combine(g_m, np.ascontiguousarray(L.reshape(len(epix), S, 3)[mixed]), g_c, first_of,
+                       L_c.reshape(len(mpix), C, 3), res)
+    out[mixed] = res
     return out
 
 
