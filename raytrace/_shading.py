@@ -16,7 +16,7 @@ from . import environment as env
 from ._jit import FASTMATH, inline, jit, jit_exact, pjit, pjit_exact
 from ._kernels import moller_trumbore
 from .brdf import brdf_cos, cosine_direction, onb, sample_brdf, specular_albedo
-from .cache import _hash01, glossy_draw, hit_normals, interpolate_rows, lattice_rows
+from .cache import _hash01, _hash32, glossy_draw, hit_normals, interpolate_rows, lattice_rows
 
 
 @pjit_exact
@@ -84,18 +84,6 @@ def sun_rays(P, NS, NG, sx, sy, sz, eps, want, out_o):
         want[k] = ok
         for a in range(3):
             out_o[k, a] = P[k, a] + eps * NG[k, a]
-
-
-@jit
-def _hash32(i, k):
-    """A 32-bit hash of the integers (i, k) (the mixing of :func:`raytrace.cache._hash01`)."""
-    h = (i * 0x9E3779B1 + k * 0x85EBCA77 + 0x27D4EB2F) & 0xFFFFFFFF
-    h ^= h >> 15
-    h = (h * 0x2C1B3C6D) & 0xFFFFFFFF
-    h ^= h >> 12
-    h = (h * 0x297A2D39) & 0xFFFFFFFF
-    h ^= h >> 15
-    return h
 
 
 @jit
@@ -1277,6 +1265,16 @@ def _slot(groups, n, g):
     return -1
 
 
+@inline
+def _slot_or_new(groups, n, g):
+    """(index of g among groups[:n], appended as groups[n] if absent; the new n)."""
+    k = _slot(groups, n, g)
+    if k >= 0:
+        return k, n
+    groups[n] = g
+    return n, n + 1
+
+
 @pjit_exact
 def coverage_unshaded_first(g_s, g_c, out):
     """out[i, j]: coverage ray j of pixel i is the first of that pixel's coverage rays to see
@@ -1318,23 +1316,13 @@ def coverage_combine(g_s, L_s, g_c, shaded_c, L_c, out):
         tot = np.zeros((S + C, 3))
         d = 0
         for a in range(S):
-            g = g_s[i, a]
-            k = _slot(groups, d, g)
-            if k < 0:
-                k = d
-                groups[d] = g
-                d += 1
+            k, d = _slot_or_new(groups, d, g_s[i, a])
             cnt[k] += 1.0
             nsh[k] += 1.0
             for c in range(3):
                 tot[k, c] += L_s[i, a, c]
         for b in range(C):
-            g = g_c[i, b]
-            k = _slot(groups, d, g)
-            if k < 0:
-                k = d
-                groups[d] = g
-                d += 1
+            k, d = _slot_or_new(groups, d, g_c[i, b])
             cnt[k] += 1.0
             if shaded_c[i, b]:
                 nsh[k] += 1.0
