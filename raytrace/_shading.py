@@ -1275,30 +1275,27 @@ def _slot_or_new(groups, n, g):
     return n, n + 1
 
 
-@pjit_exact
+@jit_exact
 def coverage_unshaded_first(g_s, g_c, out):
     """out[i, j]: coverage ray j of pixel i is the first of that pixel's coverage rays to see
     a group (part, or space) that none of its shaded sub-samples saw (g_s (n, S), g_c (n, C):
     groups, :func:`ray_groups`)."""
     n, S = g_s.shape
     C = g_c.shape[1]
-    for i in numba.prange(n):
-        groups = np.empty(S + C, np.int64)
+    groups = np.empty(S + C, np.int64)
+    for i in range(n):
         d = 0
         for a in range(S):
             if _slot(groups, d, g_s[i, a]) < 0:
                 groups[d] = g_s[i, a]
                 d += 1
         for b in range(C):
-            g = g_c[i, b]
-            k = _slot(groups, d, g)
-            out[i, b] = k < 0
-            if k < 0:
-                groups[d] = g
-                d += 1
+            _k, d_new = _slot_or_new(groups, d, g_c[i, b])
+            out[i, b] = d_new > d
+            d = d_new
 
 
-@pjit_exact
+@jit_exact
 def coverage_combine(g_s, L_s, g_c, shaded_c, L_c, out):
     """Radiance of anti-aliased pixels from their shaded sub-samples and coverage rays
     (multisample anti-aliasing): each group (part, or space) seen in pixel i weighs the mean
@@ -1309,11 +1306,11 @@ def coverage_combine(g_s, L_s, g_c, shaded_c, L_c, out):
     n, S = g_s.shape
     C = g_c.shape[1]
     inv = 1.0 / (S + C)
-    for i in numba.prange(n):
-        groups = np.empty(S + C, np.int64)
-        cnt = np.zeros(S + C)
-        nsh = np.zeros(S + C)
-        tot = np.zeros((S + C, 3))
+    groups = np.empty(S + C, np.int64)
+    cnt = np.zeros(S + C)
+    nsh = np.zeros(S + C)
+    tot = np.zeros((S + C, 3))
+    for i in range(n):
         d = 0
         for a in range(S):
             k, d = _slot_or_new(groups, d, g_s[i, a])
@@ -1336,6 +1333,11 @@ def coverage_combine(g_s, L_s, g_c, shaded_c, L_c, out):
             r0 += w * tot[k, 0]
             r1 += w * tot[k, 1]
             r2 += w * tot[k, 2]
+            cnt[k] = 0.0
+            nsh[k] = 0.0
+            tot[k, 0] = 0.0
+            tot[k, 1] = 0.0
+            tot[k, 2] = 0.0
         out[i, 0] = r0
         out[i, 1] = r1
         out[i, 2] = r2

@@ -465,7 +465,7 @@ class _Context:
         cand = np.flatnonzero(near & facing)
         if not len(cand):
             return
-        d = np.empty((len(cand) * n_rays, 3))
+        d = np.empty((len(cand) * n_rays, 3), np.float32)  # as Embree takes them
         K.sun_disc_dirs(np.repeat(pix[cand].astype(np.int64), n_rays), np.tile(np.arange(n_rays), len(cand)), n_rays,
                         seed, sx, sy, sz, math.cos(half), d)
         o = np.repeat(s["P"][cand] + self.eps * s["NG"][cand], n_rays, axis=0)
