@@ -1139,6 +1139,18 @@ def _progress(total: int, initial: int, desc: str, quiet: bool):
                 dynamic_ncols=True, smoothing=0.1, mininterval=0.5)
 
 
+def _kernels_not_compiled() -> bool:
+    """Whether numba's on-disk cache of the shading kernels looks empty (a fresh install), so
+    the first frame will wait for them to compile. Looks for the cache index of one kernel next
+    to its source, where numba keeps it for a writable install; False when NUMBA_CACHE_DIR
+    moves the cache elsewhere (no guess then)."""
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return False
+    from pathlib import Path
+
+    return not any((Path(__file__).resolve().parent / "raytrace" / "__pycache__").glob("_shading.surfaces-*.nbi"))
+
+
 def run_plans(jobs: list, args: argparse.Namespace, *, desc: str | None = None) -> list:
     """Render the (plan, sequence folder) pairs: prepare folders, run every missing frame of
     this shard on the chosen backend (one progress bar), then assemble labels and manifests.
@@ -1155,6 +1167,9 @@ def run_plans(jobs: list, args: argparse.Namespace, *, desc: str | None = None) 
                       "visible": sum(f["visible"] for f in plan["result"]["frames"])})
     skipped = sum(s["skipped"] for s in stats)
     t0 = time.perf_counter()
+    if all_tasks and not args.quiet and _kernels_not_compiled():
+        print("first run: numba compiles the ray-tracing kernels once (the first frame takes about a "
+              "minute); later runs start at once", file=sys.stderr)
     bar = _progress(len(all_tasks) + skipped, skipped, desc or jobs[0][0]["name"], args.quiet)
     try:
         for _ in execute(all_tasks, workers=workers, scheduler=args.scheduler, progress=bar):

@@ -198,3 +198,19 @@ def test_render_scene_stars_in_the_background_only(tmp_path):
     spec = load_scene_file(path)
     again = scene_to_dict(spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting, [])
     assert again["stars"]["catalogue"] == str(tmp_path / "cat.csv")
+
+
+def test_first_run_notice_follows_numba_cache_index(tmp_path, monkeypatch):
+    """cli._kernels_not_compiled: True while no cache index of the shading kernels exists next
+    to their source (a fresh install: the first frame waits for compilation), False once one
+    does, and False (no guess) when NUMBA_CACHE_DIR puts the cache elsewhere."""
+    monkeypatch.setattr(cli, "__file__", str(tmp_path / "cli.py"))
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    assert cli._kernels_not_compiled()
+    (tmp_path / "raytrace" / "__pycache__").mkdir(parents=True)
+    assert cli._kernels_not_compiled()
+    (tmp_path / "raytrace" / "__pycache__" / "_shading.surfaces-22.py311.nbi").write_bytes(b"")
+    assert not cli._kernels_not_compiled()
+    (tmp_path / "raytrace" / "__pycache__" / "_shading.surfaces-22.py311.nbi").unlink()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
+    assert not cli._kernels_not_compiled()
