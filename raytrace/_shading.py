@@ -1286,9 +1286,7 @@ def coverage_unshaded_first(g_s, g_c, out):
     for i in range(n):
         d = 0
         for a in range(S):
-            if _slot(groups, d, g_s[i, a]) < 0:
-                groups[d] = g_s[i, a]
-                d += 1
+            _k, d = _slot_or_new(groups, d, g_s[i, a])
         for b in range(C):
             _k, d_new = _slot_or_new(groups, d, g_c[i, b])
             out[i, b] = d_new > d
