@@ -1151,6 +1151,23 @@ def _kernels_not_compiled() -> bool:
     return not any((Path(__file__).resolve().parent / "raytrace" / "__pycache__").glob("_shading.surfaces-*.nbi"))
 
 
+def _compile_kernels(quiet: bool) -> None:
+    """A fresh install: compile the main job's numba kernels into numba's cache on all cores
+    at once (raytrace._precompile), before the workers start and would each compile all of
+    them. A kernel this misses compiles on its first call, as it would anyway."""
+    cores = default_workers()
+    if not quiet:
+        print(f"first run: compiling the ray-tracing kernels into numba's cache on {cores} "
+              f"core{'s' if cores > 1 else ''} (once; about {45 // min(cores, 2)} s)", file=sys.stderr)
+    if cores < 2:
+        return  # one core: the first frame compiles them, in the same time
+    try:
+        from raytrace._precompile import precompile
+        precompile(min(cores, 4))
+    except Exception:  # noqa: BLE001 (an optimisation: without it the kernels compile lazily)
+        pass
+
+
 def run_plans(jobs: list, args: argparse.Namespace, *, desc: str | None = None) -> list:
     """Render the (plan, sequence folder) pairs: prepare folders, run every missing frame of
     this shard on the chosen backend (one progress bar), then assemble labels and manifests.
@@ -1167,9 +1184,8 @@ def run_plans(jobs: list, args: argparse.Namespace, *, desc: str | None = None) 
                       "visible": sum(f["visible"] for f in plan["result"]["frames"])})
     skipped = sum(s["skipped"] for s in stats)
     t0 = time.perf_counter()
-    if all_tasks and not args.quiet and _kernels_not_compiled():
-        print("first run: numba compiles the ray-tracing kernels once (the first frame takes about a "
-              "minute); later runs start at once", file=sys.stderr)
+    if all_tasks and args.scheduler is None and _kernels_not_compiled():
+        _compile_kernels(quiet=args.quiet)
     bar = _progress(len(all_tasks) + skipped, skipped, desc or jobs[0][0]["name"], args.quiet)
     try:
         for _ in execute(all_tasks, workers=workers, scheduler=args.scheduler, progress=bar):
