@@ -1140,15 +1140,15 @@ def _progress(total: int, initial: int, desc: str, quiet: bool):
 
 
 def _kernels_not_compiled() -> bool:
-    """Whether numba's on-disk cache of the shading kernels looks empty (a fresh install), so
-    the first frame will wait for them to compile. Looks for the cache index of one kernel next
-    to its source, where numba keeps it for a writable install; False when NUMBA_CACHE_DIR
-    moves the cache elsewhere (no guess then)."""
-    if os.environ.get("NUMBA_CACHE_DIR"):
+    """Whether numba's on-disk cache holds no compiled shading kernel yet (a fresh install, or
+    a new NUMBA_CACHE_DIR): the cache index of one kernel, where numba's own cache locator puts
+    it (next to the source when writable, else the user's cache directory). False if numba's
+    cache internals cannot be read (no guess then)."""
+    try:
+        from raytrace import _shading
+        return not os.path.exists(_shading.surfaces._cache._cache_file._index_path)
+    except Exception:  # noqa: BLE001 (numba internals of another version)
         return False
-    from pathlib import Path
-
-    return not any((Path(__file__).resolve().parent / "raytrace" / "__pycache__").glob("_shading.surfaces-*.nbi"))
 
 
 def _compile_kernels(quiet: bool) -> None:

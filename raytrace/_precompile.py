@@ -89,16 +89,16 @@ def precompile(processes: int) -> list:
 def _record_here(out_dir: str) -> dict:
     """One frame of the main job in this process (numba's cache empty), with every kernel's
     compile time: {qualname: (seconds, [signature reprs])}."""
-    import runpy
     from numba.core import event
     from numba.core.registry import CPUDispatcher
-    sys.argv = ["cli.py", "--target", "cassini", "--pattern", "spiral", "--frames", "1", "--workers", "1",
-                "--out", out_dir, "--quiet"]
+    sys.path.insert(0, str(_ROOT))
+    import cli
+    cli._kernels_not_compiled = lambda: False  # compile here, where the recorder sees it
     with event.install_recorder("numba:compile") as rec:
-        try:
-            runpy.run_path(str(_ROOT / "cli.py"), run_name="__main__")
-        except SystemExit:
-            pass
+        status = cli.main(["--target", "cassini", "--pattern", "spiral", "--frames", "1", "--workers", "1",
+                           "--out", out_dir, "--quiet"])
+    if status != 0:
+        raise RuntimeError(f"the main job failed (exit {status})")
     spent, start = {}, {}
     for ts, ev in rec.buffer:
         d = ev.data["dispatcher"]

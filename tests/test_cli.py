@@ -4,6 +4,7 @@ The rendering main job is tested in tests/test_pipeline.py."""
 
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -200,17 +201,15 @@ def test_render_scene_stars_in_the_background_only(tmp_path):
     assert again["stars"]["catalogue"] == str(tmp_path / "cat.csv")
 
 
-def test_first_run_notice_follows_numba_cache_index(tmp_path, monkeypatch):
-    """cli._kernels_not_compiled: True while no cache index of the shading kernels exists next
-    to their source (a fresh install: the first frame waits for compilation), False once one
-    does, and False (no guess) when NUMBA_CACHE_DIR puts the cache elsewhere."""
-    monkeypatch.setattr(cli, "__file__", str(tmp_path / "cli.py"))
-    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
-    assert cli._kernels_not_compiled()
-    (tmp_path / "raytrace" / "__pycache__").mkdir(parents=True)
-    assert cli._kernels_not_compiled()
-    (tmp_path / "raytrace" / "__pycache__" / "_shading.surfaces-22.py311.nbi").write_bytes(b"")
-    assert not cli._kernels_not_compiled()
-    (tmp_path / "raytrace" / "__pycache__" / "_shading.surfaces-22.py311.nbi").unlink()
-    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
-    assert not cli._kernels_not_compiled()
+def test_a_fresh_numba_cache_is_detected_and_filled_by_the_precompile_step(tmp_path):
+    """cli._kernels_not_compiled in a process whose numba cache directory is empty: True; after
+    raytrace._precompile compiled the kernel it looks for into that directory: False."""
+    code = ("import cli, sys; from raytrace import _precompile as P; from raytrace._jit_signatures import SIGNATURES; "
+            "a = cli._kernels_not_compiled(); "
+            "bad = P._compile_share([('raytrace._shading.surfaces', SIGNATURES['raytrace._shading.surfaces'][1])]); "
+            "print(a, bad, cli._kernels_not_compiled())")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300,
+                       check=False)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["True", "[]", "False"]
