@@ -1083,24 +1083,25 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, camera: Camera, 
         Dh = np.ascontiguousarray(D[idx])
         s = ctx.surfaces(np.ascontiguousarray(np.broadcast_to(o_body, Dh.shape)), Dh, face)
         E = ctx.cache_E(s)
-        sub_key = (centre[idx] * S + number[idx]).astype(np.int64)
+        c_idx = centre[idx].astype(np.int64)  # each hit's pixel
+        n_idx = number[idx].astype(np.int64)  # and its number there
         disc = None
         if ctx.lighting.sun_angular_diameter_rad > 0.0 and S > 1:
             # one solar-disc sample per sub-sample, stratified over the pixel's S sub-samples in
             # strata permuted per pixel, independent of the sub-samples' cells
-            disc = (centre[idx].astype(np.int64), number[idx].astype(np.int64), S, seed)
+            disc = (c_idx, n_idx, S, seed)
         lbar = np.zeros((len(idx), 3))
         Ls, _ = ctx.direct(s, E, disc=disc, lbar_out=lbar)
         if residual is not None:
             row_of_pixel, P_c, N_c, foot = centre_surface
             k = np.empty(len(idx), dtype=np.int64)
             H, W = geo.instance.shape
-            K.donor_rows(centre[idx].astype(np.int64), W, H, s["comp"], s["P"], s["NS"], row_of_pixel,
+            K.donor_rows(c_idx, W, H, s["comp"], s["P"], s["NS"], row_of_pixel,
                          geo.instance.ravel(), P_c, N_c, foot, borrow, k)
             # on its own pixel centre's surface: the corrections of the (up to) four centres
             # around it on that surface, interpolated bilinearly, not the centre's alone (a
             # contact shadow or the light of a neighbouring part varies within the pixel)
-            own = np.flatnonzero((k >= 0) & (k == row_of_pixel[centre[idx]]))
+            own = np.flatnonzero((k >= 0) & (k == row_of_pixel[c_idx]))
             K.add_interpolated_rows(own, Dh, R_cam, camera.fx, camera.fy, camera.cx, camera.cy, W, H, s["comp"],
                                     s["P"], s["NS"], row_of_pixel, geo.instance.ravel(), P_c, N_c, foot,
                                     residual[0], residual[1], E, Ls)
@@ -1110,7 +1111,7 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, camera: Camera, 
             j = np.flatnonzero(k == -1)
             if len(j) and gather_rays >= _MIN_SUB_GATHER:
                 sj = {k: v[j] for k, v in s.items()}
-                keys = sub_key[j]
+                keys = c_idx[j] * S + n_idx[j]  # the samples' keys, distinct per sub-sample
                 Ls[j] += ctx.lobe(sj, gather_rays, keys, seed, lbar[j])  # the lobe replaces the mirror term
                 E[j] = ctx.gather_E(sj, gather_rays, keys, seed)
         ctx.add_diffuse(s, E, Ls)
