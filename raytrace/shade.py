@@ -1008,7 +1008,24 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     give the fraction of the pixel each part (or space) covers; the shaded sub-samples give
     each part's mean radiance. A part the shaded sub-samples missed is shaded at one of its
     coverage rays. The estimate of where the silhouette and the part boundaries run then has
-    the noise of cov_grid² + n_grid² samples, not n_grid²."""
+    the noise of cov_grid² + n_grid² samples, not n_grid².
+
+    The pixels go through in chunks of about _CHUNK_RAYS sub-samples (every sample is keyed
+    by its pixel and number, so the result does not depend on the chunking): the arrays of
+    all of them at once (~600 k rows on Tiangong at 1280×960) were mapped fresh on every
+    frame, and their page faults cost more than the shading."""
+    per = max(1, _CHUNK_RAYS // (n_grid * n_grid))
+    if len(epix) <= per:
+        return _supersample_chunk(ctx, scene, camera, R, t, o_body, geo, epix, n_grid, seed, residual, gather_rays,
+                                  centre_surface, cov_grid, borrow)
+    return np.concatenate([_supersample_chunk(ctx, scene, camera, R, t, o_body, geo, epix[i:i + per], n_grid, seed,
+                                              residual, gather_rays, centre_surface, cov_grid, borrow)
+                           for i in range(0, len(epix), per)])
+
+
+def _supersample_chunk(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,
+                       residual, gather_rays: int, centre_surface, cov_grid: int, borrow: bool):
+    """:func:`_supersample` of one chunk of pixels."""
     S = n_grid * n_grid
     W = camera.width
     R_bc = np.ascontiguousarray(R.T)
