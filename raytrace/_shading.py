@@ -832,13 +832,13 @@ def donor_rows(centre, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c, foot, bo
 
 @pjit_exact
 def add_interpolated_rows(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c,
-                          foot, A, B, outA, outB):
+                          foot, A, B, min_found, outA, outB, added):
     """For the listed sub-samples i (ray direction D[i], body frame; part ``comp``, point P,
     shading normal NS): outA[i] += Σ_j w_j A[k_j] (and B into outB), over the (up to) four
     pixel centres k_j around the sub-sample's image point on its own surface
     (:func:`_centre_on_surface`), w_j their bilinear weights renormalised over those found (pixel
-    centres at integer image coordinates). Nothing is added where none of the four is on its
-    surface."""
+    centres at integer image coordinates). Nothing is added where fewer than ``min_found``
+    (≥ 1) of the four are on its surface; added[t] tells whether sub-sample sel[t] was."""
     for t in numba.prange(sel.shape[0]):
         m = sel[t]
         xc = R_cam_from_body[0, 0] * D[m, 0] + R_cam_from_body[0, 1] * D[m, 1] + R_cam_from_body[0, 2] * D[m, 2]
@@ -851,6 +851,7 @@ def add_interpolated_rows(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P
         fu = uf - u0
         fv = vf - v0
         sw = 0.0
+        found = 0
         a0 = a1 = a2 = b0 = b1 = b2 = 0.0
         for j in range(4):
             uu = u0 + (j & 1)
@@ -861,6 +862,7 @@ def add_interpolated_rows(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P
             if k < 0:
                 continue
             w = (fu if j & 1 else 1.0 - fu) * (fv if j >> 1 else 1.0 - fv)
+            found += 1
             sw += w
             a0 += w * A[k, 0]
             a1 += w * A[k, 1]
@@ -868,7 +870,8 @@ def add_interpolated_rows(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P
             b0 += w * B[k, 0]
             b1 += w * B[k, 1]
             b2 += w * B[k, 2]
-        if sw > 0.0:
+        added[t] = found >= min_found and sw > 0.0
+        if added[t]:
             outA[m, 0] += a0 / sw
             outA[m, 1] += a1 / sw
             outA[m, 2] += a2 / sw
