@@ -61,7 +61,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import environment as env
-from ._jit import inline, jit, pjit
+from ._jit import inline, jit, pjit, pjit_exact
 from .brdf import bounce_albedo, brdf_cos, cosine_direction, sample_brdf
 
 __all__ = ["CacheFrame", "RadianceCache"]
@@ -322,12 +322,14 @@ def _sun_rays(rows, pos, nrm, eps, sx, sy, sz, cos_out, out_o, out_d):
         out_d[r, 2] = sz
 
 
-@pjit
+@pjit_exact
 def _jacobi_step(indptr, indices, data, Y, g_ptr, g_idx, g_data, Yb, X, X0, out):
     """out = X0 + W_ss Y + W_g Yb for CSR matrices: W_ss (rows, rows) with RGB rows Y (= ρ ⊙ X),
     and W_g, the light glossy parts reflect along their lobes, with RGB entries g_data (nnz, 3)
     and Yb = ρ_bounce ⊙ X (empty without glossy parts); returns max |out − X|. One row per
-    thread, in a fixed order: the result does not depend on the thread count."""
+    thread, in a fixed order: the result does not depend on the thread count. Without
+    fastmath: with it (reassociation) LLVM vectorised the sparse row sums into gathers that
+    ran 1.5–2× slower (ICESat, 411 k non-zeros: 1.4 → 0.85 ms per step, median of 300)."""
     n = X.shape[0]
     dmax = np.zeros(n)
     for i in numba.prange(n):

@@ -271,24 +271,25 @@ def _node_direction(m, n_t, n_p):
 
 
 @pjit
-def _irradiance_nodes(n_t, n_p, amb, L, W, D, out):
+def _irradiance_nodes(n_t, n_p, amb, wl, d, out):
+    """Table nodes' irradiance: π·amb plus Σ_c max(0, n·d_c) wl_c over the cells, their
+    directions ``d`` (3, k) and solid-angle-weighted radiances ``wl`` (3, k) laid out per
+    component, so the sum over cells vectorises (3.3× faster than per-cell rows)."""
     for m in numba.prange(n_t * n_p):
         i = m // n_p
         j = m % n_p
         nx, ny, nz = _node_direction(m, n_t, n_p)
-        er = math.pi * amb
-        eg = er
-        eb = er
-        for c in range(L.shape[0]):
-            cs = nx * D[c, 0] + ny * D[c, 1] + nz * D[c, 2]
-            if cs > 0.0:
-                w = cs * W[c]
-                er += w * L[c, 0]
-                eg += w * L[c, 1]
-                eb += w * L[c, 2]
-        out[i, j, 0] = er
-        out[i, j, 1] = eg
-        out[i, j, 2] = eb
+        er = 0.0
+        eg = 0.0
+        eb = 0.0
+        for c in range(wl.shape[1]):
+            cs = max(nx * d[0, c] + ny * d[1, c] + nz * d[2, c], 0.0)
+            er += cs * wl[0, c]
+            eg += cs * wl[1, c]
+            eb += cs * wl[2, c]
+        out[i, j, 0] = math.pi * amb + er
+        out[i, j, 1] = math.pi * amb + eg
+        out[i, j, 2] = math.pi * amb + eb
 
 
 def environment_cells(p, texture, k_t: int = 64, k_p: int = 128, sub: int = 2):
@@ -313,12 +314,13 @@ def irradiance_table(p, texture, n_t: int = 49, n_p: int = 96, k_t: int = 64, k_
     exact (π·L_sky), only cells where Earth replaces the sky are summed. With the defaults
     (normals every 3.75°, directions every 2.8°, 4 samples per cell) the interpolated table is
     within 1.1 % of a 720×1440-cell quadrature on 400 random normals (95 % within 0.51 %, mean
-    +0.07 %; Earth 400 km below, where it fills a third of the sky); about 5 ms there. A finer
+    +0.07 %; Earth 400 km below, where it fills a third of the sky); about 1.7 ms there. A finer
     table (65 × 128 normals) halves these errors for three times the time. ``cells``: the
     :func:`environment_cells` of this environment, if the caller already has them."""
     L, W, D = environment_cells(p, texture, k_t, k_p, sub) if cells is None else cells
     out = np.empty((n_t, n_p, 3))
-    _irradiance_nodes(n_t, n_p, float(p[P_AMBIENT]), L, W, D, out)
+    _irradiance_nodes(n_t, n_p, float(p[P_AMBIENT]), np.ascontiguousarray((L * W[:, None]).T),
+                      np.ascontiguousarray(D.T), out)
     return out
 
 

@@ -1066,7 +1066,8 @@ def _supersample_chunk(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body
     R_cam = np.ascontiguousarray(R, dtype=np.float64)
     L = _shade_subsamples(ctx, scene, o_body, geo, camera, R_cam, D, h, centre, number, S, seed, residual,
                           gather_rays, centre_surface, borrow, own_at_boundary)
-    out = L.reshape(len(epix), S, 3).mean(axis=1)
+    out = np.empty((len(epix), 3))
+    K.group_means(L, S, out)
     if cov_grid <= n_grid:
         return out
 
@@ -1124,12 +1125,14 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, camera: Camera, 
     L = np.zeros((len(D), 3))
     idx = np.flatnonzero(hit)
     if len(idx):
-        face = (scene.face_offset[h["geomID"][idx]] + h["primID"][idx]).astype(np.int64)
-        Dh = np.ascontiguousarray(D[idx])
+        face = np.empty(len(idx), np.int64)
+        Dh = np.empty((len(idx), 3))
+        c_idx = np.empty(len(idx), np.int64)  # each hit's pixel
+        n_idx = np.empty(len(idx), np.int64)  # and its number there
+        K.subsample_hits(idx, h["geomID"], h["primID"], scene.face_offset, D, np.asarray(centre, np.int64),
+                         np.asarray(number, np.int64), face, Dh, c_idx, n_idx)
         s = ctx.surfaces(np.ascontiguousarray(np.broadcast_to(o_body, Dh.shape)), Dh, face)
         E = ctx.cache_E(s)
-        c_idx = centre[idx].astype(np.int64)  # each hit's pixel
-        n_idx = number[idx].astype(np.int64)  # and its number there
         disc = None
         if ctx.lighting.sun_angular_diameter_rad > 0.0 and S > 1:
             # one solar-disc sample per sub-sample, stratified over the pixel's S sub-samples in
@@ -1163,7 +1166,7 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, camera: Camera, 
                 Ls[j] += ctx.lobe(sj, gather_rays, keys, seed, lbar[j])  # the lobe replaces the mirror term
                 E[j] = ctx.gather_E(sj, gather_rays, keys, seed)
         ctx.add_diffuse(s, E, Ls)
-        L[idx] = Ls
+        K.put_rows(idx, Ls, L)
     miss = np.flatnonzero(~hit)
     if len(miss) and ctx.lighting.earth is not None:
         Dm = D[miss] / np.linalg.norm(D[miss], axis=1, keepdims=True)
