@@ -96,8 +96,9 @@ class Quality:
         Shadow rays over the solar disc where a penumbra can be wider than a quarter pixel
         (1: a point Sun everywhere) [-].
     cov_grid : int
-        Edge pixels also get cov_grid² unshaded primary rays that measure how much of the
-        pixel each part covers (0: the shaded sub-samples alone) [-].
+        Edge pixels whose shaded sub-samples saw more than one part (or space) also get
+        cov_grid² unshaded primary rays, in a pattern of their own, that measure how much of
+        the pixel each part covers (0 or 1: the shaded sub-samples alone) [-].
     borrow : bool
         An edge sub-sample off its pixel centre's surface takes the filtered gather
         correction of the nearest neighbouring centre on its own surface (3 × 3 pixels), and
@@ -160,8 +161,12 @@ class Quality:
 # samples (subpixel_rays) ``fast`` needs fewer coverage rays: on the 12 scenes at 1280×960,
 # 4² instead of 6² took the median error 6.29 → 6.38 % (5²: 6.32 %) for 0.91× the time (two
 # runs of all 12 scenes, the settings alternated per scene, min of 5: median ratios 0.908 and
-# 1/1.09; ``fast``'s error is the cache's bias, edge noise² 77 → 87 of 700 ×10⁻⁴ summed)
-COV_FAST = 4
+# 1/1.09; ``fast``'s error is the cache's bias, edge noise² 77 → 87 of 700 ×10⁻⁴ summed).
+# 3² (as many as the shaded sub-samples, in their own pattern) then took it 6.39 → 6.46 % for
+# ~0.94× the time, and ``balanced``, whose edge error is the shaded sub-samples' noise, not the
+# coverage's, needs no more coverage rays than shaded ones below 32 gather rays
+# (_balanced_cov)
+COV_FAST = 3
 COV_BAL = 8
 _MIN_SUB_GATHER = 4
 # the traced path from a final-gather hit: at most _GATHER_BOUNCES one-sample bounces, each
@@ -204,6 +209,20 @@ def _balanced_aa(samples: int) -> int:
     0.481 s, 3.23 %, below the old curve at those times; 6/8 cost more than it gained
     (N = 8: 0.353 s, 4.03 %) and so did 8×8 at N = 64 (1.04 s, 2.35 % → 1.34 s, 2.13 %)."""
     return 4 if samples <= 8 else (6 if samples <= 128 else 8)
+
+
+def _balanced_cov(samples: int) -> int:
+    """Coverage grid (:attr:`Quality.cov_grid`) of ``balanced`` with N gather rays: the shaded
+    grid's side (_balanced_aa) for N ≤ 16, else the larger of COV_BAL and that side + 2.
+    Measured on the 12 scenes of ``benchmarks/bench_time_error.py`` at 1280×960 (median error of
+    one render, bias and noise estimated without the reference's noise; time: min of 2, one
+    run): N = 8 (4² shaded) coverage 8² 3.26 %, 0.329 s; 6² 3.29 %, 0.295 s; 4² 3.35 %, 0.275 s;
+    N = 16 (6² shaded) 8² 2.27 %, 0.481 s; 6² 2.30 %, 0.438 s; 4² 2.35 %, 0.430 s; none 2.38 %,
+    0.406 s. Along the curve of more gather rays the error falls as ~t^−0.66, so each of these
+    steps down buys more time than its error would cost there. At N = 64, 6² took the error
+    1.52 → 1.56 % for a few % of the time, and stays at 8²."""
+    aa = _balanced_aa(samples)
+    return aa if samples <= 16 else max(COV_BAL, aa + 2)
 
 
 def _filter_passes(samples: int) -> int:
@@ -287,7 +306,7 @@ def _own_at_boundary(samples: int) -> bool:
 _PRESETS = {
     "fast": Quality("fast", gather_rays=0, filter_passes=0, aa_grid=3, sun_rays=4, cov_grid=COV_FAST),
     "balanced": Quality("balanced", gather_rays=8, filter_passes=_filter_passes(8), aa_grid=_balanced_aa(8),
-                        sun_rays=16, cov_grid=COV_BAL, borrow=_borrow(8), sun_corners=True,
+                        sun_rays=16, cov_grid=_balanced_cov(8), borrow=_borrow(8), sun_corners=True,
                         slivers=True, filter_sigma_l=_filter_sigma_l(8), thin_shadows=True,
                         filter_linear=_filter_linear(8)),
     "reference": Quality("reference", spp=1024),
@@ -310,13 +329,13 @@ def quality_preset(name: str, samples: int | None = None) -> Quality:
         passes = _filter_passes(samples)
         aa = _balanced_aa(samples)
         return Quality(name, gather_rays=samples, filter_passes=passes, aa_grid=aa, sun_rays=max(16, min(samples, 64)),
-                       cov_grid=max(COV_BAL, aa + 2), borrow=_borrow(samples), sun_corners=True,
+                       cov_grid=_balanced_cov(samples), borrow=_borrow(samples), sun_corners=True,
                        slivers=True, filter_sigma_l=_filter_sigma_l(samples), thin_shadows=True,
                        filter_linear=_filter_linear(samples), own_at_boundary=_own_at_boundary(samples))
     if name == "reference":
         return Quality(name, spp=samples)
     aa = max(1, min(samples, 16))
-    return Quality(name, aa_grid=aa, sun_rays=4, cov_grid=COV_FAST if aa < COV_FAST else 0)
+    return Quality(name, aa_grid=aa, sun_rays=4, cov_grid=COV_FAST if aa <= COV_FAST else 0)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -1029,7 +1048,7 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     tries the filtered correction of the nearest neighbouring centre on its own surface. Misses
     see Earth or black space.
 
-    With ``cov_grid`` > n_grid, coverage and shading are estimated apart (as multisample
+    With ``cov_grid`` ≥ 2, coverage and shading are estimated apart (as multisample
     anti-aliasing does): cov_grid² further primary rays, which cost a ray each and no shading,
     give the fraction of the pixel each part (or space) covers; the shaded sub-samples give
     each part's mean radiance. A part the shaded sub-samples missed is shaded at one of its
@@ -1068,7 +1087,7 @@ def _supersample_chunk(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body
                           gather_rays, centre_surface, borrow, own_at_boundary)
     out = np.empty((len(epix), 3))
     K.group_means(L, S, out)
-    if cov_grid <= n_grid:
+    if cov_grid < 2:
         return out
 
     def groups(hh):
