@@ -218,8 +218,9 @@ def _balanced_cov(samples: int) -> int:
     one render, bias and noise estimated without the reference's noise; time: min of 2, one
     run): N = 8 (4² shaded) coverage 8² 3.26 %, 0.329 s; 6² 3.29 %, 0.295 s; 4² 3.35 %, 0.275 s;
     N = 16 (6² shaded) 8² 2.27 %, 0.481 s; 6² 2.30 %, 0.438 s; 4² 2.35 %, 0.430 s; none 2.38 %,
-    0.406 s. Along the curve of more gather rays the error falls as ~t^−0.66, so each of these
-    steps down buys more time than its error would cost there. At N = 64, 6² took the error
+    0.406 s. Along the curve of more gather rays the error falls as t^−0.6 to t^−0.95 (8 → 16
+    rays, in the side-by-side runs and in these), so each of these steps down (error ~t^−0.15)
+    buys more time than its error would cost there. At N = 64, 6² took the error
     1.52 → 1.56 % for a few % of the time, and stays at 8²."""
     aa = _balanced_aa(samples)
     return aa if samples <= 16 else max(COV_BAL, aa + 2)
