@@ -1391,6 +1391,23 @@ def write_files_atomically(out_dir: str, files: dict, texts: dict) -> None:
         raise CLIError(f"--out: {exc}") from None
 
 
+def check_out_folder(out_dir: str) -> None:
+    """Fail before any work when ``--out`` cannot become a writable folder: it exists and is not
+    a folder or not writable, or its nearest existing parent is not a writable folder."""
+    path = os.path.abspath(out_dir)
+    if os.path.exists(path):
+        if not os.path.isdir(path):
+            raise CLIError(f"--out: {out_dir} exists and is not a folder")
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise CLIError(f"--out: {out_dir} is not writable")
+        return
+    parent = os.path.dirname(path)
+    while not os.path.exists(parent):
+        parent = os.path.dirname(parent)
+    if not os.path.isdir(parent) or not os.access(parent, os.W_OK | os.X_OK):
+        raise CLIError(f"--out: cannot create {out_dir} ({parent} is not a writable folder)")
+
+
 def render_scene_main(argv: list[str]) -> int:
     """``cli.py render-scene SCENE.json --out DIR``: render one frame of an explicit scene."""
     parser = _Parser(prog=f"{PROG} render-scene",
@@ -1408,6 +1425,7 @@ def render_scene_main(argv: list[str]) -> int:
     from raytrace.shade import render
     try:
         spec = load_scene_file(args.scene)
+        check_out_folder(args.out)
         quality = args.quality or spec.quality
         samples = args.samples if args.samples is not None else (spec.samples if args.quality is None else None)
         seed = args.seed if args.seed is not None else spec.seed
@@ -1420,7 +1438,8 @@ def render_scene_main(argv: list[str]) -> int:
         info = {"scene": os.path.abspath(args.scene), "quality": frame.quality.name, "samples": samples,
                 "seed": seed, "render_s": elapsed, "timings_s": frame.timings_s, "exposure_scale": scale,
                 "width": spec.camera.width, "height": spec.camera.height, "K": spec.camera.K.tolist(),
-                "R_cam_from_body": spec.R_cam_from_body.ravel().tolist(), "t_cam_m": spec.t_cam_m.tolist(),
+                "R_cam_from_body": spec.R_cam_from_body.ravel().tolist(),
+                "t_cam_m": spec.file_t_cam_m().tolist(), "body_offset_m": spec.body_offset_m.tolist(),
                 "components": list(spec.model.component_names),
                 "pixel_counts": geo.pixel_counts.tolist(), "bbox_xywh": geo.bbox_xywh,
                 "visible_fraction": None if math.isnan(geo.visible_fraction) else geo.visible_fraction}
@@ -1428,6 +1447,9 @@ def render_scene_main(argv: list[str]) -> int:
     except (CLIError, ValueError) as exc:
         sys.stderr.write(f"{PROG}: error: {exc}\n")
         return 2
+    except FloatingPointError as exc:  # a renderer bug, not the input's: say so in one line
+        sys.stderr.write(f"{PROG}: error: {exc}\n")
+        return 1
     sys.stdout.write(f"rendered {args.scene} ({frame.quality.name}) in {elapsed:.2f} s -> {args.out}\n")
     return 0
 

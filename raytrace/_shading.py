@@ -741,8 +741,9 @@ def atrous(img, var, vblur, lum, inst, normal, depth, fx, fy, cx, cy, step, sigm
             n0x = normal[v, u, 0]
             n0y = normal[v, u, 1]
             n0z = normal[v, u, 2]
-            # 1 / (pixel footprint · (1 + step)): tangent-plane distances in footprints
-            ik = fx / (z0 * (1.0 + step))
+            # 1 / (pixel footprint · (1 + step)): tangent-plane distances in footprints (a camera
+            # touching a surface sees it at depth 0: a huge but finite 1/footprint, no 0·∞)
+            ik = fx / (max(z0, 1e-12) * (1.0 + step))
             for c in range(C):
                 acc[c] = 0.0
             sw = 0.0

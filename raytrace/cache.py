@@ -442,7 +442,7 @@ class RadianceCache:
         self.spacing_m = float(spacing_m)
         self.G = rays_per_sample
         self.n_cells = sky_cells
-        self.eps_m = 2e-5 * max(scene.scale_m, 1e-3)
+        self.eps_m = scene.ray_eps_m
         V, F = scene.vertices, scene.faces
         tri = V[F]
         # s from the longest edge, as documented: the square root of the area left long thin

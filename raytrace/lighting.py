@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,9 +26,17 @@ SUN_ANGULAR_DIAMETER_RAD = math.radians(0.533)
 
 EARTH_TEXTURES = ("uniform", "procedural")
 
+MAX_IRRADIANCE_W_M2 = 1e6
+"""Largest accepted solar irradiance [W/m²] and ambient radiance [W/(m²·sr)]: above the Sun's
+~650 kW/m² at Parker Solar Probe's closest approach (1361 W/m² / 0.046² au⁻²), far below
+where float32 radiance would overflow."""
+
 
 def _unit3(name: str, value) -> tuple:
-    v = np.asarray(value, dtype=np.float64).ravel()
+    try:
+        v = np.asarray(value, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a unit 3-vector, got {value!r}") from None
     if v.shape != (3,) or not np.all(np.isfinite(v)):
         raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
     n = float(np.linalg.norm(v))
@@ -37,10 +46,10 @@ def _unit3(name: str, value) -> tuple:
 
 
 def _finite(name: str, value, lo: float, hi: float = math.inf, lo_open: bool = False) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    # a number, not text or a truth value that float() would also take ("1361", True)
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    x = float(value)
     if not math.isfinite(x) or x < lo or x > hi or (lo_open and x == lo):
         lo_txt = f"({lo:g}" if lo_open else f"[{lo:g}"
         raise ValueError(f"{name} must be a finite number in {lo_txt}, {hi:g}], got {value!r}")
@@ -147,12 +156,13 @@ class Lighting:
 
     def __post_init__(self):
         object.__setattr__(self, "sun_dir_body", _unit3("sun_dir_body", self.sun_dir_body))
-        object.__setattr__(self, "sun_irradiance_W_m2", _finite("sun_irradiance_W_m2", self.sun_irradiance_W_m2, 0.0))
+        object.__setattr__(self, "sun_irradiance_W_m2",
+                           _finite("sun_irradiance_W_m2", self.sun_irradiance_W_m2, 0.0, MAX_IRRADIANCE_W_M2))
         object.__setattr__(self, "shadow_fraction", _finite("shadow_fraction", self.shadow_fraction, 0.0, 1.0))
         object.__setattr__(self, "sun_angular_diameter_rad",
                            _finite("sun_angular_diameter_rad", self.sun_angular_diameter_rad, 0.0, 0.1))
         object.__setattr__(self, "ambient_radiance_W_m2_sr",
-                           _finite("ambient_radiance_W_m2_sr", self.ambient_radiance_W_m2_sr, 0.0))
+                           _finite("ambient_radiance_W_m2_sr", self.ambient_radiance_W_m2_sr, 0.0, MAX_IRRADIANCE_W_M2))
         if self.earth is not None and not isinstance(self.earth, Earth):
             raise ValueError(f"earth must be a raytrace.lighting.Earth or None, got {type(self.earth).__name__}")
         if self.stars is not None:

@@ -179,7 +179,7 @@ def render_reference(scene, camera, R, t, lighting, geo, *, spp: int, seed: int)
     e_sun = lighting.sun_irradiance_at_target_W_m2
     sx, sy, sz = lighting.sun_dir_body
     cos_half = math.cos(0.5 * lighting.sun_angular_diameter_rad)
-    eps = 2e-5 * max(scene.scale_m, 1e-3)
+    eps = scene.ray_eps_m
     out = np.zeros((H * W, 3))
     # pixels where the target may appear (plus a 1-pixel border: jittered rays reach it)
     u0, v0, u1, v1 = geo.cast_rect

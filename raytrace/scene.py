@@ -17,6 +17,7 @@ runs in robust (watertight) mode: no ray slips between triangles sharing an edge
 from __future__ import annotations
 
 import math
+import warnings
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -113,14 +114,16 @@ class GeometryFrame:
     n_components : int
         Number of components of the target.
     camera_inside_hull : bool
-        The optical centre lies inside (or on) the target's convex hull: culling was off.
+        The optical centre lies inside (or on) the target's convex hull, or the hull straddles
+        the camera's z = 0 plane: culling was off (not when the target is wholly behind).
     semantic_lut : ndarray, shape (n_components + 1,), uint8
         Semantic class id of each instance id (0 → 0, background).
     visible_fraction : float
         Fraction of the target's silhouette (as the same pinhole would see it on an
         unbounded sensor) that falls inside the image [-]: 1 when the whole target is in
-        frame, 0 when it is out of view; NaN when the camera is inside the target's convex
-        hull (the silhouette is unbounded there). The part outside the image is counted on a
+        frame, 0 when it is out of view (also wholly behind the camera); NaN when the
+        camera is inside the target's convex hull or the hull straddles the camera's z = 0
+        plane (the silhouette is unbounded there). The part outside the image is counted on a
         coarser grid when it is large (see :meth:`Scene.render_geometry`).
     """
 
@@ -201,6 +204,17 @@ class Scene:
         self.face_normal, self.corner_normal = self._normals(self.component_of_face, np.asarray(creases))
         self.hull_vertices = _bounding_vertices(self.vertices)
         self.scale_m = float(np.linalg.norm(self.vertices.max(0) - self.vertices.min(0)))
+        # offset of secondary rays' origins from the surface [m]: 2·10⁻⁵ of the target's size,
+        # or, for a mesh far from its origin, ~16–32 float32 ulps of its largest coordinate
+        # (Embree holds vertices and ray origins in float32: a 1 m sphere 5 km from the
+        # origin, ulp 0.5 mm, cast shadow acne over its lit side with the size-based 20 µm)
+        far = float(np.abs(self.vertices).max()) if len(self.vertices) else 0.0
+        self.ray_eps_m = max(2e-5 * max(self.scale_m, 1e-3), 2.0**-19 * far)
+        if far > 1e3 * max(self.scale_m, 1e-3):
+            warnings.warn(f"model {model.name}: its vertices lie up to {far:.4g} m from the body origin, "
+                          f"{far / max(self.scale_m, 1e-3):.3g}x its size: float32 ray tracing loses precision "
+                          "there; recentre the mesh (raytrace.meshio.load_mesh(..., recentre='bbox'))",
+                          RuntimeWarning, stacklevel=2)
         self.semantic_lut = np.array([0] + [c.semantic_id for c in model.components], dtype=np.uint8)
         self._embree = None
         self._cache = None
@@ -329,7 +343,9 @@ class Scene:
     # ------------------------------------------------------------------ culling
     def projected_rect(self, camera: Camera, R_cam_from_body, t_cam_m) -> tuple | None:
         """Unclipped pixel rectangle (u0, v0, u1, v1), end exclusive, holding every pixel centre
-        the target can cover; None when part of the target is at or behind the optical centre.
+        the target can cover; None when part of the target is at or behind the optical centre
+        and part in front of it (its projection is unbounded); (0, 0, 0, 0) when all of it is
+        behind the camera.
 
         The convex hull of the mesh contains the target; when all hull vertices lie in front
         of the camera, the projected target lies inside the convex hull of the projected
@@ -340,7 +356,10 @@ class Scene:
 
     def _projected_rect(self, camera: Camera, p_hull_cam: np.ndarray) -> tuple | None:
         p = p_hull_cam
-        if np.any(p[:, 2] <= 1e-9 * max(self.scale_m, 1.0)):
+        behind = p[:, 2] <= 1e-9 * max(self.scale_m, 1.0)
+        if np.all(behind):
+            return (0, 0, 0, 0)  # nothing in front of the camera: nothing to see
+        if np.any(behind):
             return None
         u = camera.fx * p[:, 0] / p[:, 2] + camera.cx
         v = camera.fy * p[:, 1] / p[:, 2] + camera.cy

@@ -29,6 +29,9 @@ right, y down, z forward, integer coordinates at pixel centres.
 inertial frame (J2000) is required; without ``catalogue`` (a CSV with columns ``ra_deg``,
 ``dec_deg``, ``v_mag``, relative to the JSON file's folder) a procedural sky of every star
 brighter than ``limit_mag`` (default 6.5, at most 9) is drawn from ``seed``.
+
+Meshes far from the file's origin (bounding-box centre beyond :data:`RECENTRE_SIZES` times
+their size) are moved to their centre for float32 ray tracing (:attr:`SceneSpec.body_offset_m`).
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -62,6 +65,45 @@ class SceneSpec:
     quality: str = "balanced"
     samples: int | None = None
     seed: int = 0
+    body_offset_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """Where the meshes' bounding-box centre lies in the file's body frame, when they lie far
+    from its origin (more than :data:`RECENTRE_SIZES` times their size; else zeros) [m]. The
+    meshes were then moved by −body_offset_m for float32 ray tracing, and ``model``,
+    ``t_cam_m`` and ``lighting`` describe the same scene in that shifted frame: a point p of
+    ``model`` is p + body_offset_m in the file, and the file's ``t_cam_m`` is
+    ``t_cam_m − R_cam_from_body @ body_offset_m`` (:meth:`file_t_cam_m`)."""
+
+    def file_t_cam_m(self) -> np.ndarray:
+        """``camera.t_cam_m`` as the file gives it (the pose of the file's body frame)."""
+        return self.t_cam_m - self.R_cam_from_body @ self.body_offset_m
+
+
+RECENTRE_SIZES = 10.0
+"""Meshes whose bounding-box centre lies farther than this many times their size (bounding-box
+diagonal) from the file's origin are moved to it for rendering (:attr:`SceneSpec.body_offset_m`):
+Embree holds vertices in float32, and a 1 m part 5 km from its origin (ulp 0.5 mm) otherwise
+shadows itself in speckles."""
+
+
+def _recentred(model: TargetModel, R: np.ndarray, t: np.ndarray, lighting: Lighting):
+    """The model moved to its bounding-box centre c when that lies far from the origin, with the
+    pose and Earth in the shifted frame: (model, t + R c, lighting, c); c = 0 otherwise."""
+    lo = np.min([np.asarray(c.mesh.vertices).min(0) for c in model.components], axis=0)
+    hi = np.max([np.asarray(c.mesh.vertices).max(0) for c in model.components], axis=0)
+    c = 0.5 * (lo + hi)
+    size = max(float(np.linalg.norm(hi - lo)), 1e-3)
+    if float(np.linalg.norm(c)) <= RECENTRE_SIZES * size:
+        return model, t, lighting, np.zeros(3)
+    comps = []
+    for comp in model.components:
+        mesh = comp.mesh.copy()
+        mesh.vertices = np.asarray(mesh.vertices, dtype=np.float64) - c
+        comps.append(replace(comp, mesh=mesh))
+    earth = lighting.earth
+    if earth is not None:  # Earth's centre seen from the new origin
+        r = earth.distance_m * np.asarray(earth.earth_dir_body) - c
+        earth = replace(earth, earth_dir_body=tuple(r / np.linalg.norm(r)), distance_m=float(np.linalg.norm(r)))
+    return replace(model, components=tuple(comps)), t + R @ c, replace(lighting, earth=earth), c
 
 
 def _err(msg: str) -> ValueError:
@@ -140,8 +182,15 @@ def _model(data: dict, folder: str) -> TargetModel:
     return TargetModel(os.path.basename(folder) or "scene", tuple(comps), "scene file")
 
 
+_CAMERA_KEYS = ("K", "width", "height", "R_cam_from_body", "t_cam_m")
+
+
 def _camera(cam: dict) -> tuple[Camera, np.ndarray, np.ndarray]:
-    for key in ("K", "width", "height", "R_cam_from_body", "t_cam_m"):
+    unknown = set(cam) - set(_CAMERA_KEYS)
+    if unknown:
+        raise _err(f"camera: unknown keys {sorted(unknown)} (allowed: {', '.join(_CAMERA_KEYS)}; a pinhole "
+                   "without distortion)")
+    for key in _CAMERA_KEYS:
         if key not in cam:
             raise _err(f"camera.{key} is required")
     K = _numbers("camera.K", cam["K"], 9).reshape(3, 3)
@@ -199,6 +248,10 @@ def _lighting(data: dict, folder: str = ".") -> Lighting:
     if "sun_dir_body" not in sun:
         raise _err("sun.sun_dir_body is required (unit vector towards the Sun, body frame)")
     stars, R_body_from_eci = _stars(data, folder)
+    diameter = sun.get("angular_diameter_deg", 0.533)
+    if isinstance(diameter, bool) or not isinstance(diameter, (int, float)) or not 0.0 <= diameter <= 5.0:
+        raise _err(f"sun.angular_diameter_deg must be a number in [0, 5] degrees (0.533 seen from Earth; 0 for a "
+                   f"point Sun), got {diameter!r}")
     earth = None
     e = _section(data, "earth", required=False)
     try:
@@ -215,7 +268,7 @@ def _lighting(data: dict, folder: str = ".") -> Lighting:
         return Lighting(sun_dir_body=sun["sun_dir_body"],
                         sun_irradiance_W_m2=sun.get("sun_irradiance_W_m2", SOLAR_CONSTANT_W_M2),
                         shadow_fraction=sun.get("shadow_fraction", 1.0),
-                        sun_angular_diameter_rad=math.radians(float(sun.get("angular_diameter_deg", 0.533))),
+                        sun_angular_diameter_rad=math.radians(diameter),
                         earth=earth, ambient_radiance_W_m2_sr=data.get("ambient_radiance_W_m2_sr", 0.0),
                         stars=stars, R_body_from_eci=R_body_from_eci)
     except ValueError as exc:
@@ -245,6 +298,9 @@ def load_scene_file(path) -> SceneSpec:
     unknown = set(data) - _TOP_KEYS
     if unknown:
         raise _err(f"unknown keys {sorted(unknown)} (allowed: {', '.join(sorted(_TOP_KEYS))})")
+    version = data.get("version", 1)
+    if isinstance(version, bool) or version != 1:
+        raise _err(f"version must be 1 (the only schema so far), got {version!r}")
     from .shade import QUALITIES
     quality = data.get("quality", "balanced")
     if quality not in QUALITIES:
@@ -258,8 +314,8 @@ def load_scene_file(path) -> SceneSpec:
     camera, R, t = _camera(_section(data, "camera"))
     folder = os.path.dirname(os.path.abspath(path))
     lighting = _lighting(data, folder)
-    model = _model(data, folder)
-    return SceneSpec(model, camera, R, t, lighting, quality, samples, seed)
+    model, t, lighting, offset = _recentred(_model(data, folder), R, t, lighting)
+    return SceneSpec(model, camera, R, t, lighting, quality, samples, seed, offset)
 
 
 def scene_to_dict(camera: Camera, R_cam_from_body, t_cam_m, lighting: Lighting, meshes: list,

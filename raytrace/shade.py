@@ -377,7 +377,7 @@ class _Context:
         t = np.minimum(np.maximum((self.alpha - K.MIRROR_BLEND_A0) / K.MIRROR_BLEND_WIDTH, 0.0), 1.0)
         self.mirror_weighted = t < 1.0
         self.table = split_sum_table()
-        self.eps = 2e-5 * max(scene.scale_m, 1e-3)
+        self.eps = scene.ray_eps_m
         self.p, self.tex = lighting.packed()
         self.p_background = self.p.copy()
         self.p_background[K.env.P_AMBIENT] = 0.0  # the sky lights the target but is not drawn

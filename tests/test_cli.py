@@ -160,6 +160,15 @@ def test_render_scene_writes_a_frame(tmp_path):
     ({"stars": {"R_body_from_eci": [1, 0, 0, 0, 1, 0, 0, 0, 1], "limit_mag": 20}}, "limit magnitude"),
     ({"stars": {"R_body_from_eci": [1, 0, 0, 0, 1, 0, 0, 0, -1]}}, "R_body_from_eci must be a 3x3 rotation"),
     ({"stars": {"R_body_from_eci": [1, 0, 0, 0, 1, 0, 0, 0, 1], "catalogue": "none.csv"}}, "none.csv"),
+    ({"camera": {"K": [[120.0, 0, 31.5], [0, 120.0, 23.5], [0, 0, 1]], "width": 64, "height": 48, "fov": 30,
+                 "R_cam_from_body": np.eye(3).ravel().tolist(), "t_cam_m": [0, 0, 5]}}, "camera: unknown keys ['fov']"),
+    ({"sun": {"sun_dir_body": [0, 0, 1], "angular_diameter_deg": None}}, "sun.angular_diameter_deg"),
+    ({"sun": {"sun_dir_body": [0, 0, 1], "angular_diameter_deg": 200}}, "sun.angular_diameter_deg"),
+    ({"sun": {"sun_dir_body": [0, 0, 1], "sun_irradiance_W_m2": "1361"}}, "sun_irradiance_W_m2 must be a number"),
+    ({"sun": {"sun_dir_body": [0, 0, 1], "sun_irradiance_W_m2": 1e300}}, "sun_irradiance_W_m2 must be a finite"),
+    ({"sun": {"sun_dir_body": "up"}}, "sun_dir_body must be a unit 3-vector"),
+    ({"ambient_radiance_W_m2_sr": True}, "ambient_radiance_W_m2_sr must be a number"),
+    ({"version": 2}, "version must be 1"),
 ])
 def test_render_scene_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, over, match):
     path = _tiny_scene(tmp_path, **over)
@@ -168,6 +177,42 @@ def test_render_scene_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys,
     err = capsys.readouterr().err
     assert match in err and err.count("\n") == 1
     assert not out.exists()
+
+
+def test_render_scene_checks_out_before_rendering(tmp_path, capsys, monkeypatch):
+    """--out that is a file fails at once, one line, exit 2, before any rendering."""
+    import raytrace.shade
+    monkeypatch.setattr(raytrace.shade, "render", lambda *a, **k: pytest.fail("rendered before checking --out"))
+    path = _tiny_scene(tmp_path)
+    (tmp_path / "taken").write_text("x")
+    assert cli.main(["render-scene", str(path), "--out", str(tmp_path / "taken")]) == 2
+    err = capsys.readouterr().err
+    assert "--out" in err and "not a folder" in err and err.count("\n") == 1
+
+
+def test_render_scene_mesh_far_from_its_origin_renders_as_if_centred(tmp_path):
+    """A 1 m sphere authored 5 km from its file's origin (a CAD export in mm): the scene file is
+    moved to the mesh's centre for float32 ray tracing, so the image is the one of the same
+    sphere at the origin (no self-shadowing speckles), and frame.json keeps the file's pose."""
+    import OpenImageIO as oiio
+    import trimesh
+    hdr = {}
+    for off in (0.0, 5000.0):
+        mesh = trimesh.creation.icosphere(4, radius=1000.0)
+        mesh.vertices += [off * 1000.0, 0.0, 0.0]
+        mesh.export(tmp_path / f"ball{int(off)}.obj")  # text: PLY would round 5e6 mm to float32
+        path = _tiny_scene(tmp_path, meshes=[{"path": f"ball{int(off)}.obj", "unit_scale_m": 0.001, "albedo": 0.6}],
+                           camera={"K": [[120.0, 0, 31.5], [0, 120.0, 23.5], [0, 0, 1]], "width": 64, "height": 48,
+                                   "R_cam_from_body": np.eye(3).ravel().tolist(), "t_cam_m": [-off, 0.0, 5.0]},
+                           sun={"sun_dir_body": [0.4, -0.3, -0.866]}, ambient_radiance_W_m2_sr=0.0)
+        out = tmp_path / f"out{int(off)}"
+        assert cli.main(["render-scene", str(path), "--out", str(out)]) == 0
+        hdr[off] = oiio.ImageBuf(str(out / "hdr/000000.exr")).get_pixels(oiio.FLOAT)
+        info = json.loads((out / "frame.json").read_text())
+        assert info["t_cam_m"] == pytest.approx([-off, 0.0, 5.0]) and info["body_offset_m"] == pytest.approx([off, 0, 0])
+    lit = hdr[0.0].sum(-1) > 0
+    assert lit.sum() > 200
+    assert np.allclose(hdr[5000.0], hdr[0.0], rtol=1e-3, atol=1e-3)
 
 
 def test_render_scene_stars_in_the_background_only(tmp_path):

@@ -289,6 +289,17 @@ def test_extreme_ranges(dist):
     assert np.all(np.isfinite(g.depth_m[g.mask])) and np.all(np.isinf(g.depth_m[~g.mask]))
 
 
+def test_target_wholly_behind_the_camera():
+    """Behind the camera there is nothing to see: an empty frame, visible fraction 0, culling
+    on (not the "camera inside the hull" case, whose fraction is NaN)."""
+    scene = Scene(small_assembly())
+    cam = Camera(width=64, height=48, fx=60.0, fy=60.0, cx=31.5, cy=23.5)
+    for z in (-30.0, -5000.0):
+        g = scene.render_geometry(cam, np.eye(3), [0.0, 0.0, z])
+        assert not g.camera_inside_hull and g.cast_rect == (0, 0, 0, 0)
+        assert g.visible_fraction == 0.0 and not g.mask.any()
+
+
 def test_one_pixel_and_large_images():
     scene = Scene(small_assembly())
     R, t = pose_looking_at_origin([0.0, -8.0, 0.0])

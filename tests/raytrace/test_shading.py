@@ -274,6 +274,39 @@ def test_earth_disc_in_the_background_has_day_and_night():
     assert lum[bg].max() <= 0.3 * 1361 / math.pi * (1 + 1e-6)
 
 
+@pytest.mark.parametrize("quality", ["fast", "balanced", "reference"])
+def test_camera_touching_a_face_sees_that_face_lit_as_the_formula_says(quality):
+    """A camera whose optical centre lies on a face of a box, looking into it, sees that face
+    at depth 0 everywhere (no 0·∞ in the filter's footprint): ρ/π·E·cosθ + ρ·L_sky."""
+    box = Component("box", trimesh.creation.box((2.0, 2.0, 2.0)), "white_paint", "bus", 1.0, albedo=(0.6,) * 3)
+    scene = Scene(TargetModel("box", (box,)))
+    s = np.array([0.4, -0.3, -0.866])
+    s /= np.linalg.norm(s)
+    light = Lighting(sun_dir_body=tuple(s), ambient_radiance_W_m2_sr=1.0)
+    frame = render(scene, CAM, np.eye(3), [0.2, 0.1, 1.0], light, quality=quality, samples=4)  # centre on z = −1
+    assert frame.geometry.mask.all() and np.all(frame.geometry.depth_m == 0.0)
+    expect = 0.6 / math.pi * 1361.0 * -s[2] + 0.6 * 1.0
+    assert np.all(np.isfinite(frame.radiance))
+    assert np.allclose(frame.radiance, expect, rtol=3e-3)  # reference: the sky sampled, ±0.6 of 225.7
+
+
+def test_mesh_far_from_its_origin_has_no_shadow_acne():
+    """Embree holds vertices in float32: a 2 m sphere 5 km from the body origin (ulp 0.5 mm)
+    needs secondary rays offset by more than the size-based 2e-5 (40 µm), else it shadows its
+    own lit side in speckles. Same image as at the origin, to float32 geometry, and a warning."""
+    sun = Lighting(sun_dir_body=(0.6, -0.48, 0.64))
+    R, t = _pose([1.0, -5.0, 2.0])
+    ref = render(_sphere_scene(), CAM, R, t, sun, quality="fast")
+    mesh = trimesh.creation.icosphere(subdivisions=6, radius=1.0)
+    mesh.vertices += [5000.0, 0.0, 0.0]
+    with pytest.warns(RuntimeWarning, match="recentre the mesh"):
+        far = Scene(TargetModel("ball", (Component("ball", mesh, "white_paint", "bus", 1.0, albedo=(0.5,) * 3),)))
+    got = render(far, CAM, R, t - R @ [5000.0, 0.0, 0.0], sun, quality="fast")
+    lit = ref.radiance.sum(-1) > 1.0
+    assert np.count_nonzero((got.radiance.sum(-1) > 1.0) != lit) <= 5 and lit.sum() > 2000  # ± terminator pixels
+    assert got.radiance[lit].mean() == pytest.approx(ref.radiance[lit].mean(), rel=1e-3)
+
+
 @pytest.mark.parametrize("bad,match", [
     (dict(sun_dir_body=(np.nan, 0, 1)), "sun_dir_body"),
     (dict(sun_dir_body=(0, 0, 2)), "unit vector"),
