@@ -1429,6 +1429,11 @@ def render_scene_main(argv: list[str]) -> int:
         quality = args.quality or spec.quality
         samples = args.samples if args.samples is not None else (spec.samples if args.quality is None else None)
         seed = args.seed if args.seed is not None else spec.seed
+        nu_geo = spec.geometric_shadow_fraction()
+        if nu_geo is not None and abs(nu_geo - spec.lighting.shadow_fraction) > 0.01:
+            sys.stderr.write(f"{PROG}: warning: sun.shadow_fraction is {spec.lighting.shadow_fraction:g} but the "
+                             f"scene's Earth leaves {nu_geo:.3g} of the solar disc visible from the target; the "
+                             "render uses shadow_fraction (set it to match if the eclipse is meant)\n")
         t0 = time.perf_counter()
         frame = render(Scene(spec.model), spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting,
                        quality=quality, samples=samples, seed=seed)
@@ -1442,7 +1447,8 @@ def render_scene_main(argv: list[str]) -> int:
                 "t_cam_m": spec.file_t_cam_m().tolist(), "body_offset_m": spec.body_offset_m.tolist(),
                 "components": list(spec.model.component_names),
                 "pixel_counts": geo.pixel_counts.tolist(), "bbox_xywh": geo.bbox_xywh,
-                "visible_fraction": None if math.isnan(geo.visible_fraction) else geo.visible_fraction}
+                "visible_fraction": None if math.isnan(geo.visible_fraction) else geo.visible_fraction,
+                "shadow_fraction": spec.lighting.shadow_fraction, "geometric_shadow_fraction": nu_geo}
         write_files_atomically(args.out, files, {"frame.json": json.dumps(info, indent=1) + "\n"})
     except (CLIError, ValueError) as exc:
         sys.stderr.write(f"{PROG}: error: {exc}\n")

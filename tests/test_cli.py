@@ -179,6 +179,28 @@ def test_render_scene_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys,
     assert not out.exists()
 
 
+def test_render_scene_warns_when_shadow_fraction_contradicts_the_earth(tmp_path, capsys):
+    """Sun straight behind Earth: the scene's Earth hides all of the solar disc (ν = 0), so a
+    shadow_fraction of 1 gets a one-line warning (the render keeps the file's ν); so does the
+    Sun's centre on Earth's limb, which hides half of its disc (a limb ~70° across is straight
+    at the Sun's 0.27°); the Sun beside Earth: ν = 1, no warning."""
+    from raytrace.scenefile import load_scene_file
+    d, r = 6.778e6, 6.378137e6
+    b = math.asin(r / d)  # Earth's angular radius seen from the target
+    cases = [((0.0, 0.0, -1.0), 0.0, True), ((math.sin(b), 0.0, -math.cos(b)), 0.5, True),
+             ((1.0, 0.0, 0.0), 1.0, False)]
+    for sun, nu, warns in cases:
+        path = _tiny_scene(tmp_path, sun={"sun_dir_body": list(sun)},
+                           earth={"earth_dir_body": [0.0, 0.0, -1.0], "earth_distance_m": d})
+        assert load_scene_file(path).geometric_shadow_fraction() == pytest.approx(nu, abs=0.01)
+        out = tmp_path / f"out{nu}"
+        assert cli.main(["render-scene", str(path), "--out", str(out)]) == 0
+        info = json.loads((out / "frame.json").read_text())
+        assert info["shadow_fraction"] == 1.0 and info["geometric_shadow_fraction"] == pytest.approx(nu, abs=0.01)
+        err = capsys.readouterr().err
+        assert ("warning: sun.shadow_fraction is 1" in err) == warns and err.count("\n") == int(warns)
+
+
 def test_render_scene_checks_out_before_rendering(tmp_path, capsys, monkeypatch):
     """--out that is a file fails at once, one line, exit 2, before any rendering."""
     import raytrace.shade
