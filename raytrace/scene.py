@@ -17,8 +17,8 @@ runs in robust (watertight) mode: no ray slips between triangles sharing an edge
 from __future__ import annotations
 
 import math
-import warnings
 import os
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
