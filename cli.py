@@ -1391,6 +1391,26 @@ def write_files_atomically(out_dir: str, files: dict, texts: dict) -> None:
         raise CLIError(f"--out: {exc}") from None
 
 
+def geometric_shadow_fraction(lighting) -> float | None:
+    """The fraction of the solar disc that a :class:`raytrace.lighting.Lighting`'s Earth leaves
+    visible at the target (:func:`orbit.visibility.illuminated_fraction`, with that Earth's
+    radius and the Sun's angular diameter), or None without Earth. ``shadow_fraction`` is what
+    the renderer uses (the Earth does not shadow the Sun by itself); this tells whether the
+    two agree. Here, not in ``raytrace``, which knows nothing of orbits."""
+    e = lighting.earth
+    if e is None:
+        return None
+    from orbit.constants import R_EARTH_M, R_SUN_M
+    from orbit.visibility import illuminated_fraction
+    # the same angles in a frame scaled to orbit's Earth radius: target at −ê·d, Sun at the
+    # distance where its disc has the scene's angular diameter
+    k = R_EARTH_M / e.radius_m
+    r_target = -k * e.distance_m * np.asarray(e.earth_dir_body)
+    half = max(0.5 * lighting.sun_angular_diameter_rad, 1e-7)
+    r_sun = r_target + R_SUN_M / math.sin(half) * np.asarray(lighting.sun_dir_body)
+    return float(illuminated_fraction(r_target, r_sun))
+
+
 def check_out_folder(out_dir: str) -> None:
     """Fail before any work when ``--out`` cannot become a writable folder: it exists and is not
     a folder or not writable, or its nearest existing parent is not a writable folder."""
@@ -1429,7 +1449,7 @@ def render_scene_main(argv: list[str]) -> int:
         quality = args.quality or spec.quality
         samples = args.samples if args.samples is not None else (spec.samples if args.quality is None else None)
         seed = args.seed if args.seed is not None else spec.seed
-        nu_geo = spec.geometric_shadow_fraction()
+        nu_geo = geometric_shadow_fraction(spec.lighting)
         if nu_geo is not None and abs(nu_geo - spec.lighting.shadow_fraction) > 0.01:
             sys.stderr.write(f"{PROG}: warning: sun.shadow_fraction is {spec.lighting.shadow_fraction:g} but the "
                              f"scene's Earth leaves {nu_geo:.3g} of the solar disc visible from the target; the "

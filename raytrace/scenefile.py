@@ -73,24 +73,6 @@ class SceneSpec:
     ``model`` is p + body_offset_m in the file, and the file's ``t_cam_m`` is
     ``t_cam_m − R_cam_from_body @ body_offset_m`` (:meth:`file_t_cam_m`)."""
 
-    def geometric_shadow_fraction(self) -> float | None:
-        """The visible fraction of the solar disc that the scene's Earth leaves at the target
-        (:func:`orbit.visibility.illuminated_fraction`, with this Earth's radius and the Sun's
-        angular diameter), or None without Earth. ``shadow_fraction`` is what the renderer
-        uses; this tells whether the two agree."""
-        e = self.lighting.earth
-        if e is None:
-            return None
-        from orbit.constants import R_EARTH_M, R_SUN_M
-        from orbit.visibility import illuminated_fraction
-        # the same angles in a frame scaled to orbit's Earth radius: target at −ê·d, Sun at the
-        # distance where its disc has the scene's angular diameter
-        k = R_EARTH_M / e.radius_m
-        r_target = -k * e.distance_m * np.asarray(e.earth_dir_body)
-        half = max(0.5 * self.lighting.sun_angular_diameter_rad, 1e-7)
-        r_sun = r_target + R_SUN_M / math.sin(half) * np.asarray(self.lighting.sun_dir_body)
-        return float(illuminated_fraction(r_target, r_sun))
-
     def file_t_cam_m(self) -> np.ndarray:
         """``camera.t_cam_m`` as the file gives it (the pose of the file's body frame)."""
         return self.t_cam_m - self.R_cam_from_body @ self.body_offset_m

@@ -192,7 +192,7 @@ def test_render_scene_warns_when_shadow_fraction_contradicts_the_earth(tmp_path,
     for sun, nu, warns in cases:
         path = _tiny_scene(tmp_path, sun={"sun_dir_body": list(sun)},
                            earth={"earth_dir_body": [0.0, 0.0, -1.0], "earth_distance_m": d})
-        assert load_scene_file(path).geometric_shadow_fraction() == pytest.approx(nu, abs=0.01)
+        assert cli.geometric_shadow_fraction(load_scene_file(path).lighting) == pytest.approx(nu, abs=0.01)
         out = tmp_path / f"out{nu}"
         assert cli.main(["render-scene", str(path), "--out", str(out)]) == 0
         info = json.loads((out / "frame.json").read_text())
