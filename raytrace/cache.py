@@ -429,25 +429,6 @@ def interpolate_rows(values, valid, face_s, lat_start, lat_ids, f, b1, b2, side)
             w0 * values[r0, 2] + w1 * values[r1, 2] + w2 * values[r2, 2])
 
 
-@pjit_exact
-def _sky_sources(indptr, indices, data, X, E_sun, E_open, out):
-    """out = E_sun + E_open + W X per row, W a CSR matrix and X (cells, 3) (the blocked sky:
-    X = −π L_env); one row per thread, in a fixed order."""
-    for i in numba.prange(out.shape[0]):
-        s0 = E_sun[i] + E_open[i, 0]
-        s1 = E_sun[i] + E_open[i, 1]
-        s2 = E_sun[i] + E_open[i, 2]
-        for k in range(indptr[i], indptr[i + 1]):
-            j = indices[k]
-            w = data[k]
-            s0 += w * X[j, 0]
-            s1 += w * X[j, 1]
-            s2 += w * X[j, 2]
-        out[i, 0] = s0
-        out[i, 1] = s1
-        out[i, 2] = s2
-
-
 @jit
 def _interp_rows(valid, face_s, lat_start, lat_ids, face, b1, b2, cols, w):
     """Rows 2i, 2i+1: the lattice rows around barycentrics (b1[i], b2[i]) of face[i] on the
@@ -921,9 +902,12 @@ class RadianceCache:
             E_sun[rows] = vals
         E_open = np.zeros((n, 3))
         _rows_irradiance(table, nrm, rows, E_open)
+        # E0 = E_sun + E_open − π W_sb L_env, the product row-parallel (scipy's is one thread)
+        E_open += E_sun[:, None]
         W_sb = mats["W_sb"]
         E0 = np.empty((n, 3))
-        _sky_sources(W_sb.indptr, W_sb.indices, W_sb.data, -math.pi * L_env, E_sun, E_open, E0)
+        sky = -math.pi * L_env
+        _jacobi_step(W_sb.indptr, W_sb.indices, W_sb.data, sky, *_EMPTY_CSR3(n), sky, E_open, E_open, E0)
         if mats["W_g"] is not None:
             for c in range(3):
                 E0[:, c] += math.pi * (mats["W_gb"][c] @ L_env[:, c])
