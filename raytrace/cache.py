@@ -597,7 +597,7 @@ class RadianceCache:
                               ok_all)
         alias[:2 * n_c] = alias_c
         self._f = dict(self._matrices(raw_f, ok_f, 2 * n_c, 2 * n_f), pos=pos_f, nrm=nrm_f, solved=ok_f & active,
-                       passive=~active)
+                       passive=np.flatnonzero(~active))
         # the coarse rows interpolated at every refined sample: the passive samples' light and
         # every refined sample's direct sunlight (as without them)
         tri = scene.vertices[scene.faces[face_f]]
@@ -612,6 +612,7 @@ class RadianceCache:
                      (d11 * p2 - d12 * p1) / den, cols, w)
         self._f["P"] = sp.csr_matrix((w.ravel(), (np.repeat(np.arange(2 * n_f), 3), cols.ravel())),
                                      shape=(2 * n_f, 2 * n_c))
+        self._f["P_passive"] = self._f["P"][self._f["passive"]]
         return (look_s, look_start, look_ids, pos_all, nrm_all, np.concatenate([valid, valid_f]), ok_all, alias,
                 comp_rows)
 
@@ -656,7 +657,7 @@ class RadianceCache:
         ok[raw["rows"][raw["buried"] > _BURIED_FRACTION * self.G] - row0] = False
         return ok
 
-    def _cast(self, pos, nrm, rows_all, key_base, lattice=None):
+    def _cast(self, pos, nrm, rows_all, key_base):
         """The cache rays of the listed rows (sample ``row // 2`` of ``pos``/``nrm``), binned on
         the coarse lattice: hits, blocked sky cells, glossy continuations, and per row the rays
         that hit the inside of a closed shell (``buried``) or any surface nearer than
@@ -672,7 +673,7 @@ class RadianceCache:
         corner_normal = scene.corner_normal.astype(np.float64) if any_glossy else None
         buried = np.zeros(len(rows_all), dtype=np.int64)
         near = np.zeros(len(rows_all), dtype=np.int64)
-        lat = lattice if lattice is not None else (self._c_face_s, self._c_lat_start, self._c_lat_ids)
+        lat = (self._c_face_s, self._c_lat_start, self._c_lat_ids)
         for a in range(0, len(rows_all), chunk):
             rows = rows_all[a:a + chunk]
             n = len(rows) * G
@@ -701,12 +702,12 @@ class RadianceCache:
         raw.update(rows=rows_all, buried=buried, near=near, rec=rec)
         return raw
 
-    def _matrices(self, raw, ok, row0, n_rows, alias=None):
+    def _matrices(self, raw, ok, row0, n_rows):
         """The transfer matrices of the rows ``row0 …`` cast in ``raw`` (rows not ``ok`` left
         empty), columns on the coarse lattice: a hit on a buried coarse row counts for the row
         standing in for it."""
         G = self.G
-        alias = self._c_alias if alias is None else alias
+        alias = self._c_alias
         n_c = len(alias)
 
         def cat(k, shape):
@@ -868,8 +869,7 @@ class RadianceCache:
             _jacobi_step(W_f.indptr, W_f.indices, W_f.data, Y,
                          *(f["W_g"] if f["W_g"] is not None else _EMPTY_CSR3(len(E0_f))), Yb, E0_f, E0_f, E_f)
             E_f[~f["solved"]] = 0.0
-            if f["passive"].any():
-                E_f[f["passive"]] = (f["P"] @ E[self._c_alias])[f["passive"]]
+            E_f[f["passive"]] = f["P_passive"] @ E[self._c_alias]
             E = np.concatenate([E, E_f])
             E_sun = np.concatenate([E_sun, E_sun_f])
         E = E[self._alias]  # buried rows take their stand-in's values
