@@ -538,7 +538,6 @@ class RadianceCache:
         self._c = self._matrices(raw, ok, 0, self.n_coarse_rows)
         # contact rows: the lattice near contacts between parts, refined (see module notes)
         lookup = (face_s, lat_start, lat_ids, pos, nrm, valid, ok, self._c_alias, self._c_comp_rows)
-        self.n_contact_faces = 0
         self.contact_rows = np.empty(0, np.int64)  # rows that gather for themselves
         self._f = None
         if contact_refine:
@@ -547,14 +546,13 @@ class RadianceCache:
             if contact.any():
                 lookup = self._refine(contact, *lookup)
         # what the renderer reads: per lookup row (coarse rows, then contact rows)
-        face_s, lat_start, lat_ids, pos, nrm, valid, solved, self._alias, self.row_component = lookup
+        face_s, lat_start, lat_ids, pos, nrm, valid, solved, self._alias, row_component = lookup
         self.face_s, self.lat_start, self.lat_ids = face_s, lat_start, lat_ids
         self.positions, self.normals = pos, nrm
         self.n_samples = len(pos)
         self.n_rows = 2 * self.n_samples
-        self.rho_bounce = bounce[self.row_component]
+        self.rho_bounce = bounce[row_component]
         self.valid = valid & (solved | (self._alias != np.arange(self.n_rows)))
-        self.W_ss, self.W_sb = self._c["W_ss"], self._c["W_sb"]
 
     def _refine(self, contact, face_s, lat_start, lat_ids, pos, nrm, valid, ok, alias_c, comp_rows_c):
         """The contact rows around the coarse rows flagged in ``contact`` (module notes): builds
@@ -564,7 +562,6 @@ class RadianceCache:
         pts = contact[2 * lat_ids] | contact[2 * lat_ids + 1]
         fine = np.zeros(len(face_s), dtype=bool)
         fine[np.repeat(np.arange(len(face_s)), (face_s + 1) * (face_s + 2) // 2)[pts]] = True
-        self.n_contact_faces = int(fine.sum())
         ff = np.flatnonzero(fine)
         s_f = np.minimum(_CONTACT_REFINE * face_s[ff], 128)
         _, f_ids, pos_f, nrm_f, face_f = self._lattice(ff, s_f, _CONTACT_CELL * self.spacing_m)
@@ -673,7 +670,6 @@ class RadianceCache:
         corner_normal = scene.corner_normal.astype(np.float64) if any_glossy else None
         buried = np.zeros(len(rows_all), dtype=np.int64)
         near = np.zeros(len(rows_all), dtype=np.int64)
-        lat = (self._c_face_s, self._c_lat_start, self._c_lat_ids)
         for a in range(0, len(rows_all), chunk):
             rows = rows_all[a:a + chunk]
             n = len(rows) * G
@@ -685,8 +681,8 @@ class RadianceCache:
             hc = np.empty((n, 3), np.int64)
             hw = np.empty((n, 3), np.float64)
             nh = _bin_hits(G, d, h["geomID"], h["primID"], h["u"].astype(np.float64), h["v"].astype(np.float64),
-                           scene.face_offset, scene.face_normal, self.two_sided_face, *lat, hr, hc, hw,
-                           buried[a:a + len(rows)])
+                           scene.face_offset, scene.face_normal, self.two_sided_face, self._c_face_s,
+                           self._c_lat_start, self._c_lat_ids, hr, hc, hw, buried[a:a + len(rows)])
             raw["hit_rows"].append(rows[hr[:nh] // G])
             raw["hit_cols"].append(hc[:nh])
             raw["hit_w"].append(hw[:nh])
@@ -698,7 +694,7 @@ class RadianceCache:
             raw["blk_rows"].append(rows[blocked // G])
             raw["blk_cells"].append(cells)
             if any_glossy:
-                self._glossy_chunk(rows, o, d, h, glossy_face, corner_normal, key_base + a, raw, rec, lat)
+                self._glossy_chunk(rows, o, d, h, glossy_face, corner_normal, key_base + a, raw, rec)
         raw.update(rows=rows_all, buried=buried, near=near, rec=rec)
         return raw
 
@@ -752,7 +748,7 @@ class RadianceCache:
             out["glint"] = glint
         return out
 
-    def _glossy_chunk(self, rows, o, d, h, glossy_face, corner_normal, key0, raw, rec, lat):
+    def _glossy_chunk(self, rows, o, d, h, glossy_face, corner_normal, key0, raw, rec):
         """The cache rays of one chunk that hit a glossy part (on a side that has a row): one
         ray drawn from the part's lobe at each hit, binned like the cache's own rays (the
         lattice points it hits, or the sky cell it leaves through, with the lobe's RGB weight),
@@ -780,8 +776,8 @@ class RadianceCache:
         hc = np.empty((m, 3), np.int64)
         hw = np.empty((m, 3), np.float64)
         nh = _bin_hits(1, d2, h2["geomID"], h2["primID"], h2["u"].astype(np.float64), h2["v"].astype(np.float64),
-                       scene.face_offset, scene.face_normal, self.two_sided_face, *lat, hr, hc, hw,
-                       np.zeros(m, np.int64))
+                       scene.face_offset, scene.face_normal, self.two_sided_face, self._c_face_s, self._c_lat_start,
+                       self._c_lat_ids, hr, hc, hw, np.zeros(m, np.int64))
         raw["g_rows"].append(src[hr[:nh]])
         raw["g_cols"].append(hc[:nh])
         raw["g_w"].append(hw[:nh, :, None] * w2[hr[:nh]][:, None, :])
