@@ -178,6 +178,16 @@ _MIN_SUB_GATHER = 4
 # with 1 bounce, 5 % with 4, 1 % with 8
 _GATHER_BOUNCES = 4
 _NEAR_SPACINGS = 2.0
+# ... and the first bounce (from the final-gather hit itself) only from hits nearer than
+# _FIRST_NEAR_SPACINGS spacings (and glossy hits): a farther hit takes the cache's indirect
+# light, which the contact rows (raytrace.cache) made right near contacts, so a one-sample
+# bounce there added more noise than the bias it removed. Measured on the 12 scenes of
+# benchmarks/bench_time_error.py at 1280×960 against every hit continued (median error, bias
+# and noise without the reference's noise, two seeds): ``balanced``-8 3.22 → 3.17 %, -16
+# 2.23 → 2.20 % (2 spacings: 2.22 %), -64 1.45 → 1.45 %; 35 of the 36 scene-preset errors
+# lower or equal (interior bias² up, noise² down more: -16 summed 23.7 → 29.1 and
+# 46.5 → 36.4 ×10⁻⁴), with fewer rays (BENCHMARKS.md, "The first bounce only near")
+_FIRST_NEAR_SPACINGS = 1.0
 # weight of the environment control variate in the final gather (raytrace._shading.gather_sum)
 GATHER_ALPHA = 1.0
 # the lobe of a part is sampled (``balanced``) only where its specular albedo is at least this
@@ -602,8 +612,10 @@ class _Context:
 
     def _traced_indirect(self, o, d, h, hu, hv, pix, n_rays, seed):
         """Traced estimate of the indirect irradiance at each gather hit (−1 at misses): a path
-        of up to _GATHER_BOUNCES cosine-weighted one-sample bounces from the hit (continued
-        only from hits nearer than _NEAR_SPACINGS lattice spacings), the Sun exact (a shadow
+        of up to _GATHER_BOUNCES cosine-weighted one-sample bounces from the hit (from hits
+        nearer than _FIRST_NEAR_SPACINGS lattice spacings, each further bounce only from hits
+        nearer than _NEAR_SPACINGS; glossy hits always; elsewhere the hit's indirect light is
+        the cache's), the Sun exact (a shadow
         ray) at every vertex, the cache beyond the last (E ≈ π·L_in at each vertex). Light
         bounced several times within a gap narrower than the cache's lattice is then traced,
         not interpolated: the cache's error there reaches the pixel multiplied once more by
@@ -612,10 +624,25 @@ class _Context:
         (:func:`raytrace._shading.bounce2_rays`): a gold foil facing a lit wall reflects the wall,
         not the average of its surroundings."""
         keys = (np.repeat(pix.astype(np.int64), n_rays) * n_rays + np.tile(np.arange(n_rays), len(pix)))
-        return self._bounces(o, d, h, hu, hv, keys, seed, _GATHER_BOUNCES)
+        return self._bounces(o, d, h, hu, hv, keys, seed, _GATHER_BOUNCES,
+                             first_near_m=_FIRST_NEAR_SPACINGS * self.cache.spacing_m)
 
-    def _bounces(self, o, d, h, hu, hv, keys, seed, levels):
-        """:meth:`_traced_indirect` for rays (o, d) with hits h, ``levels`` bounces deep."""
+    def _continued(self, h, near_m):
+        """Which rays' hits a traced path continues from: those nearer than ``near_m`` (the
+        rays' directions unit) and every glossy hit, whose reflection the cache's irradiance
+        cannot stand in for."""
+        go = h["tfar"] < near_m
+        hit = h["geomID"] >= 0
+        if self.glossy.any() and hit.any():
+            sc = self.scene
+            f = sc.face_offset[h["geomID"][hit]] + h["primID"][hit]
+            go[hit] |= self.glossy[sc.component_of_face[f]]
+        return go
+
+    def _bounces(self, o, d, h, hu, hv, keys, seed, levels, first_near_m=None):
+        """:meth:`_traced_indirect` for rays (o, d) with hits h, ``levels`` bounces deep; with
+        ``first_near_m``, the first bounce only from hits :meth:`_continued` at that distance
+        (the others take the cache's indirect light)."""
         m = len(d)
         e_ind = np.empty((m, 3))
         K.hit_or_miss_rows(h["geomID"], e_ind)  # directions below the surface carry nothing
@@ -630,6 +657,10 @@ class _Context:
         K.bounce2_rays(o, d, h["tfar"].astype(np.float64), h["geomID"], h["primID"], hu, hv, sc.face_offset,
                        sc.face_normal, sc.corner_normal, sc.component_of_face, self.glossy, self.f0, self.alpha,
                        keys, seed, self.eps, want, o2, d2, w2)
+        if first_near_m is not None:
+            go = self._continued(h, first_near_m)
+            want &= go
+            e_ind[(h["geomID"] >= 0) & ~go] = -1.0
         idx = np.flatnonzero(want)
         if len(idx):
             o2c, d2c = np.empty((len(idx), 3)), np.empty((len(idx), 3))
@@ -642,13 +673,8 @@ class _Context:
             e2 = np.full((len(idx), 3), -1.0)  # beyond the last traced bounce: the cache
             if levels > 1:
                 # continued: hits within _NEAR_SPACINGS lattice spacings (d2 is unit), and every
-                # glossy hit, whose reflection the cache's irradiance cannot stand in for
-                go = h2["tfar"] < _NEAR_SPACINGS * self.cache.spacing_m
-                hit2 = h2["geomID"] >= 0
-                if self.glossy.any() and hit2.any():
-                    f2 = sc.face_offset[h2["geomID"][hit2]] + h2["primID"][hit2]
-                    go[hit2] |= self.glossy[sc.component_of_face[f2]]
-                near = np.flatnonzero(go)
+                # glossy hit
+                near = np.flatnonzero(self._continued(h2, _NEAR_SPACINGS * self.cache.spacing_m))
                 if len(near):
                     # keys * 4 + 1: the next bounce's samples, distinct per sample and depth
                     e2[near] = self._bounces(o2[near], d2[near], {k: v[near] for k, v in h2.items()}, hu2[near],
