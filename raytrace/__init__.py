@@ -1,7 +1,15 @@
 """Geometry and light: Embree ray casting on trimesh meshes of the targets.
 
-Planned content (issue 3 onwards): the four built-in targets, the pinhole camera, one hit
-record per primary ray and every AOV from it (depth, normals, instance ids), then Numba
-shading. ``raytrace`` knows nothing of orbits: it receives poses and light directions
-already expressed in the target's body frame.
+The four built-in targets (``targets``), meshes from files (``meshio``, ``model``), the pinhole
+camera (``camera``), one hit record per primary ray and every AOV from it: depth, normals,
+instance ids (``scene``); the lighting environment (``lighting``, ``environment``, ``stars``),
+materials (``materials``, ``brdf``) and Numba shading of the Sun, Earth, sky and
+inter-reflection (``shade``, with the radiance cache ``cache`` and the path tracer behind the
+``reference`` preset, ``pathtrace``); explicit scene files (``scenefile``) and frame export
+(``export``).
+``raytrace`` knows nothing of orbits: it receives poses and light directions already
+expressed in the target's body frame.
+
+``_jit``, which every module with kernels imports, sets numba's thread policy and, on Linux,
+malloc's thresholds for the large per-frame arrays (README, "Memory").
 """

@@ -30,7 +30,49 @@ import os
 # → 0.243 (two interleaved runs each, benchmarks/bench_time_error.py scenes)
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
+import ctypes
+import sys
+
 import numba
+
+# glibc's malloc serves blocks above its mmap threshold (128 KiB, raised dynamically up to
+# 32 MiB as such blocks are freed) by fresh mappings, and returns heap top beyond its trim
+# threshold (twice that) to the system: the MB-sized arrays a frame allocates and frees by the
+# hundred were then mapped and zero-filled by the kernel again on every frame, or not,
+# depending on what the process had freed before. Fixed thresholds keep them in the heap,
+# reused. Measured (BENCHMARKS.md, "Allocator"), ``balanced``-16 at 1280×960, each scene in a
+# fresh process, two rounds alternated: Tiangong's three views 11–15 k page faults per frame
+# → ~300, system time 44–76 → 14–25 ms per frame, min time 0.84× (``sunlit``) and 0.98–1.01×;
+# the other nine had ≤ 400 faults already, 0.94–1.01×. MALLOC_MMAP_THRESHOLD_ /
+# MALLOC_TRIM_THRESHOLD_ in the environment, or ORBITSYNTH_KEEP_MALLOC=1, keep the user's
+# settings.
+MMAP_THRESHOLD_BYTES = 32 << 20  # glibc's largest (HEAP_MAX_SIZE / 2 on 64-bit)
+TRIM_THRESHOLD_BYTES = 512 << 20
+
+
+def tune_allocator() -> bool:
+    """Fix glibc's mmap and trim thresholds (see above); True if both were set. A no-op
+    (False) off Linux/glibc, or where the environment already sets either."""
+    if os.environ.get("ORBITSYNTH_KEEP_MALLOC", "") not in ("", "0"):
+        return False
+    if "MALLOC_MMAP_THRESHOLD_" in os.environ or "MALLOC_TRIM_THRESHOLD_" in os.environ:
+        return False
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        mallopt = ctypes.CDLL("libc.so.6").mallopt
+    except (OSError, AttributeError):  # not glibc (musl has no libc.so.6)
+        return False
+    mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
+    mallopt.restype = ctypes.c_int
+    M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
+    # the mmap threshold first: setting the trim threshold alone would switch off the dynamic
+    # raise of the mmap one and leave it at 128 KiB (tried: 92 k faults per frame)
+    return mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES) == 1 and \
+        mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES) == 1
+
+
+ALLOCATOR_TUNED = tune_allocator()
 
 FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
