@@ -52,7 +52,8 @@ TRIM_THRESHOLD_BYTES = 512 << 20
 
 def tune_allocator() -> bool:
     """Fix glibc's mmap and trim thresholds (see above); True if both were set. A no-op
-    (False) off Linux/glibc, or where the environment already sets either."""
+    (False) off Linux/glibc, with ORBITSYNTH_KEEP_MALLOC set (other than 0), or where the
+    environment already sets either threshold."""
     if os.environ.get("ORBITSYNTH_KEEP_MALLOC", "") not in ("", "0"):
         return False
     if "MALLOC_MMAP_THRESHOLD_" in os.environ or "MALLOC_TRIM_THRESHOLD_" in os.environ:
