@@ -1901,6 +1901,17 @@ def snapshots_main(argv: list) -> int:
     args = p.parse_args(argv)
     names = snapshot_cases(args.targets, args.patterns)
     diff_dir = args.diff_dir or tempfile.mkdtemp(prefix="orbitsynth-snapshots-")
+    try:
+        return _snapshots_run(args, names, diff_dir)
+    finally:
+        # a temporary folder of our own stays only if it holds diff images
+        if not args.diff_dir and os.path.isdir(diff_dir) and not os.listdir(diff_dir):
+            os.rmdir(diff_dir)
+
+
+def _snapshots_run(args, names: list, diff_dir: str) -> int:
+    """:func:`snapshots_main` after parsing: compare (or with --update write) the snapshots
+    ``names``, diff images into ``diff_dir``."""
     t0 = time.perf_counter()
     failures, nbytes = [], 0
     try:
@@ -1933,8 +1944,6 @@ def snapshots_main(argv: list) -> int:
         sys.stdout.write(f"{len(failures)} failure(s) in {len(names)} snapshots ({elapsed:.1f} s); diff images in "
                          f"{diff_dir}; if the change is intended: python cli.py snapshots --update\n")
         return 1
-    if not args.diff_dir:
-        os.rmdir(diff_dir)
     sys.stdout.write(f"{len(names)} snapshots match the references in {elapsed:.1f} s\n")
     return 0
 

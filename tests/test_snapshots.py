@@ -198,3 +198,30 @@ def test_snapshots_command_errors_are_one_line(tmp_path, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--targets" in err and "tiangong" in err
+
+
+def test_snapshots_command_leaves_no_empty_temporary_folder(tmp_path, monkeypatch, capsys):
+    # without --diff-dir the diff images go to a new temporary folder; it must not stay behind
+    # empty when there is nothing to show (stale references, --update, all matching)
+    import tempfile
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    target, pattern = SMALL_TARGET.split("_")
+    refs = tmp_path / "refs"
+    refs.mkdir()
+    argv = ["snapshots", "--targets", target, "--patterns", pattern, "--dir", str(refs)]
+    assert cli.main(argv) == 1  # no references yet: stale
+    assert list(tmp.iterdir()) == []
+    assert cli.main(argv + ["--update"]) == 0
+    assert list(tmp.iterdir()) == []
+    assert cli.main(argv) == 0
+    assert list(tmp.iterdir()) == []
+    mask = F.read_image(str(refs / f"{SMALL_TARGET}.mask.png"))
+    y, x = _target_pixel({"mask": mask})
+    mask[y, x] += 1
+    F.write_image(str(refs / f"{SMALL_TARGET}.mask.png"), mask)
+    assert cli.main(argv) == 1  # a failure keeps its diff image
+    (kept,) = tmp.iterdir()
+    assert (kept / f"{SMALL_TARGET}.mask.diff.png").is_file()
+    assert str(kept) in capsys.readouterr().out
