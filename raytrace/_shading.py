@@ -504,20 +504,78 @@ def _cmj_point(j, gx, gy, perm_x, perm_y, jx, jy):
     return (i + (perm_y[r] + jx) / gy) / gx, (r + (perm_x[i] + jy) / gx) / gy
 
 
+@jit
+def _reverse_bits32(x):
+    x = ((x >> 1) & 0x55555555) | ((x & 0x55555555) << 1)
+    x = ((x >> 2) & 0x33333333) | ((x & 0x33333333) << 2)
+    x = ((x >> 4) & 0x0F0F0F0F) | ((x & 0x0F0F0F0F) << 4)
+    x = ((x >> 8) & 0x00FF00FF) | ((x & 0x00FF00FF) << 8)
+    return ((x >> 16) | (x << 16)) & 0xFFFFFFFF
+
+
+@jit
+def _owen_scramble32(x, seed):
+    """Nested uniform (Owen) scrambling of the 32-bit fraction x, keyed by ``seed``: Burley's
+    hash-based form (2020, "Practical Hash-based Owen Scrambling", JCGT 9(4), §3–4): bits
+    reversed, the Laine–Karras permutation (each bit flipped by a hash of the bits before it),
+    reversed back."""
+    M = 0xFFFFFFFF
+    x = _reverse_bits32(x)
+    x = (x + seed) & M
+    x ^= (x * 0x6C50B47C) & M
+    x ^= (x * 0xB82F1E52) & M
+    x ^= (x * 0xC7AFE638) & M
+    x ^= (x * 0x8D22F6E6) & M
+    return _reverse_bits32(x)
+
+
+@jit
+def _sobol2(i):
+    """Point i of the first two dimensions of the Sobol sequence as 32-bit fractions: the
+    van der Corput radical inverse, and the second dimension, whose direction numbers
+    m_k = 2·m_{k−1} XOR m_{k−1} (m_1 = 1; primitive polynomial x + 1) are the Pascal matrix
+    mod 2 (Joe & Kuo's table: 0x80000000, 0xC0000000, 0xA0000000, 0xF0000000, …). Together they
+    are a (0, 2)-sequence: every aligned block of 2^m points is a (0, m, 2)-net."""
+    x = 0
+    y = 0
+    m = 1
+    bit = 0
+    while i > 0 and bit < 32:
+        if i & 1:
+            x ^= 1 << (31 - bit)
+            y ^= m << (31 - bit)
+        m = (m << 1) ^ m
+        i >>= 1
+        bit += 1
+    return x & 0xFFFFFFFF, y & 0xFFFFFFFF
+
+
+@jit
+def owen_sobol2(i, key, stream):
+    """Sample i (≥ 0) of an Owen-scrambled, index-shuffled 2-D Sobol sequence on [0, 1)²,
+    keyed by (key, stream) (Burley 2020, §5): the index scrambled too, so that every prefix of
+    2^m samples is still a (0, m, 2)-net (one point in each of the 2^m cells of every
+    2^a × 2^(m−a) grid) and a prefix of any length is well spread; a sequence continued from
+    sample n fills in the strata the first n left."""
+    j = _owen_scramble32(i, _hash32(key, stream))
+    x, y = _sobol2(j)
+    x = _owen_scramble32(x, _hash32(key, stream + 1))
+    y = _owen_scramble32(y, _hash32(key, stream + 2))
+    return x / 4294967296.0, y / 4294967296.0
+
+
 @pjit
-def gather_rays(P, NS, NG, n_rays, seed, pix, eps, out_o, out_d):
-    """n_rays cosine-weighted directions about the shading normal per point, correlated
-    multi-jittered (Kensler 2013) in (radius², azimuth) on an exact gx × gy grid: one point in
-    every cell and in every one of the n_rays fine rows and columns, permuted and jittered per
-    pixel and seed."""
-    gx = _strata(n_rays)
-    gy = n_rays // gx
+def gather_rays(P, NS, NG, start, first, seed, pix, eps, out_o, out_d):
+    """Cosine-weighted directions about the shading normal, rays start[k] … start[k + 1] − 1
+    for point k: samples first[k], first[k] + 1, … of its pixel's Owen-scrambled Sobol
+    sequence (:func:`owen_sobol2`, keyed by pixel and seed) in (radius², azimuth). Any 2^m of
+    them from sample 0 are a (0, m, 2)-net; a second pass from sample n continues the same
+    sequence, so the two passes together are as well stratified as one."""
     for k in numba.prange(P.shape[0]):
         key = pix[k] * 1009 + seed
-        perm_x, perm_y = _cmj_perms(gx, gy, key, 2 * seed + 15)
-        for j in range(n_rays):
-            u1, u2 = _cmj_point(j, gx, gy, perm_x, perm_y, _hash01(key, 2 * j + 11), _hash01(key, 2 * j + 12))
-            m = k * n_rays + j
+        for j in range(start[k + 1] - start[k]):
+            u1, u2 = owen_sobol2(first[k] + j, key, 2 * seed + 15)
+            m = start[k] + j
             out_d[m, 0], out_d[m, 1], out_d[m, 2] = cosine_direction(NS[k, 0], NS[k, 1], NS[k, 2], u1, u2)
             for a in range(3):
                 out_o[m, a] = P[k, a] + eps * NG[k, a]
@@ -604,11 +662,12 @@ def incoming_rays(O, D, geom, prim, hu, hv, face_offset, face_normal, corner_nor
 
 
 @pjit
-def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
+def gather_sum(start, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
                mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis,
                e_ind, NS, E_unocc, alpha, out, out_var):
-    """Irradiance estimate per point from its n_rays cosine-weighted rays (about NS; rays under
-    the geometric surface carry nothing), with the environment as a control variate:
+    """Irradiance estimate per point k from its N = start[k + 1] − start[k] cosine-weighted rays
+    (rays start[k] … start[k + 1] − 1, about NS; rays under the geometric surface carry
+    nothing), with the environment as a control variate:
 
         E = α·E_env(n) + π/N Σ_j [L_in(ω_j) − α·L_env(ω_j)],
 
@@ -627,12 +686,13 @@ def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, c
     per-ray terms: s²/N [(W/m²)²], which guides :func:`atrous` (0 for N = 1)."""
     a = alpha
     for k in numba.prange(out.shape[0]):
+        n_rays = start[k + 1] - start[k]
         sr = 0.0
         sg = 0.0
         sb = 0.0
         sy2 = 0.0  # Σ (luminance of the ray's term)²
         for j in range(n_rays):
-            m = k * n_rays + j
+            m = start[k] + j
             below = D[m, 0] * NG[k, 0] + D[m, 1] * NG[k, 1] + D[m, 2] * NG[k, 2] <= 0.0
             if geom[m] < 0 and not below:
                 if a == 1.0:
@@ -661,7 +721,7 @@ def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, c
                 sb += b
                 y += 0.2126 * r + 0.7152 * g + 0.0722 * b
             sy2 += y * y
-        k_ = math.pi / n_rays
+        k_ = math.pi / max(n_rays, 1)
         out[k, 0] = sr * k_
         out[k, 1] = sg * k_
         out[k, 2] = sb * k_
@@ -676,6 +736,75 @@ def gather_sum(n_rays, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, c
             out[k, 0] += a * er
             out[k, 1] += a * eg
             out[k, 2] += a * eb
+
+
+@pjit_exact
+def same_part_mean(img, inst, r, out):
+    """out[v, u] = the mean of img over the other pixels of the same part (inst equal to its
+    own) among the (2r + 1)² around (v, u), or img[v, u] where there is none; left alone off
+    the target (inst 0). Leaving the pixel itself out keeps a two-pass gather's allocation
+    independent of the pixel's own first-pass rays (:func:`raytrace.shade._gather_two_pass`)."""
+    H, W = inst.shape
+    for v in numba.prange(H):
+        for u in range(W):
+            i0 = inst[v, u]
+            if i0 == 0:
+                continue
+            sv = 0.0
+            nv = 0
+            for vv in range(max(v - r, 0), min(v + r + 1, H)):
+                for uu in range(max(u - r, 0), min(u + r + 1, W)):
+                    if inst[vv, uu] == i0 and (vv != v or uu != u):
+                        sv += img[vv, uu]
+                        nv += 1
+            out[v, u] = sv / nv if nv > 0 else img[v, u]
+
+
+@jit_exact
+def _allotted(c, w, cost, n_min, n_max):
+    """Σ_k cost_k · clip(⌊c·w_k + ½⌋, n_min, n_max)."""
+    t = 0.0
+    for k in range(w.shape[0]):
+        t += cost[k] * min(max(int(math.floor(c * w[k] + 0.5)), n_min), n_max)
+    return t
+
+
+@jit_exact
+def allocate_rays(sig, cost, n_min, n_max, budget, out):
+    """Rays per point for the least summed variance Σ σ_k²/n_k at a given cost Σ cost_k·n_k
+    (Neyman allocation with costs: n_k ∝ σ_k/√cost_k; σ_k the per-ray standard deviation of
+    point k's estimate, cost_k what one of its rays costs), rounded and clipped to
+    [n_min, n_max]: out[k] = clip(⌊c·σ_k/√cost_k + ½⌋, n_min, n_max) with the largest c (by
+    bisection) whose cost does not exceed ``budget``. Where every σ is 0, every point gets the
+    same number of rays."""
+    n = sig.shape[0]
+    if n == 0:
+        return
+    smax = 0.0
+    csum = 0.0
+    for k in range(n):
+        smax = max(smax, sig[k])
+        csum += cost[k]
+    if not smax > 0.0:
+        for k in range(n):
+            out[k] = min(max(int(budget / csum), n_min), n_max)
+        return
+    w = np.empty(n)
+    for k in range(n):
+        w[k] = max(sig[k], 1e-3 * smax) / math.sqrt(cost[k])  # a σ of 0 from a few rays is not certain
+    wmin = w[0]
+    for k in range(n):
+        wmin = min(wmin, w[k])
+    lo = 0.0
+    hi = (n_max + 1.0) / wmin
+    for _ in range(64):
+        c = 0.5 * (lo + hi)
+        if _allotted(c, w, cost, n_min, n_max) > budget:
+            hi = c
+        else:
+            lo = c
+    for k in range(n):
+        out[k] = min(max(int(math.floor(lo * w[k] + 0.5)), n_min), n_max)
 
 
 # the filter kernels are compiled without fastmath: with it, the code numba loads from its cache

@@ -137,8 +137,12 @@ def test_perpendicular_plates_first_bounce_matches_form_factor(quality, samples,
     rho = np.array([4.0, -0.3, 1.2])
     R, t = _pose(rho)
     light = Lighting(sun_dir_body=(0, 0, 1), sun_irradiance_W_m2=e)  # B is edge-on to the Sun
-    frame = render(scene, CAM, R, t, light, quality=quality, samples=samples)
-    geo = frame.geometry
+    # the expectation is the form factor's: ``balanced``'s gather is averaged over 4 seeds (a
+    # 5×5 patch of one 32-ray render is still ±2–3 % noisy where B is far from A)
+    seeds = range(4) if quality == "balanced" else range(1)
+    frames = [render(scene, CAM, R, t, light, quality=quality, samples=samples, seed=sd) for sd in seeds]
+    frame, geo = frames[0], frames[0].geometry
+    radiance = np.mean([f.radiance for f in frames], axis=0)
     # 5×5-pixel patches on B's face away from its borders (averaging the path tracer's noise);
     # each pixel's depth back-projected to its point on B
     inner = binary_erosion(geo.instance == 2, iterations=6)
@@ -152,7 +156,7 @@ def test_perpendicular_plates_first_bounce_matches_form_factor(quality, samples,
                 p_cam = np.array([(uu - CAM.cx) / CAM.fx * z_c, (vv - CAM.cy) / CAM.fy * z_c, z_c])
                 p = R.T @ (p_cam - t)
                 expect.append(rho_b / math.pi * rho_a * e * _form_factor_to_floor(p[1], p[2]))
-                got.append(float(frame.radiance[vv, uu, 0]))
+                got.append(float(radiance[vv, uu, 0]))
         # B also gets light from A that first bounced off B (second order, < 2 %)
         assert np.mean(got) == pytest.approx(np.mean(expect), rel=tol), (v[k], u[k], np.mean(got), np.mean(expect))
 
