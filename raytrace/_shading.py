@@ -747,17 +747,26 @@ def same_part_mean(img, inst, r, out):
     H, W = inst.shape
     for v in numba.prange(H):
         for u in range(W):
-            i0 = inst[v, u]
-            if i0 == 0:
+            if inst[v, u] == 0:
                 continue
-            sv = 0.0
-            nv = 0
-            for vv in range(max(v - r, 0), min(v + r + 1, H)):
-                for uu in range(max(u - r, 0), min(u + r + 1, W)):
-                    if inst[vv, uu] == i0 and (vv != v or uu != u):
-                        sv += img[vv, uu]
-                        nv += 1
+            sv, nv = _same_part_sum(img, inst, v, u, r, False)
             out[v, u] = sv / nv if nv > 0 else img[v, u]
+
+
+@inline
+def _same_part_sum(img, inst, v, u, r, with_centre):
+    """Σ img and the number of pixels over the (2r + 1)² around (v, u) whose id is its own
+    (itself included or not)."""
+    H, W = inst.shape
+    i0 = inst[v, u]
+    sv = 0.0
+    nv = 0
+    for vv in range(max(v - r, 0), min(v + r + 1, H)):
+        for uu in range(max(u - r, 0), min(u + r + 1, W)):
+            if inst[vv, uu] == i0 and (with_centre or vv != v or uu != u):
+                sv += img[vv, uu]
+                nv += 1
+    return sv, nv
 
 
 @jit_exact
@@ -821,13 +830,7 @@ def guide_images(img, var, inst, lum, vblur):
             if i0 == 0:
                 continue
             lum[v, u] = 0.2126 * img[v, u, 0] + 0.7152 * img[v, u, 1] + 0.0722 * img[v, u, 2]
-            sv = 0.0
-            nv = 0
-            for vv in range(max(v - 1, 0), min(v + 2, H)):
-                for uu in range(max(u - 1, 0), min(u + 2, W)):
-                    if inst[vv, uu] == i0:
-                        sv += var[vv, uu]
-                        nv += 1
+            sv, nv = _same_part_sum(var, inst, v, u, 1, True)
             vblur[v, u] = sv / nv
 
 
