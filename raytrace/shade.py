@@ -135,9 +135,9 @@ class Quality:
         (:func:`_filter_residual`); 0: the weighted mean [-].
     pilot_rays : int
         > 0: the final gather runs in two passes, ``pilot_rays`` rays at every pixel, then the
-        rest of the frame's gather_rays × pixels rays shared out in proportion to the noise the
-        first pass measured (its per-ray standard deviation over the 5 × 5 pixels of the same
-        part; :func:`_gather_two_pass`); 0: gather_rays rays at every pixel [-].
+        rest of the frame's gather_rays × pixels rays (a ray that hits counted as several that
+        escape) shared out by the noise the first pass measured among each pixel's neighbours
+        on the same part (:func:`_gather_two_pass`); 0: gather_rays rays at every pixel [-].
     """
 
     name: str
