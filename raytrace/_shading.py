@@ -567,14 +567,14 @@ def owen_sobol2(i, key, stream):
 @pjit
 def gather_rays(P, NS, NG, start, first, seed, pix, eps, out_o, out_d):
     """Cosine-weighted directions about the shading normal, rays start[k] … start[k + 1] − 1
-    for point k: samples first[k], first[k] + 1, … of its pixel's Owen-scrambled Sobol
+    for point k: samples first, first + 1, … of its pixel's Owen-scrambled Sobol
     sequence (:func:`owen_sobol2`, keyed by pixel and seed) in (radius², azimuth). Any 2^m of
     them from sample 0 are a (0, m, 2)-net; a second pass from sample n continues the same
     sequence, so the two passes together are as well stratified as one."""
     for k in numba.prange(P.shape[0]):
         key = pix[k] * 1009 + seed
         for j in range(start[k + 1] - start[k]):
-            u1, u2 = owen_sobol2(first[k] + j, key, 2 * seed + 15)
+            u1, u2 = owen_sobol2(first + j, key, 2 * seed + 15)
             m = start[k] + j
             out_d[m, 0], out_d[m, 1], out_d[m, 2] = cosine_direction(NS[k, 0], NS[k, 1], NS[k, 2], u1, u2)
             for a in range(3):
@@ -806,7 +806,7 @@ def allocate_rays(sig, cost, n_min, n_max, budget, out):
         wmin = min(wmin, w[k])
     lo = 0.0
     hi = (n_max + 1.0) / wmin
-    for _ in range(64):
+    for _ in range(40):  # c to 2^−40 of hi: every c·w_k to < 10⁻⁶ of a ray
         c = 0.5 * (lo + hi)
         if _allotted(c, w, cost, n_min, n_max) > budget:
             hi = c

@@ -614,8 +614,6 @@ class _Context:
         n = len(s["P"])
         if var is None:
             var = np.empty(n)
-        if hits is None:
-            hits = np.empty(n, dtype=np.int64)
         if counts is None:
             counts = np.full(n, n_rays, dtype=np.int64)
             kmul = n_rays
@@ -633,11 +631,11 @@ class _Context:
         E = np.empty((n, 3))
         for a, b in zip(bounds[:-1], bounds[1:]):
             E[a:b] = self._gather_chunk({k: v[a:b] for k, v in s.items()}, counts[a:b], kmul, first, pix[a:b],
-                                        seeds, var[a:b], hits[a:b])
+                                        seeds, var[a:b], None if hits is None else hits[a:b])
         return E
 
     def _gather_chunk(self, s, counts, kmul: int, first: int, pix: np.ndarray, seeds, var: np.ndarray,
-                      hits: np.ndarray):
+                      hits: np.ndarray | None):
         n = len(s["P"])
         start = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(counts, out=start[1:])
@@ -645,9 +643,9 @@ class _Context:
         o = np.empty((m, 3))
         d = np.empty((m, 3))
         seed, path_seed = seeds
-        K.gather_rays(s["P"], s["NS"], s["NG"], start, np.full(n, first, dtype=np.int64), seed, pix, self.eps, o, d)
+        K.gather_rays(s["P"], s["NS"], s["NG"], start, first, seed, pix, self.eps, o, d)
         h = self.scene.intersect(o, d)
-        if n:
+        if hits is not None and n:
             hits[:] = np.add.reduceat((h["geomID"] >= 0).astype(np.int64), start[:-1])
         hu, hv = h["u"].astype(np.float64), h["v"].astype(np.float64)
         vis = self._bounce_sun(o, d, h)

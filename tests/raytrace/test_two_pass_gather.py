@@ -88,7 +88,7 @@ def _gather_u(counts, first, seed=9):
     N = np.tile([0.0, 0.0, 1.0], (n_pts, 1))
     o = np.empty((start[-1], 3))
     d = np.empty((start[-1], 3))
-    K.gather_rays(P, N, N, start, np.asarray(first, dtype=np.int64), seed,
+    K.gather_rays(P, N, N, start, first, seed,
                   np.arange(100, 100 + n_pts, dtype=np.int64), 1e-6, o, d)
     u1 = 1.0 - d[:, 2] ** 2
     u2 = np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi) % 1.0
@@ -106,7 +106,7 @@ def _is_net(u1, u2):
 
 @pytest.mark.parametrize("n", [1, 2, 4, 8, 16, 32, 64, 128])
 def test_gather_directions_are_a_net_at_every_power_of_two(n):
-    for u1, u2 in _gather_u([n] * 4, [0] * 4):
+    for u1, u2 in _gather_u([n] * 4, 0):
         assert _is_net(u1, u2)
 
 
@@ -116,17 +116,17 @@ def test_a_second_pass_fills_the_strata_the_first_left(n_pilot, total):
     together the first `total` samples of one sequence: a net when `total` is a power of 2;
     two independent patterns of those sizes are not."""
     pts = 5
-    first = _gather_u([n_pilot] * pts, [0] * pts)
-    second = _gather_u([total - n_pilot] * pts, [n_pilot] * pts)
+    first = _gather_u([n_pilot] * pts, 0)
+    second = _gather_u([total - n_pilot] * pts, n_pilot)
     for (a1, a2), (b1, b2) in zip(first, second):
         assert _is_net(np.concatenate([a1, b1]), np.concatenate([a2, b2]))
-    other = _gather_u([total - n_pilot] * pts, [0] * pts, seed=10)
+    other = _gather_u([total - n_pilot] * pts, 0, seed=10)
     assert not all(_is_net(np.concatenate([a1, b1]), np.concatenate([a2, b2]))
                    for (a1, a2), (b1, b2) in zip(first, other))
 
 
 def test_gather_directions_are_uniform_over_seeds():
-    u = np.concatenate([np.column_stack(_gather_u([12], [5], seed=s)[0]) for s in range(300)])
+    u = np.concatenate([np.column_stack(_gather_u([12], 5, seed=s)[0]) for s in range(300)])
     for col in (0, 1):
         hist = np.histogram(u[:, col], bins=10, range=(0, 1))[0]
         assert np.abs(hist / len(u) - 0.1).max() < 0.015
