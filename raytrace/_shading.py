@@ -514,40 +514,72 @@ def _reverse_bits32(x):
 
 
 @jit
-def _owen_scramble32(x, seed):
-    """Nested uniform (Owen) scrambling of the 32-bit fraction x, keyed by ``seed``: Burley's
-    hash-based form (2020, "Practical Hash-based Owen Scrambling", JCGT 9(4), §3–4): bits
-    reversed, the Laine–Karras permutation (each bit flipped by a hash of the bits before it),
-    reversed back."""
+def _laine_karras32(x, seed):
+    """The Laine–Karras permutation of the 32-bit integer x, keyed by ``seed``: every bit
+    flipped by a hash of the bits below it (Burley 2020, "Practical Hash-based Owen
+    Scrambling", JCGT 9(4), §3)."""
     M = 0xFFFFFFFF
-    x = _reverse_bits32(x)
     x = (x + seed) & M
     x ^= (x * 0x6C50B47C) & M
     x ^= (x * 0xB82F1E52) & M
     x ^= (x * 0xC7AFE638) & M
     x ^= (x * 0x8D22F6E6) & M
-    return _reverse_bits32(x)
+    return x
 
 
 @jit
-def _sobol2(i):
-    """Point i of the first two dimensions of the Sobol sequence as 32-bit fractions: the
-    van der Corput radical inverse, and the second dimension, whose direction numbers
-    m_k = 2·m_{k−1} XOR m_{k−1} (m_1 = 1; primitive polynomial x + 1) are the Pascal matrix
-    mod 2 (Joe & Kuo's table: 0x80000000, 0xC0000000, 0xA0000000, 0xF0000000, …). Together they
-    are a (0, 2)-sequence: every aligned block of 2^m points is a (0, m, 2)-net."""
-    x = 0
-    y = 0
+def _owen_scramble32(x, seed):
+    """Nested uniform (Owen) scrambling of the 32-bit fraction x, keyed by ``seed``: Burley's
+    hash-based form (2020, §3–4): bits reversed, the Laine–Karras permutation (each bit flipped
+    by a hash of the bits before it), reversed back."""
+    return _reverse_bits32(_laine_karras32(_reverse_bits32(x), seed))
+
+
+def _sobol2_byte_tables():
+    """The second dimension of the Sobol sequence as four 256-entry tables, one per byte of
+    the index: entry b of table k is the XOR of the direction numbers of the set bits of b
+    (bits 8k … 8k + 7 of the index). Direction numbers m_k = 2·m_{k−1} XOR m_{k−1} (m_1 = 1;
+    primitive polynomial x + 1), i.e. the Pascal matrix mod 2 (Joe & Kuo's table:
+    0x80000000, 0xC0000000, 0xA0000000, 0xF0000000, …)."""
+    v = []
     m = 1
-    bit = 0
-    while i > 0 and bit < 32:
-        if i & 1:
-            x ^= 1 << (31 - bit)
-            y ^= m << (31 - bit)
+    for bit in range(32):
+        v.append(m << (31 - bit))
         m = (m << 1) ^ m
-        i >>= 1
-        bit += 1
-    return x & 0xFFFFFFFF, y & 0xFFFFFFFF
+    t = np.zeros((4, 256), np.int64)
+    for k in range(4):
+        for b in range(256):
+            acc = 0
+            for i in range(8):
+                if b >> i & 1:
+                    acc ^= v[8 * k + i]
+            t[k, b] = acc
+    return t
+
+
+_SOBOL2_BYTES = _sobol2_byte_tables()
+
+
+@jit
+def _sobol2_y(i):
+    """Point i (< 2³²) of the Sobol sequence's second dimension as a 32-bit fraction: four
+    table look-ups (:func:`_sobol2_byte_tables`). With the first dimension, the van der
+    Corput radical inverse (i's bits reversed), a (0, 2)-sequence: every aligned block of 2^m
+    points is a (0, m, 2)-net."""
+    t = _SOBOL2_BYTES
+    return t[0, i & 255] ^ t[1, (i >> 8) & 255] ^ t[2, (i >> 16) & 255] ^ t[3, (i >> 24) & 255]
+
+
+@jit
+def _owen_sobol2_keyed(i, h_index, h_x, h_y):
+    """Sample i of the Owen-scrambled, index-shuffled 2-D Sobol sequence with the scrambling
+    keys already hashed (:func:`owen_sobol2`). The first dimension is the radical inverse of
+    the shuffled index j, and its scramble reverses the bits back: reverse(LK(j)) without the
+    two reversals in between."""
+    j = _owen_scramble32(i, h_index)
+    x = _reverse_bits32(_laine_karras32(j, h_x))
+    y = _owen_scramble32(_sobol2_y(j), h_y)
+    return x / 4294967296.0, y / 4294967296.0
 
 
 @jit
@@ -557,11 +589,7 @@ def owen_sobol2(i, key, stream):
     2^m samples is still a (0, m, 2)-net (one point in each of the 2^m cells of every
     2^a × 2^(m−a) grid) and a prefix of any length is well spread; a sequence continued from
     sample n fills in the strata the first n left."""
-    j = _owen_scramble32(i, _hash32(key, stream))
-    x, y = _sobol2(j)
-    x = _owen_scramble32(x, _hash32(key, stream + 1))
-    y = _owen_scramble32(y, _hash32(key, stream + 2))
-    return x / 4294967296.0, y / 4294967296.0
+    return _owen_sobol2_keyed(i, _hash32(key, stream), _hash32(key, stream + 1), _hash32(key, stream + 2))
 
 
 @pjit
@@ -571,14 +599,20 @@ def gather_rays(P, NS, NG, start, first, seed, pix, eps, out_o, out_d):
     sequence (:func:`owen_sobol2`, keyed by pixel and seed) in (radius², azimuth). Any 2^m of
     them from sample 0 are a (0, m, 2)-net; a second pass from sample n continues the same
     sequence, so the two passes together are as well stratified as one."""
+    stream = 2 * seed + 15
     for k in numba.prange(P.shape[0]):
         key = pix[k] * 1009 + seed
+        h_index, h_x, h_y = _hash32(key, stream), _hash32(key, stream + 1), _hash32(key, stream + 2)
+        ox = P[k, 0] + eps * NG[k, 0]
+        oy = P[k, 1] + eps * NG[k, 1]
+        oz = P[k, 2] + eps * NG[k, 2]
         for j in range(start[k + 1] - start[k]):
-            u1, u2 = owen_sobol2(first + j, key, 2 * seed + 15)
+            u1, u2 = _owen_sobol2_keyed(first + j, h_index, h_x, h_y)
             m = start[k] + j
             out_d[m, 0], out_d[m, 1], out_d[m, 2] = cosine_direction(NS[k, 0], NS[k, 1], NS[k, 2], u1, u2)
-            for a in range(3):
-                out_o[m, a] = P[k, a] + eps * NG[k, a]
+            out_o[m, 0] = ox
+            out_o[m, 1] = oy
+            out_o[m, 2] = oz
 
 
 @pjit
@@ -914,6 +948,62 @@ def atrous(img, var, vblur, lum, inst, normal, depth, fx, fy, cx, cy, step, sigm
             for c in range(C):
                 out[v, u, c] = acc[c] * isw
             out_var[v, u] = sw2v * isw * isw
+
+
+@pjit_exact
+def residual_image(rows, var, av, au, unit, img, var_img):
+    """The per-pixel rows (n, 3) and their variances into the (zeroed) images of the residual
+    filter at (av[k], au[k]); with 14 channels also the local-linear fit's moments: y·u, y·v,
+    u, v, u², u·v, v² (u, v the pixel's coordinates in units of ``unit`` pixels)."""
+    linear = img.shape[2] == 14
+    for k in numba.prange(rows.shape[0]):
+        v = av[k]
+        w = au[k]
+        var_img[v, w] = var[k]
+        for c in range(3):
+            img[v, w, c] = rows[k, c]
+        if linear:
+            x = w / unit
+            y = v / unit
+            for c in range(3):
+                img[v, w, 3 + c] = rows[k, c] * x
+                img[v, w, 6 + c] = rows[k, c] * y
+            img[v, w, 9] = x
+            img[v, w, 10] = y
+            img[v, w, 11] = x * x
+            img[v, w, 12] = x * y
+            img[v, w, 13] = y * y
+
+
+@pjit_exact
+def residual_rows(img, av, au, unit, ridge, beta, out):
+    """The filtered residual at each pixel (av[k], au[k]) of ``img``: channels 0–2 (the
+    weighted mean), or, with 14 channels (:func:`residual_image`), the weighted least-squares
+    plane through the kernel's neighbours at the pixel, its slope scaled by β, from the
+    filtered moments (a ridge on the coordinates' covariance)."""
+    linear = img.shape[2] == 14
+    for k in numba.prange(out.shape[0]):
+        v = av[k]
+        w = au[k]
+        if not linear:
+            for c in range(3):
+                out[k, c] = img[v, w, c]
+            continue
+        mu = img[v, w, 9]
+        mv = img[v, w, 10]
+        cuu = img[v, w, 11] - mu * mu + ridge
+        cuv = img[v, w, 12] - mu * mv
+        cvv = img[v, w, 13] - mv * mv + ridge
+        det = cuu * cvv - cuv * cuv
+        du = w / unit - mu
+        dv = v / unit - mv
+        for c in range(3):
+            mean = img[v, w, c]
+            cyu = img[v, w, 3 + c] - mean * mu
+            cyv = img[v, w, 6 + c] - mean * mv
+            b = (cyu * cvv - cyv * cuv) / det
+            g = (cyv * cuu - cyu * cuv) / det
+            out[k, c] = mean + beta * (b * du + g * dv)
 
 
 @pjit

@@ -847,39 +847,17 @@ def _filter_residual(rows, var, inst, at, guide, passes: int, sigma_l: float, li
     the filter is linear in its channels for given weights, so filtering y, y·u, y·v, u, v, u²,
     u·v and v² together gives the weighted moments of the regression."""
     linear_fit = linear > 0.0 and passes > 0
+    # image coordinates in units of _LL_UNIT pixels (moments of order 2 stay well scaled); a
+    # small ridge on the plane's covariance keeps a kernel one pixel wide (a thin strip)
+    # solvable, its slope across the strip then ≈ 0
+    av, au = at[0].astype(np.int64), at[1].astype(np.int64)
     img = np.zeros((*inst.shape, 14 if linear_fit else 3))
-    img[at[0], at[1], 0:3] = rows
-    if linear_fit:
-        # image coordinates in units of _LL_UNIT pixels (moments of order 2 stay well scaled)
-        u = at[1].astype(np.float64) / _LL_UNIT
-        v = at[0].astype(np.float64) / _LL_UNIT
-        img[at[0], at[1], 3:6] = rows * u[:, None]
-        img[at[0], at[1], 6:9] = rows * v[:, None]
-        img[at[0], at[1], 9] = u
-        img[at[0], at[1], 10] = v
-        img[at[0], at[1], 11] = u * u
-        img[at[0], at[1], 12] = u * v
-        img[at[0], at[1], 13] = v * v
     var_img = np.zeros(inst.shape)
-    var_img[at] = var
+    K.residual_image(rows, var, av, au, _LL_UNIT, img, var_img)
     img, _ = _atrous_passes(img, var_img, inst, guide, passes, sigma_l, overwrite=True)
-    if not linear_fit:
-        return np.ascontiguousarray(img[at])
-    f = img[at]
-    mu, mv = f[:, 9], f[:, 10]
-    # weighted covariances; a small ridge keeps a kernel one pixel wide (a thin strip) solvable,
-    # its slope across the strip then ≈ 0
-    ridge = _LL_RIDGE_PX2 / (_LL_UNIT * _LL_UNIT)
-    cuu = f[:, 11] - mu * mu + ridge
-    cuv = f[:, 12] - mu * mv
-    cvv = f[:, 13] - mv * mv + ridge
-    mean = f[:, 0:3]
-    cyu = f[:, 3:6] - mean * mu[:, None]
-    cyv = f[:, 6:9] - mean * mv[:, None]
-    det = cuu * cvv - cuv * cuv
-    b = (cyu * cvv[:, None] - cyv * cuv[:, None]) / det[:, None]
-    c = (cyv * cuu[:, None] - cyu * cuv[:, None]) / det[:, None]
-    return np.ascontiguousarray(mean + linear * (b * (u - mu)[:, None] + c * (v - mv)[:, None]))
+    out = np.empty((len(av), 3))
+    K.residual_rows(img, av, au, _LL_UNIT, _LL_RIDGE_PX2 / (_LL_UNIT * _LL_UNIT), linear, out)
+    return out
 
 
 def _atrous_passes(img, var, inst, guide, passes: int, sigma_l: float, overwrite: bool = False):

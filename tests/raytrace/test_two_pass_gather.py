@@ -104,6 +104,26 @@ def _is_net(u1, u2):
                == list(range(n)) for a in range(m + 1))
 
 
+def test_unscrambled_sequence_is_scipys_sobol():
+    """The two dimensions under the scrambling (radical inverse and the byte-table second
+    dimension) are the first two of scipy's Sobol sequence, which lists point gray(k) as its
+    k-th (Gray-code order, gray(k) = k XOR k >> 1)."""
+    from scipy.stats import qmc
+    ref = qmc.Sobol(d=2, scramble=False, bits=32).random_base2(12)
+    idx = [k ^ (k >> 1) for k in range(4096)] + [2**32 - 1, 0x9E3779B9, 0x80000001]
+    ours = np.array([[K._reverse_bits32(i), K._sobol2_y(i)] for i in idx], dtype=np.float64) / 2.0**32
+    np.testing.assert_array_equal(ours[:4096], ref)
+    # a full 32-bit index (as the shuffled index is) against the direction-number recursion
+    for i, (x, y) in zip(idx[4096:], ours[4096:] * 2.0**32):
+        bits = [b for b in range(32) if i >> b & 1]
+        m, y_ref = 1, 0
+        for b in range(32):
+            if b in bits:
+                y_ref ^= m << (31 - b)
+            m = (m << 1) ^ m
+        assert y == y_ref and x == sum(1 << (31 - b) for b in bits)
+
+
 @pytest.mark.parametrize("n", [1, 2, 4, 8, 16, 32, 64, 128])
 def test_gather_directions_are_a_net_at_every_power_of_two(n):
     for u1, u2 in _gather_u([n] * 4, 0):
