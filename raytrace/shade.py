@@ -138,6 +138,13 @@ class Quality:
         rest of the frame's gather_rays × pixels rays (a ray that hits counted as several that
         escape) shared out by the noise the first pass measured among each pixel's neighbours
         on the same part (:func:`_gather_two_pass`); 0: gather_rays rays at every pixel [-].
+    aa_extra : float
+        Fraction of the anti-aliased pixels that get a second, independent aa_grid² pattern
+        of shaded sub-samples (and coverage rays), their radiance the mean of both: those
+        whose first pattern is noisiest, by the difference between the means of its two
+        checkerboard halves (:func:`raytrace._shading.half_split_noise`) — a truss, a
+        penumbra, a crevice, where the sub-samples' noise sits (:func:`_balanced_aa_extra`)
+        [-].
     """
 
     name: str
@@ -155,6 +162,7 @@ class Quality:
     filter_linear: float = 0.0
     own_at_boundary: bool = False
     pilot_rays: int = 0
+    aa_extra: float = 0.0
 
 
 # coverage grids of edge pixels (Quality.cov_grid) and the fewest final-gather rays worth
@@ -240,6 +248,27 @@ def _balanced_cov(samples: int) -> int:
     1.52 → 1.56 % for a few % of the time, and stays at 8²."""
     aa = _balanced_aa(samples)
     return aa if samples <= 16 else max(COV_BAL, aa + 2)
+
+
+def _balanced_aa_extra(samples: int) -> float:
+    """:attr:`Quality.aa_extra` of ``balanced`` with N gather rays: 10 % of the anti-aliased
+    pixels, at every N. Most of ``balanced``'s edge noise sits in few of them (a truss, a
+    penumbra, a crevice): in one 16-ray frame of Cassini ``sunlit`` and Tiangong ``earth``,
+    the noisiest 10 % hold 58–59 % of the frame's noise² (the half-split estimate picks pixels
+    holding 34–37 %; 20 %: 51–57 %). Measured on the 12 scenes of
+    ``benchmarks/bench_time_error.py`` at 1280×960 (median error of one render, bias and noise
+    estimated without the reference's noise; time: min of 2 per scene, median ratio over the
+    scenes, one run): N = 8 3.07 → 2.89 % for 1.02× the time, N = 16 2.04 → 1.96 % for 1.08×
+    (15 %: 1.94 % for 1.09×), N = 64 1.42 → 1.35 % for 1.11×; every scene's error fell at every
+    N (summed edge noise² at 16 rays 44.7 → 40.7 ×10⁻⁴, bias unchanged). More gather rays buy
+    less: along the ray count the error falls as t^−0.33 at 16 rays and t^−0.2 at 64
+    (BENCHMARKS.md), i.e. 0.976 and 0.979 for those times."""
+    return 0.1
+
+
+# XORed into the frame's seed for the second sub-sample pattern of the noisiest anti-aliased
+# pixels (Quality.aa_extra)
+_AA_SECOND_STREAM = 0x1B873593
 
 
 def _filter_passes(samples: int) -> int:
@@ -339,7 +368,8 @@ _PRESETS = {
     "balanced": Quality("balanced", gather_rays=8, filter_passes=_filter_passes(8), aa_grid=_balanced_aa(8),
                         sun_rays=16, cov_grid=_balanced_cov(8), borrow=_borrow(8), sun_corners=True,
                         slivers=True, filter_sigma_l=_filter_sigma_l(8), thin_shadows=True,
-                        filter_linear=_filter_linear(8), pilot_rays=_pilot_rays(8)),
+                        filter_linear=_filter_linear(8), pilot_rays=_pilot_rays(8),
+                        aa_extra=_balanced_aa_extra(8)),
     "reference": Quality("reference", spp=1024),
 }
 
@@ -363,7 +393,7 @@ def quality_preset(name: str, samples: int | None = None) -> Quality:
                        cov_grid=_balanced_cov(samples), borrow=_borrow(samples), sun_corners=True,
                        slivers=True, filter_sigma_l=_filter_sigma_l(samples), thin_shadows=True,
                        filter_linear=_filter_linear(samples), own_at_boundary=_own_at_boundary(samples),
-                       pilot_rays=_pilot_rays(samples))
+                       pilot_rays=_pilot_rays(samples), aa_extra=_balanced_aa_extra(samples))
     if name == "reference":
         return Quality(name, spp=samples)
     aa = max(1, min(samples, 16))
@@ -1047,8 +1077,17 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
                 row_of_pixel = np.full(H * W, -1, dtype=np.int32)
                 row_of_pixel[pix] = np.arange(len(pix), dtype=np.int32)
                 centre = (row_of_pixel, s["P"], s["NS"], geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx)
+            noise = np.empty(len(epix)) if q.aa_extra > 0.0 else None
             sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual, sub_rays,
-                               centre, q.cov_grid, q.borrow, q.own_at_boundary)
+                               centre, q.cov_grid, q.borrow, q.own_at_boundary, noise)
+            n_extra = int(q.aa_extra * len(epix))
+            if n_extra:
+                # the noisiest first, ties in pixel order; then back in pixel order
+                sel = np.sort(np.argsort(-noise, kind="stable")[:n_extra])
+                sub2 = _supersample(ctx, scene, camera, R, t, o_body, geo, epix[sel], q.aa_grid,
+                                    int(seed) ^ _AA_SECOND_STREAM, residual, sub_rays, centre, q.cov_grid, q.borrow,
+                                    q.own_at_boundary)
+                sub[sel] = 0.5 * (sub[sel] + sub2)
             _check_finite("anti-aliasing", sub)
             rad[epix] = np.maximum(sub, 0.0)
     timings["antialias"] = time.perf_counter() - t0
@@ -1157,7 +1196,7 @@ def _corner_edges(scene: Scene, camera: Camera, R, t, o_body, geo, lit=None, sun
 
 def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,
                  residual=None, gather_rays: int = 0, centre_surface=None, cov_grid: int = 0, borrow: bool = False,
-                 own_at_boundary: bool = False):
+                 own_at_boundary: bool = False, noise_out=None):
     """Box-filtered radiance of the listed pixels from n_grid² correlated multi-jittered
     sub-pixel rays (:func:`raytrace._shading.subpixel_rays`). Each sub-sample is shaded like a
     ``fast`` pixel (exact Sun, cache, mirror term); with ``residual`` (the filtered
@@ -1181,6 +1220,9 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     coverage rays. The estimate of where the silhouette and the part boundaries run then has
     the noise of cov_grid² + n_grid² samples, not n_grid².
 
+    With ``noise_out`` (one per pixel), it receives each pixel's noise estimate from its
+    shaded sub-samples (:func:`raytrace._shading.half_split_noise`).
+
     The pixels go through in chunks of about _CHUNK_RAYS sub-samples (every sample is keyed
     by its pixel and number, so the result does not depend on the chunking): the arrays of
     all of them at once (~600 k rows on Tiangong at 1280×960) were mapped fresh on every
@@ -1188,17 +1230,17 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     per = max(1, _CHUNK_RAYS // (n_grid * n_grid))
     if len(epix) <= per:
         return _supersample_chunk(ctx, scene, camera, R, t, o_body, geo, epix, n_grid, seed, residual, gather_rays,
-                                  centre_surface, cov_grid, borrow, own_at_boundary)
+                                  centre_surface, cov_grid, borrow, own_at_boundary, noise_out)
     return np.concatenate([_supersample_chunk(ctx, scene, camera, R, t, o_body, geo, epix[i:i + per], n_grid, seed,
                                               residual, gather_rays, centre_surface, cov_grid, borrow,
-                                              own_at_boundary)
+                                              own_at_boundary, None if noise_out is None else noise_out[i:i + per])
                            for i in range(0, len(epix), per)])
 
 
 def _supersample_chunk(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,
                        residual, gather_rays: int, centre_surface, cov_grid: int, borrow: bool,
-                       own_at_boundary: bool):
-    """:func:`_supersample` of one chunk of pixels."""
+                       own_at_boundary: bool, noise_out=None):
+    """:func:`_supersample` of one chunk of pixels (``noise_out``: a view of its rows)."""
     S = n_grid * n_grid
     W = camera.width
     R_bc = np.ascontiguousarray(R.T)
@@ -1213,6 +1255,8 @@ def _supersample_chunk(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body
                           gather_rays, centre_surface, borrow, own_at_boundary)
     out = np.empty((len(epix), 3))
     K.group_means(L, S, out)
+    if noise_out is not None:
+        K.half_split_noise(L, n_grid, noise_out)
     if cov_grid < 2:
         return out
 
