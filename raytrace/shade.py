@@ -262,7 +262,11 @@ def _balanced_aa_extra(samples: int) -> float:
     (15 %: 1.94 % for 1.09×), N = 64 1.42 → 1.35 % for 1.11×; every scene's error fell at every
     N (summed edge noise² at 16 rays 44.7 → 40.7 ×10⁻⁴, bias unchanged). More gather rays buy
     less: along the ray count the error falls as t^−0.33 at 16 rays and t^−0.2 at 64
-    (BENCHMARKS.md), i.e. 0.976 and 0.979 for those times."""
+    (BENCHMARKS.md), i.e. 0.976 and 0.979 for those times. In the side-by-side Cycles run
+    (per-scene ratios to the run before): 1.06 / 1.07 / 1.10 / 1.10× the time for 0.961 /
+    0.971 / 0.938 / 0.944× the error at 8 / 16 / 64 / 256 rays — on the curve of more rays at
+    8 and 16 (t^−0.73 between them), below it at 64 and 256; and the pixels that flicker most
+    in a sequence get half the noise variance."""
     return 0.1
 
 
