@@ -1081,10 +1081,10 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
                 row_of_pixel = np.full(H * W, -1, dtype=np.int32)
                 row_of_pixel[pix] = np.arange(len(pix), dtype=np.int32)
                 centre = (row_of_pixel, s["P"], s["NS"], geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx)
-            noise = np.empty(len(epix)) if q.aa_extra > 0.0 else None
+            n_extra = int(q.aa_extra * len(epix))
+            noise = np.empty(len(epix)) if n_extra else None
             sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual, sub_rays,
                                centre, q.cov_grid, q.borrow, q.own_at_boundary, noise)
-            n_extra = int(q.aa_extra * len(epix))
             if n_extra:
                 # the noisiest first, ties in pixel order; then back in pixel order
                 sel = np.sort(np.argsort(-noise, kind="stable")[:n_extra])
