@@ -228,36 +228,21 @@ def group_means(L, S, out):
 
 
 @pjit_exact
-def half_split_noise(L, n_grid, out):
-    """The variance of each pixel's mean of its S = n_grid² sub-samples (rows p·S … p·S + S − 1
-    of L, rows of 3; sub-sample j in cell (j mod n_grid, j div n_grid) of the pixel's grid,
-    :func:`subpixel_rays`), estimated from its two checkerboard halves a and b, each a
-    stratified sample of the whole pixel: (m_a − m_b)²/4, summed over RGB. (m_a and m_b are
-    nearly independent, each with about twice the variance of the mean, so E(m_a − m_b)² ≈
-    4 Var(mean).) For n_grid = 1 it is 0."""
-    S = n_grid * n_grid
+def subsample_contrast(L, S, out):
+    """out[p] = (max − min)² over rows p·S … p·S + S − 1 of L (rows of 3) of R + G + B: the
+    squared contrast that pixel's S sub-samples saw. The noise of a stratified estimate of a
+    pixel is driven by what changes inside it: a step of height c across the pixel (a
+    silhouette, a part boundary, a shadow) leaves a variance ∝ c² in each stratum it cuts
+    (e.g. Pharr, Jakob & Humphreys, PBR 4th ed., sec. 8.2), so c² ranks pixels by their noise
+    (used by ``raytrace.shade`` to pick where a second sub-sample pattern pays)."""
     for p in numba.prange(out.shape[0]):
-        a0 = a1 = a2 = b0 = b1 = b2 = 0.0
-        na = 0
-        for j in range(S):
-            k = p * S + j
-            if ((j % n_grid) + (j // n_grid)) % 2 == 0:
-                a0 += L[k, 0]
-                a1 += L[k, 1]
-                a2 += L[k, 2]
-                na += 1
-            else:
-                b0 += L[k, 0]
-                b1 += L[k, 1]
-                b2 += L[k, 2]
-        nb = S - na
-        if nb == 0:
-            out[p] = 0.0
-            continue
-        d0 = a0 / na - b0 / nb
-        d1 = a1 / na - b1 / nb
-        d2 = a2 / na - b2 / nb
-        out[p] = 0.25 * (d0 * d0 + d1 * d1 + d2 * d2)
+        lo = np.inf
+        hi = -np.inf
+        for k in range(p * S, p * S + S):
+            y = L[k, 0] + L[k, 1] + L[k, 2]
+            lo = min(lo, y)
+            hi = max(hi, y)
+        out[p] = (hi - lo) * (hi - lo)
 
 
 @pjit_exact

@@ -141,10 +141,9 @@ class Quality:
     aa_extra : float
         Fraction of the anti-aliased pixels that get a second, independent aa_grid² pattern
         of shaded sub-samples (and coverage rays), their radiance the mean of both: those
-        whose first pattern is noisiest, by the difference between the means of its two
-        checkerboard halves (:func:`raytrace._shading.half_split_noise`) — a truss, a
-        penumbra, a crevice, where the sub-samples' noise sits (:func:`_balanced_aa_extra`)
-        [-].
+        whose first pattern saw the largest contrast (the range of its sub-samples' R + G + B,
+        :func:`raytrace._shading.subsample_contrast`) — a truss, a silhouette against a bright
+        part, a penumbra, where the sub-samples' noise sits (:func:`_balanced_aa_extra`) [-].
     """
 
     name: str
@@ -253,20 +252,25 @@ def _balanced_cov(samples: int) -> int:
 def _balanced_aa_extra(samples: int) -> float:
     """:attr:`Quality.aa_extra` of ``balanced`` with N gather rays: 10 % of the anti-aliased
     pixels, at every N. Most of ``balanced``'s edge noise sits in few of them (a truss, a
-    penumbra, a crevice): in one 16-ray frame of Cassini ``sunlit`` and Tiangong ``earth``,
-    the noisiest 10 % hold 58–59 % of the frame's noise² (the half-split estimate picks pixels
-    holding 34–37 %; 20 %: 51–57 %). Measured on the 12 scenes of
-    ``benchmarks/bench_time_error.py`` at 1280×960 (median error of one render, bias and noise
-    estimated without the reference's noise; time: min of 2 per scene, median ratio over the
-    scenes, one run): N = 8 3.07 → 2.89 % for 1.02× the time, N = 16 2.04 → 1.96 % for 1.08×
-    (15 %: 1.94 % for 1.09×), N = 64 1.42 → 1.35 % for 1.11×; every scene's error fell at every
-    N (summed edge noise² at 16 rays 44.7 → 40.7 ×10⁻⁴, bias unchanged). More gather rays buy
-    less: along the ray count the error falls as t^−0.33 at 16 rays and t^−0.2 at 64
-    (BENCHMARKS.md), i.e. 0.976 and 0.979 for those times. In the side-by-side Cycles run
-    (per-scene ratios to the run before): 1.06 / 1.07 / 1.10 / 1.10× the time for 0.961 /
-    0.971 / 0.938 / 0.944× the error at 8 / 16 / 64 / 256 rays — on the curve of more rays at
-    8 and 16 (t^−0.73 between them), below it at 64 and 256; and the pixels that flicker most
-    in a sequence get half the noise variance."""
+    penumbra, a crevice): in 16-ray frames of Cassini ``sunlit``, Tiangong ``earth`` and ICESat
+    ``earth`` the noisiest 10 % hold 51–55 % of the frame's noise². The pixels are picked by
+    the contrast their first pattern saw (:func:`raytrace._shading.subsample_contrast`): the
+    top 10 % by contrast hold 36–41 % of the noise², the top 10 % by the half-split estimate
+    (the two checkerboard halves' means apart, an unbiased but one-degree-of-freedom estimate
+    of the pixel mean's variance) 23–30 % (20 %: 53–61 % against 32–50 %).
+    Measured on the 12 scenes of ``benchmarks/bench_time_error.py`` at 1280×960 (median
+    error of one render, bias and noise estimated without the reference's noise; time: min of
+    2 per scene, median ratio over the scenes, one run): against none, with the half-split
+    estimate, N = 8 3.07 → 2.89 % for 1.02× the time, N = 16 2.04 → 1.96 % for 1.08×, N = 64
+    1.42 → 1.35 % for 1.11×, every scene's error lower at every N; picked by contrast instead,
+    2.89 → 2.85 %, 1.96 → 1.95 %, 1.35 → 1.33 % at the same time (summed edge noise² 88.6 →
+    85.4, 40.7 → 39.7, 13.8 → 12.9 ×10⁻⁴). 20 % of the pixels instead of 10 % (N = 8: 2.78 %,
+    N = 16: 1.91 %, 1.10× the time) is on the curve of more gather rays, not below it
+    (t^−0.73 between 8 and 16 rays in the side-by-side Cycles run, BENCHMARKS.md). There,
+    against none: 1.06 / 1.07 / 1.10 / 1.10× the time for 0.961 / 0.971 / 0.938 / 0.944× the
+    error at 8 / 16 / 64 / 256 rays (half-split) — on the curve at 8 and 16 rays, below it at
+    64 and 256 (t^−0.2 there); and the pixels that flicker most in a sequence get half the
+    noise variance."""
     return 0.1
 
 
@@ -1082,12 +1086,12 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
                 row_of_pixel[pix] = np.arange(len(pix), dtype=np.int32)
                 centre = (row_of_pixel, s["P"], s["NS"], geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx)
             n_extra = int(q.aa_extra * len(epix))
-            noise = np.empty(len(epix)) if n_extra else None
+            contrast = np.empty(len(epix)) if n_extra else None
             sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual, sub_rays,
-                               centre, q.cov_grid, q.borrow, q.own_at_boundary, noise)
+                               centre, q.cov_grid, q.borrow, q.own_at_boundary, contrast)
             if n_extra:
-                # the noisiest first, ties in pixel order; then back in pixel order
-                sel = np.sort(np.argsort(-noise, kind="stable")[:n_extra])
+                # the highest contrast first, ties in pixel order; then back in pixel order
+                sel = np.sort(np.argsort(-contrast, kind="stable")[:n_extra])
                 sub2 = _supersample(ctx, scene, camera, R, t, o_body, geo, epix[sel], q.aa_grid,
                                     int(seed) ^ _AA_SECOND_STREAM, residual, sub_rays, centre, q.cov_grid, q.borrow,
                                     q.own_at_boundary)
@@ -1200,7 +1204,7 @@ def _corner_edges(scene: Scene, camera: Camera, R, t, o_body, geo, lit=None, sun
 
 def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,
                  residual=None, gather_rays: int = 0, centre_surface=None, cov_grid: int = 0, borrow: bool = False,
-                 own_at_boundary: bool = False, noise_out=None):
+                 own_at_boundary: bool = False, contrast_out=None):
     """Box-filtered radiance of the listed pixels from n_grid² correlated multi-jittered
     sub-pixel rays (:func:`raytrace._shading.subpixel_rays`). Each sub-sample is shaded like a
     ``fast`` pixel (exact Sun, cache, mirror term); with ``residual`` (the filtered
@@ -1224,8 +1228,8 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     coverage rays. The estimate of where the silhouette and the part boundaries run then has
     the noise of cov_grid² + n_grid² samples, not n_grid².
 
-    With ``noise_out`` (one per pixel), it receives each pixel's noise estimate from its
-    shaded sub-samples (:func:`raytrace._shading.half_split_noise`).
+    With ``contrast_out`` (one per pixel), it receives the squared contrast each pixel's shaded
+    sub-samples saw (:func:`raytrace._shading.subsample_contrast`).
 
     The pixels go through in chunks of about _CHUNK_RAYS sub-samples (every sample is keyed
     by its pixel and number, so the result does not depend on the chunking): the arrays of
@@ -1234,17 +1238,17 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     per = max(1, _CHUNK_RAYS // (n_grid * n_grid))
     if len(epix) <= per:
         return _supersample_chunk(ctx, scene, camera, R, t, o_body, geo, epix, n_grid, seed, residual, gather_rays,
-                                  centre_surface, cov_grid, borrow, own_at_boundary, noise_out)
+                                  centre_surface, cov_grid, borrow, own_at_boundary, contrast_out)
     return np.concatenate([_supersample_chunk(ctx, scene, camera, R, t, o_body, geo, epix[i:i + per], n_grid, seed,
                                               residual, gather_rays, centre_surface, cov_grid, borrow,
-                                              own_at_boundary, None if noise_out is None else noise_out[i:i + per])
+                                              own_at_boundary, None if contrast_out is None else contrast_out[i:i + per])
                            for i in range(0, len(epix), per)])
 
 
 def _supersample_chunk(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,
                        residual, gather_rays: int, centre_surface, cov_grid: int, borrow: bool,
-                       own_at_boundary: bool, noise_out=None):
-    """:func:`_supersample` of one chunk of pixels (``noise_out``: a view of its rows)."""
+                       own_at_boundary: bool, contrast_out=None):
+    """:func:`_supersample` of one chunk of pixels (``contrast_out``: a view of its rows)."""
     S = n_grid * n_grid
     W = camera.width
     R_bc = np.ascontiguousarray(R.T)
@@ -1259,8 +1263,8 @@ def _supersample_chunk(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body
                           gather_rays, centre_surface, borrow, own_at_boundary)
     out = np.empty((len(epix), 3))
     K.group_means(L, S, out)
-    if noise_out is not None:
-        K.half_split_noise(L, n_grid, noise_out)
+    if contrast_out is not None:
+        K.subsample_contrast(L, S, contrast_out)
     if cov_grid < 2:
         return out
 

@@ -386,30 +386,62 @@ def test_second_sub_sample_pattern_halves_the_silhouette_noise(sphere, monkeypat
     assert abs(float(np.mean(two))) < 0.005
 
 
-def test_half_split_noise_estimates_the_variance_of_the_pixel_mean():
-    """raytrace._shading.half_split_noise against NumPy (the checkerboard halves of each
-    pixel's grid taken apart), and on independent samples of known variance σ² its mean is
-    that of the pixel's mean, 3 σ²/S summed over RGB (within 3 %, 20 000 pixels; exactly
-    3 σ² (1/n_a + 1/n_b)/4 for halves of n_a and n_b samples)."""
+def test_second_sub_sample_pattern_goes_to_the_highest_contrast_pixels(sphere, monkeypatch):
+    """``Quality.aa_extra`` = 0.2 on a sphere lit from the side: the second pattern is drawn
+    at exactly the 20 % of the anti-aliased pixels whose sub-samples saw the largest contrast
+    (:func:`raytrace._shading.subsample_contrast`), and those lie on the lit limb, none on
+    the dark limb (black against black)."""
+    import dataclasses
+
+    from raytrace import shade
+
+    preset = shade.quality_preset
+    monkeypatch.setattr(shade, "quality_preset",
+                        lambda name, samples=None: dataclasses.replace(preset(name, samples), aa_extra=0.2))
+    calls = []
+    first = shade._supersample
+
+    def record(*args, **kwargs):
+        out = first(*args, **kwargs)
+        contrast = args[16] if len(args) > 16 else kwargs.get("contrast_out")
+        calls.append((args[7].copy(), None if contrast is None else contrast.copy()))
+        return out
+
+    monkeypatch.setattr(shade, "_supersample", record)
+    R, t = _pose([0.0, -5.0, 0.0])
+    light = Lighting(sun_dir_body=(1.0, 0.0, 0.0), sun_irradiance_W_m2=1000.0)  # lights the +x half
+    render(sphere, CAM, R, t, light, quality="balanced", samples=8, seed=2)
+    (epix, contrast), (epix2, none) = calls
+    assert none is None and len(epix2) == int(0.2 * len(epix))
+    top = np.sort(epix[np.argsort(-contrast, kind="stable")[:len(epix2)]])
+    np.testing.assert_array_equal(epix2, top)
+    # the body frame's +x is the image's +u here (camera on −y looking at the centre)
+    u = epix2 % W - CAM.cx
+    side = np.sign(R[0, 0]) * u  # > 0 on the lit half of the image
+    assert np.all(side > 0), "a second pattern on the dark limb"
+    assert np.all(contrast[np.isin(epix, epix2)] > 0)
+
+
+def test_subsample_contrast_is_the_squared_range_of_each_pixels_sub_samples():
+    """raytrace._shading.subsample_contrast against NumPy (the peak-to-peak of R + G + B over
+    each pixel's rows); a uniform pixel has none, and a step of height c gives c² whatever
+    fraction of the pixel each side covers."""
     from raytrace import _shading as K
 
     rng = np.random.default_rng(0)
-    for n in (3, 4, 6):
-        S = n * n
-        L = rng.normal(2.0, 0.5, (20000 * S, 3))
-        got = np.empty(20000)
-        K.half_split_noise(L, n, got)
-        j = np.arange(S)
-        black = (j % n + j // n) % 2 == 0
-        Lp = L.reshape(20000, S, 3)
-        want = ((Lp[:, black].mean(1) - Lp[:, ~black].mean(1)) ** 2).sum(1) / 4
-        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
-        # exactly: E(m_a − m_b)² / 4 = σ²(1/n_a + 1/n_b)/4 per channel
-        n_a = int(black.sum())
-        sigma2 = 0.5 ** 2
-        expect = 3 * sigma2 * (1 / n_a + 1 / (S - n_a)) / 4
-        assert abs(got.mean() / expect - 1) < 0.03
-        assert abs(expect / (3 * sigma2 / S) - 1) < 0.02  # ≈ the variance of the mean
+    for S in (9, 16, 36):
+        L = rng.gamma(2.0, 1.5, (5000 * S, 3))
+        got = np.empty(5000)
+        K.subsample_contrast(L, S, got)
+        want = np.ptp(L.sum(1).reshape(5000, S), axis=1) ** 2
+        np.testing.assert_allclose(got, want, rtol=1e-12)
+    S = 36
+    L = np.tile(np.array([[0.3, 0.2, 0.1]]), (4 * S, 1))
+    for p, k in enumerate((0, 1, 18, 35)):
+        L[p * S:p * S + k] = [1.3, 0.2, 0.1]  # k of the 36 sub-samples on the bright side
+    got = np.empty(4)
+    K.subsample_contrast(L, S, got)
+    np.testing.assert_allclose(got, [0.0, 1.0, 1.0, 1.0], atol=1e-12)
 
 
 def _dense_cover(px, py, W, H, n=400):
