@@ -233,8 +233,9 @@ def subsample_contrast(L, S, out):
     squared contrast that pixel's S sub-samples saw. The noise of a stratified estimate of a
     pixel is driven by what changes inside it: a step of height c across the pixel (a
     silhouette, a part boundary, a shadow) leaves a variance ∝ c² in each stratum it cuts
-    (e.g. Pharr, Jakob & Humphreys, PBR 4th ed., sec. 8.2), so c² ranks pixels by their noise
-    (used by ``raytrace.shade`` to pick where a second sub-sample pattern pays)."""
+    (Mitchell 1996, "Consequences of stratified sampling in graphics", SIGGRAPH), so c² ranks
+    pixels by their noise (used by ``raytrace.shade`` to pick where a second sub-sample
+    pattern pays)."""
     for p in numba.prange(out.shape[0]):
         lo = np.inf
         hi = -np.inf
