@@ -217,6 +217,7 @@ class Scene:
                           RuntimeWarning, stacklevel=2)
         self.semantic_lut = np.array([0] + [c.semantic_id for c in model.components], dtype=np.uint8)
         self._embree = None
+        self._direct = None
         self._cache = None
 
     # ------------------------------------------------------------------ build
@@ -269,6 +270,17 @@ class Scene:
         return self._embree
 
     @property
+    def direct(self):
+        """The same scene for kernels that call Embree themselves
+        (:class:`raytrace._embree.DirectScene`), built on first use; None where the embreex
+        wheel has no Embree 4 library to call."""
+        if self._direct is None:
+            from . import _embree
+            self._direct = _embree.DirectScene(self.vertices, self.faces, self.vertex_offset, self.face_offset) \
+                if _embree.available() else False
+        return self._direct or None
+
+    @property
     def materials(self) -> tuple:
         """BRDF of each component (:func:`raytrace.materials.material_of`)."""
         from .materials import material_of
@@ -294,6 +306,7 @@ class Scene:
     def __getstate__(self):
         state = self.__dict__.copy()
         state["_embree"] = None
+        state["_direct"] = None
         state["_cache"] = None
         return state
 

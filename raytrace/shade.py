@@ -59,9 +59,10 @@ import math
 import time
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
-from . import _shading as K
+from . import _paths, _shading as K
 from ._kernels import ray_origins32, rows_times_matrix
 from .brdf import split_sum_table
 from .camera import Camera
@@ -219,6 +220,8 @@ _LOBE_STREAM = 0x2545F491
 # fresh arrays from parallel kernels cost more than the kernels: bounce2_rays 66 ms fresh
 # against 9 ms on mapped memory, measured on Crew Dragon ``sunlit``)
 _CHUNK_RAYS = 1 << 18
+_FUSED_GATHER = True
+_FUSED_CHUNK = 1
 
 
 def _balanced_aa(samples: int) -> int:
@@ -664,6 +667,27 @@ class _Context:
                                          side="right"))
         bounds = [0, *[int(c) for c in cuts if 0 < c < n], n]
         seeds = (seed, seed if path_seed is None else path_seed)
+        direct = self.scene.direct if _FUSED_GATHER else None
+        if direct is not None:
+            start = np.zeros(n + 1, dtype=np.int64)
+            np.cumsum(counts, out=start[1:])
+            E = np.empty((n, 3))
+            h = np.empty(n, dtype=np.int64)
+            light = self.lighting
+            sx, sy, sz = (float(x) for x in light.sun_dir_body)
+            old_chunk = numba.set_parallel_chunksize(_FUSED_CHUNK)
+            try:
+                _paths.gather_traced(direct.handle, s["P"], s["NS"], s["NG"], start, first, seeds[0], seeds[1],
+                                     pix.astype(np.int64), kmul, self.eps, sx, sy, sz,
+                                     light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
+                                     np.float32(_FIRST_NEAR_SPACINGS * self.cache.spacing_m),
+                                     np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(),
+                                     self.env_irradiance, GATHER_ALPHA, E, var, h)
+            finally:
+                numba.set_parallel_chunksize(old_chunk)
+            if hits is not None:
+                hits[:] = h
+            return E
         if len(bounds) == 2:
             return self._gather_chunk(s, counts, kmul, first, pix, seeds, var, hits)
         E = np.empty((n, 3))
