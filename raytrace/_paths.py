@@ -21,8 +21,8 @@ import numpy as np
 from . import environment as env
 from ._embree import intersect1, occluded1, ray_buffer
 from ._jit import inline, pjit
-from ._shading import _owen_sobol2_keyed, incoming, incoming_env
-from .brdf import cosine_direction
+from ._shading import _cmj_perms, _cmj_point, _owen_sobol2_keyed, _strata, incoming, incoming_env
+from .brdf import cosine_direction, sample_brdf
 from .cache import _hash01, _hash32, glossy_draw, hit_normals
 
 # points per block of the parallel loop (scheduled dynamically: the rays per point vary)
@@ -230,3 +230,75 @@ def gather_traced(scene, P, NS, NG, start, first, seed, path_seed, pix, kmul, ep
                 out[k, 1] += a * eg
                 out[k, 2] += a * eb
 
+
+
+@pjit
+def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, eps, sx, sy, sz, sun_on, levels, near,
+                face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun,
+                E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, CV, out, out_var):
+    """Each listed point's (idx[j]) sampled specular reflection minus its control variate, as
+    :meth:`raytrace.shade._Context.lobe` computes it from :func:`raytrace._shading.lobe_rays`
+    (n_rays lobe directions, keyed by pixel and ``seed``), the shadow rays and paths of their
+    hits (:func:`_traced_indirect`: the first bounce from every hit, further ones from hits
+    nearer than ``near``; keyed by pix·n_rays + r and ``path_seed``) and :func:`raytrace._shading.lobe_sum`; a draw that fails (weight 0) casts
+    no ray."""
+    gx = _strata(n_rays)
+    gy = n_rays // gx
+    lk = (face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot,
+          E_sun, valid, face_s, lat_start, lat_ids, p, tex)
+    every = np.float32(np.inf)
+    n_pts = out.shape[0]
+    for blk in numba.prange((n_pts + _BLOCK - 1) // _BLOCK):
+        buf = ray_buffer()
+        path = np.empty((max(levels, 1), 14))
+        for j in range(blk * _BLOCK, min(n_pts, (blk + 1) * _BLOCK)):
+            k = idx[j]
+            c = comp[k]
+            key = pix[k] * 1013 + seed
+            perm_x, perm_y = _cmj_perms(gx, gy, key, 2 * seed + 23)
+            ox = P[k, 0] + eps * NG[k, 0]
+            oy = P[k, 1] + eps * NG[k, 1]
+            oz = P[k, 2] + eps * NG[k, 2]
+            sr = 0.0
+            sg = 0.0
+            sb = 0.0
+            sy2 = 0.0
+            for r in range(n_rays):
+                u1, u2 = _cmj_point(r, gx, gy, perm_x, perm_y, _hash01(key, 2 * r + 21), _hash01(key, 2 * r + 22))
+                lx, ly, lz, wr, wg, wb, ok = sample_brdf(NS[k, 0], NS[k, 1], NS[k, 2], WO[k, 0], WO[k, 1], WO[k, 2],
+                                                         0.0, 0.0, 0.0, mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2],
+                                                         mat_alpha[c], 0.0, u1, u2)
+                if not ok or lx * NG[k, 0] + ly * NG[k, 1] + lz * NG[k, 2] <= 0.0:
+                    continue
+                if wr == 0.0 and wg == 0.0 and wb == 0.0:
+                    continue
+                g, pr, hu32, hv32, t = intersect1(scene, buf, ox, oy, oz, lx, ly, lz)
+                if g < 0:
+                    a, b, cc = incoming_env(p, tex, ox, oy, oz, lx, ly, lz)
+                else:
+                    hu = np.float64(hu32)
+                    hv = np.float64(hv32)
+                    vis = _sun_visibility(scene, buf, ox, oy, oz, lx, ly, lz, g, pr, t, face_offset, face_normal, sx,
+                                          sy, sz, eps, sun_on)
+                    eir, eig, eib = _traced_indirect(scene, buf, path, ox, oy, oz, lx, ly, lz, g, pr, hu, hv, t,
+                                                     pix[k] * n_rays + r, path_seed, levels, every, near, sx, sy, sz,
+                                                     sun_on, eps, lk)
+                    a, b, cc = incoming(g, pr, hu, hv, ox, oy, oz, lx, ly, lz, face_offset, face_normal, corner_normal,
+                                        comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun,
+                                        valid, face_s, lat_start, lat_ids, p, tex, vis, eir, eig, eib)
+                tr = wr * (a - CV[k, 0])
+                tg = wg * (b - CV[k, 1])
+                tb = wb * (cc - CV[k, 2])
+                sr += tr
+                sg += tg
+                sb += tb
+                y = 0.2126 * tr + 0.7152 * tg + 0.0722 * tb
+                sy2 += y * y
+            out[j, 0] = sr / n_rays
+            out[j, 1] = sg / n_rays
+            out[j, 2] = sb / n_rays
+            if n_rays > 1:
+                ym = (0.2126 * sr + 0.7152 * sg + 0.0722 * sb) / n_rays
+                out_var[j] = max((sy2 - n_rays * ym * ym) / (n_rays * (n_rays - 1.0)), 0.0)
+            else:
+                out_var[j] = 0.0

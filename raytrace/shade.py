@@ -220,7 +220,7 @@ _LOBE_STREAM = 0x2545F491
 # fresh arrays from parallel kernels cost more than the kernels: bounce2_rays 66 ms fresh
 # against 9 ms on mapped memory, measured on Crew Dragon ``sunlit``)
 _CHUNK_RAYS = 1 << 18
-_FUSED_GATHER = True
+_FUSED_GATHER = True  # the final gather and the lobe sampling in one kernel each (raytrace._paths)
 _FUSED_CHUNK = 1
 
 
@@ -608,6 +608,24 @@ class _Context:
             var.fill(0.0)
         idx = np.flatnonzero(self.lobe_sampled[s["comp"]])
         if len(idx) == 0:
+            return out
+        direct = self.scene.direct if _FUSED_GATHER else None
+        if direct is not None:
+            val = np.empty((len(idx), 3))
+            v = np.empty(len(idx))
+            light = self.lighting
+            sx, sy, sz = (float(x) for x in light.sun_dir_body)
+            old_chunk = numba.set_parallel_chunksize(_FUSED_CHUNK)
+            try:
+                _paths.lobe_traced(direct.handle, idx, s["P"], s["NS"], s["NG"], s["WO"], s["comp"], n_rays, seed,
+                                   seed ^ _LOBE_STREAM, np.asarray(pix, dtype=np.int64), self.eps, sx, sy, sz,
+                                   light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
+                                   np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(), lbar, val, v)
+            finally:
+                numba.set_parallel_chunksize(old_chunk)
+            out[idx] = val
+            if var is not None:
+                var[idx] = v
             return out
         step = max(1, _CHUNK_RAYS // n_rays)
         for a in range(0, len(idx), step):

@@ -1,10 +1,10 @@
-"""The final gather fused into one kernel that calls Embree itself (raytrace._paths,
+"""The final gather and the glossy lobe sampling fused into one kernel each that calls Embree itself (raytrace._paths,
 raytrace._embree), against the batched code it replaces, which traces through ``embreex``
 level by level (a second implementation of the same estimator, kept as the fallback):
 
 * the direct Embree scene returns the same hits as ``Scene.intersect`` / ``Scene.occluded``,
   bit for bit, on rays that graze, hit edges and vertices, start inside parts and miss;
-* a ``balanced`` frame with the fused gather equals the batched one on a scene with a glossy
+* a ``balanced`` frame with the fused gather and lobe sampling equals the batched one on a scene with a glossy
   part, a crevice (paths several bounces deep), Earth and sky, with the Sun on and eclipsed,
   and with the control variate's weight α ≠ 1 (a branch the presets do not take).
 """
@@ -97,19 +97,21 @@ def test_fused_gather_equals_the_batched_gather(scene, monkeypatch, case):
                      shadow_fraction=0.0 if case == "eclipsed" else 1.0)
     if case == "alpha-half":
         monkeypatch.setattr(shade, "GATHER_ALPHA", 0.5)
-    calls = []
-    real = shade._paths.gather_traced
+    calls = {"gather_traced": [], "lobe_traced": []}
+    for name in calls:
+        real = getattr(shade._paths, name)
 
-    def spy(*a):
-        calls.append(len(a[1]))
-        return real(*a)
+        def spy(*a, _real=real, _name=name):
+            calls[_name].append(len(a[1]))
+            return _real(*a)
 
-    monkeypatch.setattr(shade._paths, "gather_traced", spy)
+        monkeypatch.setattr(shade._paths, name, spy)
     fused = _frame(scene, light, monkeypatch, True)
-    assert calls and sum(calls) > 1000  # the fused kernel did the gathering
-    n_calls = len(calls)
+    # the fused kernels did the gathering and the lobe sampling (gold and silver foil)
+    assert sum(calls["gather_traced"]) > 1000 and sum(calls["lobe_traced"]) > 300
+    n_calls = {k: len(v) for k, v in calls.items()}
     batched = _frame(scene, light, monkeypatch, False)
-    assert len(calls) == n_calls  # and the batched code did not call it
+    assert {k: len(v) for k, v in calls.items()} == n_calls  # and the batched code did not call them
     assert np.isfinite(fused).all() and fused.max() > 0.0
     # the same rays and the same arithmetic: equal up to the last bits of fast-math shading
     np.testing.assert_allclose(fused, batched, rtol=1e-9, atol=1e-9 * float(batched.max()))
