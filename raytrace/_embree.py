@@ -138,6 +138,9 @@ class DirectScene:
             self._scene = None
 
 
+# loaded on import: a kernel below is linked (compiled, or loaded from numba's cache) against
+# the symbols of the library already in the process
+available()
 _intersect1 = types.ExternalFunction("rtcIntersect1", types.void(types.uintp, types.voidptr, types.voidptr))
 _occluded1 = types.ExternalFunction("rtcOccluded1", types.void(types.uintp, types.voidptr, types.voidptr))
 

@@ -21,8 +21,8 @@ import numpy as np
 from . import environment as env
 from ._embree import intersect1, occluded1, ray_buffer
 from ._jit import inline, pjit
-from ._shading import _cmj_perms, _cmj_point, _owen_sobol2_keyed, _strata, incoming, incoming_env
-from .brdf import cosine_direction, sample_brdf
+from ._shading import _cmj_perms, _cmj_point, _owen_sobol2_keyed, _strata, disc_direction, incoming, incoming_env
+from .brdf import cosine_direction, onb, sample_brdf
 from .cache import _hash01, _hash32, glossy_draw, hit_normals
 
 # points per block of the parallel loop (scheduled dynamically: the rays per point vary)
@@ -302,3 +302,27 @@ def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, e
                 out_var[j] = max((sy2 - n_rays * ym * ym) / (n_rays * (n_rays - 1.0)), 0.0)
             else:
                 out_var[j] = 0.0
+
+
+@pjit
+def sun_visibility(scene, idx, P, NG, sx, sy, sz, eps, pixel, number, n_strata, seed, cos_half, out):
+    """out[k] = 1 where the shadow ray of listed point k = idx[j] reaches the Sun, else 0 (the
+    rest untouched), as :meth:`raytrace.shade._Context.direct` casts it: from P + ε·NG
+    (float32, as Embree takes it) towards the Sun's centre, or with ``n_strata`` > 0 towards
+    the solar-disc sample :func:`raytrace._shading.sun_disc_dirs` draws for (pixel[k],
+    number[k]) — the same directions, without their array."""
+    gx = _strata(max(n_strata, 1))
+    gy = max(n_strata, 1) // gx
+    tx, ty, tz, bx, by, bz = onb(sx, sy, sz)
+    n = idx.shape[0]
+    for blk in numba.prange((n + 255) // 256):
+        buf = ray_buffer()
+        for j in range(blk * 256, min(n, (blk + 1) * 256)):
+            k = idx[j]
+            dx, dy, dz = sx, sy, sz
+            if n_strata > 0:
+                dx, dy, dz = disc_direction(pixel[k], number[k], n_strata, gx, gy, seed, tx, ty, tz, bx, by, bz, sx,
+                                            sy, sz, cos_half)
+            blocked = occluded1(scene, buf, P[k, 0] + eps * NG[k, 0], P[k, 1] + eps * NG[k, 1],
+                                P[k, 2] + eps * NG[k, 2], np.float32(dx), np.float32(dy), np.float32(dz))
+            out[k] = 0.0 if blocked else 1.0

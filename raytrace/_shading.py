@@ -139,17 +139,23 @@ def sun_disc_dirs(pixel, number, n_strata, seed, sx, sy, sz, cos_half, out_d):
     gy = n_strata // gx
     tx, ty, tz, bx, by, bz = onb(sx, sy, sz)
     for m in numba.prange(pixel.shape[0]):
-        j = permute(number[m], n_strata, _hash32(pixel[m], 4 * seed + 23))
-        key = pixel[m] * n_strata + number[m]
-        u1 = ((j % gx) + _hash01(key, 4 * seed + 21)) / gx
-        u2 = ((j // gx) + _hash01(key, 4 * seed + 22)) / gy
-        ct = 1.0 - u1 * (1.0 - cos_half)
-        st = math.sqrt(max(0.0, 1.0 - ct * ct))
-        c = st * math.cos(2.0 * math.pi * u2)
-        d = st * math.sin(2.0 * math.pi * u2)
-        out_d[m, 0] = c * tx + d * bx + ct * sx
-        out_d[m, 1] = c * ty + d * by + ct * sy
-        out_d[m, 2] = c * tz + d * bz + ct * sz
+        out_d[m, 0], out_d[m, 1], out_d[m, 2] = disc_direction(pixel[m], number[m], n_strata, gx, gy, seed, tx, ty,
+                                                               tz, bx, by, bz, sx, sy, sz, cos_half)
+
+
+@inline
+def disc_direction(pixel, number, n_strata, gx, gy, seed, tx, ty, tz, bx, by, bz, sx, sy, sz, cos_half):
+    """One direction of :func:`sun_disc_dirs` ((t, b) the basis about the Sun's direction s
+    that :func:`raytrace.brdf.onb` gives)."""
+    j = permute(number, n_strata, _hash32(pixel, 4 * seed + 23))
+    key = pixel * n_strata + number
+    u1 = ((j % gx) + _hash01(key, 4 * seed + 21)) / gx
+    u2 = ((j // gx) + _hash01(key, 4 * seed + 22)) / gy
+    ct = 1.0 - u1 * (1.0 - cos_half)
+    st = math.sqrt(max(0.0, 1.0 - ct * ct))
+    c = st * math.cos(2.0 * math.pi * u2)
+    d = st * math.sin(2.0 * math.pi * u2)
+    return c * tx + d * bx + ct * sx, c * ty + d * by + ct * sy, c * tz + d * bz + ct * sz
 
 
 @pjit

@@ -507,7 +507,14 @@ class _Context:
             o = np.empty((n, 3), np.float32)  # Embree's precision: rounded once, as before
             K.sun_rays(s["P"], s["NS"], s["NG"], sx, sy, sz, self.eps, want, o)
             idx = np.flatnonzero(want)
-            if len(idx):
+            direct = self.scene.direct if _FUSED_GATHER and occluder_t is None else None
+            if len(idx) and direct is not None:
+                # the disc samples drawn and the shadow rays cast in one kernel
+                pixel, number, n_strata, seed = disc if disc is not None else (idx, idx, 0, 0)
+                _paths.sun_visibility(direct.handle, idx, s["P"], s["NG"], float(sx), float(sy), float(sz), self.eps,
+                                      np.asarray(pixel, np.int64), np.asarray(number, np.int64), int(n_strata),
+                                      int(seed), math.cos(0.5 * light.sun_angular_diameter_rad), vis)
+            elif len(idx):
                 if disc is None:
                     d = np.broadcast_to(np.float32([sx, sy, sz]), (len(idx), 3))
                 else:
