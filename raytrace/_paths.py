@@ -1,16 +1,18 @@
-"""Fused kernels: the final gather's rays and the paths traced from their hits, in one pass.
+"""Fused kernels: rays and the paths traced from their hits in one pass, Embree called per ray.
 
-:meth:`raytrace.shade._Context.gather_E` used to run the gather level by level: every ray's
-direction into an array (:func:`raytrace._shading.gather_rays`), the batch through Embree,
-the shadow rays (:func:`raytrace._shading.bounce_sun_rays`), the next bounce's rays
+The batched code (:meth:`raytrace.shade._Context._gather_chunk` and ``_bounces``, kept as the
+fallback) runs the final gather level by level: every ray's direction into an array
+(:func:`raytrace._shading.gather_rays`), the batch through ``embreex``, the shadow rays
+(:func:`raytrace._shading.bounce_sun_rays`), the next bounce's rays
 (:func:`raytrace._shading.bounce2_rays`), and so on up to four bounces deep, then the sum
-(:func:`raytrace._shading.gather_sum`), with a round of Python, NumPy indexing and the arrays
-of every ray between levels. :func:`gather_traced` computes the same estimate ray by ray
-inside one kernel, calling Embree itself (:mod:`raytrace._embree`): the same directions, the
-same keys of the same hashes, the same float32 rays, so the same result up to the last bits
-of the fast-math shading arithmetic.
+(:func:`raytrace._shading.gather_sum`), with a round of Python, NumPy indexing and arrays of
+every ray between levels. :func:`gather_traced` computes the same estimate ray by ray inside
+one kernel that calls Embree itself (:mod:`raytrace._embree`): the same directions, the same
+keys of the same hashes, the same float32 rays, so the same result up to the last bits of the
+fast-math shading arithmetic. :func:`lobe_traced` does the same for the GGX-lobe sampling
+(:func:`raytrace._shading.lobe_rays` … :func:`raytrace._shading.lobe_sum`), and
+:func:`sun_visibility` for the edge sub-samples' shadow rays towards the solar disc.
 """
-
 from __future__ import annotations
 
 import math
@@ -27,7 +29,6 @@ from .cache import _hash01, _hash32, glossy_draw, hit_normals
 
 # points per block of the parallel loop (scheduled dynamically: the rays per point vary)
 _BLOCK = 16
-_MAX_LEVELS = 8
 
 
 @inline

@@ -220,7 +220,13 @@ _LOBE_STREAM = 0x2545F491
 # fresh arrays from parallel kernels cost more than the kernels: bounce2_rays 66 ms fresh
 # against 9 ms on mapped memory, measured on Crew Dragon ``sunlit``)
 _CHUNK_RAYS = 1 << 18
-_FUSED_GATHER = True  # the final gather and the lobe sampling in one kernel each (raytrace._paths)
+# the final gather, the lobe sampling and the edge sub-samples' shadow rays in one kernel each
+# that calls Embree from numba (raytrace._paths, raytrace._embree; the same frames); False:
+# the batched code through embreex, the fallback where the wheel has no Embree 4 (the tests
+# compare the two). The fused kernels hand out blocks of raytrace._paths._BLOCK points
+# _FUSED_CHUNK blocks at a time (numba.set_parallel_chunksize: the rays per point vary 8×
+# in the second pass; 0, numba's static split, measured 0.95–1.03× on four scenes)
+_FUSED_GATHER = True
 _FUSED_CHUNK = 1
 
 
@@ -608,7 +614,8 @@ class _Context:
         hits a part sees it as a final-gather ray does: the Sun exact there (a shadow ray) and
         the hit's indirect light traced (:meth:`_bounces`), not the cache's, whose lattice blurs
         the shadows and edges a sharp lobe reflects. ``var`` (n,), if given, receives each
-        estimate's luminance variance (:func:`raytrace._shading.lobe_sum`)."""
+        estimate's luminance variance (:func:`raytrace._shading.lobe_sum`). Where Embree can
+        be called from numba, all in one kernel (:func:`raytrace._paths.lobe_traced`)."""
         n = len(s["P"])
         out = np.zeros((n, 3))
         if var is not None:
@@ -670,7 +677,8 @@ class _Context:
                  counts: np.ndarray | None = None, hits: np.ndarray | None = None, first: int = 0,
                  path_seed: int | None = None):
         """Final-gather irradiance (n, 3) of the points ``s`` from n_rays rays each, or from
-        counts[k] rays at point k (≥ 1; then ``n_rays`` is ignored), in chunks of about
+        counts[k] rays at point k (≥ 1; then ``n_rays`` is ignored): in one kernel
+        (:meth:`_gather_fused`) where Embree can be called from numba, else in chunks of about
         _CHUNK_RAYS rays (every sample is keyed by its pixel, so the result does not depend on
         the chunking); the rays are samples ``first``, ``first`` + 1, … of each pixel's
         sequence of directions (:func:`raytrace._shading.gather_rays`, keyed by ``seed``), the
@@ -686,39 +694,49 @@ class _Context:
         else:
             counts = np.asarray(counts, dtype=np.int64)
             kmul = int(counts.max()) if n else 1
+        seeds = (seed, seed if path_seed is None else path_seed)
+        direct = self.scene.direct if _FUSED_GATHER else None
+        if direct is not None:
+            return self._gather_fused(direct, s, counts, kmul, first, pix, seeds, var, hits)
         end = np.cumsum(counts)
         # chunk boundaries: every _CHUNK_RAYS rays (at least one point per chunk)
         cuts = np.unique(np.searchsorted(end, np.arange(_CHUNK_RAYS, int(end[-1]) if n else 0, _CHUNK_RAYS),
                                          side="right"))
         bounds = [0, *[int(c) for c in cuts if 0 < c < n], n]
-        seeds = (seed, seed if path_seed is None else path_seed)
-        direct = self.scene.direct if _FUSED_GATHER else None
-        if direct is not None:
-            start = np.zeros(n + 1, dtype=np.int64)
-            np.cumsum(counts, out=start[1:])
-            E = np.empty((n, 3))
-            h = np.empty(n, dtype=np.int64)
-            light = self.lighting
-            sx, sy, sz = (float(x) for x in light.sun_dir_body)
-            old_chunk = numba.set_parallel_chunksize(_FUSED_CHUNK)
-            try:
-                _paths.gather_traced(direct.handle, s["P"], s["NS"], s["NG"], start, first, seeds[0], seeds[1],
-                                     pix.astype(np.int64), kmul, self.eps, sx, sy, sz,
-                                     light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
-                                     np.float32(_FIRST_NEAR_SPACINGS * self.cache.spacing_m),
-                                     np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(),
-                                     self.env_irradiance, GATHER_ALPHA, E, var, h)
-            finally:
-                numba.set_parallel_chunksize(old_chunk)
-            if hits is not None:
-                hits[:] = h
-            return E
         if len(bounds) == 2:
             return self._gather_chunk(s, counts, kmul, first, pix, seeds, var, hits)
         E = np.empty((n, 3))
         for a, b in zip(bounds[:-1], bounds[1:]):
             E[a:b] = self._gather_chunk({k: v[a:b] for k, v in s.items()}, counts[a:b], kmul, first, pix[a:b],
                                         seeds, var[a:b], None if hits is None else hits[a:b])
+        return E
+
+    def _gather_fused(self, direct, s, counts, kmul: int, first: int, pix: np.ndarray, seeds, var: np.ndarray,
+                      hits: np.ndarray | None):
+        """:meth:`gather_E` in one kernel that calls Embree itself
+        (:func:`raytrace._paths.gather_traced`; ``direct`` the scene's
+        :class:`raytrace._embree.DirectScene`): the same estimate, without the arrays of every
+        ray and bounce. The distances that decide where a path continues are float32, as the
+        batched code compares them (NumPy casts the threshold to the hits' float32)."""
+        n = len(s["P"])
+        start = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(counts, out=start[1:])
+        E = np.empty((n, 3))
+        h = np.empty(n, dtype=np.int64)
+        light = self.lighting
+        sx, sy, sz = (float(x) for x in light.sun_dir_body)
+        old_chunk = numba.set_parallel_chunksize(_FUSED_CHUNK)
+        try:
+            _paths.gather_traced(direct.handle, s["P"], s["NS"], s["NG"], start, first, seeds[0], seeds[1],
+                                 pix.astype(np.int64), kmul, self.eps, sx, sy, sz,
+                                 light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
+                                 np.float32(_FIRST_NEAR_SPACINGS * self.cache.spacing_m),
+                                 np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(),
+                                 self.env_irradiance, GATHER_ALPHA, E, var, h)
+        finally:
+            numba.set_parallel_chunksize(old_chunk)
+        if hits is not None:
+            hits[:] = h
         return E
 
     def _gather_chunk(self, s, counts, kmul: int, first: int, pix: np.ndarray, seeds, var: np.ndarray,
