@@ -155,9 +155,9 @@ def ray_buffer():
 
 
 @inline
-def intersect1(scene, buf, ox, oy, oz, dx, dy, dz):
-    """The closest hit of the ray o + t·d (t ≥ 0; float32, as ``Scene.intersect``):
-    (geomID, primID, u, v, tfar) with geomID −1 on a miss (tfar then inf)."""
+def _load_ray(buf, ox, oy, oz, dx, dy, dz):
+    """Write the ray o + t·d, t ∈ [0, ∞), into words 0–11 of ``buf`` (float32, every mask bit
+    set); returns the buffer's uint32 view."""
     ib = buf.view(np.uint32)
     buf[0] = np.float32(ox)
     buf[1] = np.float32(oy)
@@ -171,6 +171,14 @@ def intersect1(scene, buf, ox, oy, oz, dx, dy, dz):
     ib[9] = np.uint32(INVALID)
     ib[10] = np.uint32(0)
     ib[11] = np.uint32(0)
+    return ib
+
+
+@inline
+def intersect1(scene, buf, ox, oy, oz, dx, dy, dz):
+    """The closest hit of the ray o + t·d (t ≥ 0; float32, as ``Scene.intersect``):
+    (geomID, primID, u, v, tfar) with geomID −1 on a miss (tfar then inf)."""
+    ib = _load_ray(buf, ox, oy, oz, dx, dy, dz)
     ib[18] = np.uint32(INVALID)
     ib[19] = np.uint32(INVALID)
     _intersect1(scene, buf.ctypes, 0)
@@ -183,19 +191,7 @@ def intersect1(scene, buf, ox, oy, oz, dx, dy, dz):
 @inline
 def occluded1(scene, buf, ox, oy, oz, dx, dy, dz):
     """Whether the ray o + t·d (t ≥ 0, float32) hits anything."""
-    ib = buf.view(np.uint32)
-    buf[0] = np.float32(ox)
-    buf[1] = np.float32(oy)
-    buf[2] = np.float32(oz)
-    buf[3] = np.float32(0.0)
-    buf[4] = np.float32(dx)
-    buf[5] = np.float32(dy)
-    buf[6] = np.float32(dz)
-    buf[7] = np.float32(0.0)
-    buf[8] = np.float32(np.inf)
-    ib[9] = np.uint32(INVALID)
-    ib[10] = np.uint32(0)
-    ib[11] = np.uint32(0)
+    ib = _load_ray(buf, ox, oy, oz, dx, dy, dz)
     _occluded1(scene, buf.ctypes, 0)
     return buf[8] < np.float32(0.0)
 

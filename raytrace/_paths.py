@@ -20,10 +20,10 @@ import math
 import numba
 import numpy as np
 
-from . import environment as env
 from ._embree import intersect1, occluded1, ray_buffer
 from ._jit import inline, pjit
-from ._shading import _cmj_perms, _cmj_point, _owen_sobol2_keyed, _strata, disc_direction, incoming, incoming_env
+from ._shading import (_cmj_perms, _cmj_point, _owen_sobol2_keyed, _strata, add_lobe_term, disc_direction,
+                       gather_estimate, incoming, incoming_env, mean_estimate)
 from .brdf import cosine_direction, onb, sample_brdf
 from .cache import _hash01, _hash32, glossy_draw, hit_normals
 
@@ -216,20 +216,8 @@ def gather_traced(scene, P, NS, NG, start, first, seed, path_seed, pix, kmul, ep
                     y += 0.2126 * r + 0.7152 * gg + 0.0722 * b
                 sy2 += y * y
             out_hits[k] = hits
-            k_ = math.pi / max(n_rays, 1)
-            out[k, 0] = sr * k_
-            out[k, 1] = sg * k_
-            out[k, 2] = sb * k_
-            if n_rays > 1:
-                ym = (0.2126 * sr + 0.7152 * sg + 0.0722 * sb) / n_rays
-                out_var[k] = max(math.pi * math.pi * (sy2 - n_rays * ym * ym) / (n_rays * (n_rays - 1.0)), 0.0)
-            else:
-                out_var[k] = 0.0
-            if a != 0.0:
-                er, eg, eb = env.irradiance_lookup(E_unocc, NS[k, 0], NS[k, 1], NS[k, 2])
-                out[k, 0] += a * er
-                out[k, 1] += a * eg
-                out[k, 2] += a * eb
+            out[k, 0], out[k, 1], out[k, 2], out_var[k] = gather_estimate(sr, sg, sb, sy2, n_rays, a, E_unocc,
+                                                                          NS[k, 0], NS[k, 1], NS[k, 2])
 
 
 
@@ -287,22 +275,8 @@ def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, e
                     a, b, cc = incoming(g, pr, hu, hv, ox, oy, oz, lx, ly, lz, face_offset, face_normal, corner_normal,
                                         comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun,
                                         valid, face_s, lat_start, lat_ids, p, tex, vis, eir, eig, eib)
-                tr = wr * (a - CV[k, 0])
-                tg = wg * (b - CV[k, 1])
-                tb = wb * (cc - CV[k, 2])
-                sr += tr
-                sg += tg
-                sb += tb
-                y = 0.2126 * tr + 0.7152 * tg + 0.0722 * tb
-                sy2 += y * y
-            out[j, 0] = sr / n_rays
-            out[j, 1] = sg / n_rays
-            out[j, 2] = sb / n_rays
-            if n_rays > 1:
-                ym = (0.2126 * sr + 0.7152 * sg + 0.0722 * sb) / n_rays
-                out_var[j] = max((sy2 - n_rays * ym * ym) / (n_rays * (n_rays - 1.0)), 0.0)
-            else:
-                out_var[j] = 0.0
+                sr, sg, sb, sy2 = add_lobe_term(sr, sg, sb, sy2, wr, wg, wb, a, b, cc, CV[k, 0], CV[k, 1], CV[k, 2])
+            out[j, 0], out[j, 1], out[j, 2], out_var[j] = mean_estimate(sr, sg, sb, sy2, n_rays)
 
 
 @pjit

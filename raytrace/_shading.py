@@ -780,21 +780,29 @@ def gather_sum(start, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, co
                 sb += b
                 y += 0.2126 * r + 0.7152 * g + 0.0722 * b
             sy2 += y * y
-        k_ = math.pi / max(n_rays, 1)
-        out[k, 0] = sr * k_
-        out[k, 1] = sg * k_
-        out[k, 2] = sb * k_
-        # variance of the mean of the N terms π·t_j: π² (Σy² − N ȳ²) / (N (N − 1))
-        if n_rays > 1:
-            ym = (0.2126 * sr + 0.7152 * sg + 0.0722 * sb) / n_rays
-            out_var[k] = max(math.pi * math.pi * (sy2 - n_rays * ym * ym) / (n_rays * (n_rays - 1.0)), 0.0)
-        else:
-            out_var[k] = 0.0
-        if a != 0.0:
-            er, eg, eb = env.irradiance_lookup(E_unocc, NS[k, 0], NS[k, 1], NS[k, 2])
-            out[k, 0] += a * er
-            out[k, 1] += a * eg
-            out[k, 2] += a * eb
+        out[k, 0], out[k, 1], out[k, 2], out_var[k] = gather_estimate(sr, sg, sb, sy2, n_rays, a, E_unocc, NS[k, 0],
+                                                                      NS[k, 1], NS[k, 2])
+
+
+@inline
+def gather_estimate(sr, sg, sb, sy2, n_rays, a, E_unocc, nx, ny, nz):
+    """The estimate of :func:`gather_sum` from its sums over a point's N rays (Σ of the terms
+    per channel, Σ of their luminance²): (E_r, E_g, E_b, luminance variance)."""
+    k_ = math.pi / max(n_rays, 1)
+    er = sr * k_
+    eg = sg * k_
+    eb = sb * k_
+    # variance of the mean of the N terms π·t_j: π² (Σy² − N ȳ²) / (N (N − 1))
+    var = 0.0
+    if n_rays > 1:
+        ym = (0.2126 * sr + 0.7152 * sg + 0.0722 * sb) / n_rays
+        var = max(math.pi * math.pi * (sy2 - n_rays * ym * ym) / (n_rays * (n_rays - 1.0)), 0.0)
+    if a != 0.0:
+        ur, ug, ub = env.irradiance_lookup(E_unocc, nx, ny, nz)
+        er += a * ur
+        eg += a * ug
+        eb += a * ub
+    return er, eg, eb, var
 
 
 @pjit_exact
@@ -1521,23 +1529,32 @@ def lobe_sum(n_rays, O, D, Wt, geom, prim, hu, hv, face_offset, face_normal, cor
                                    D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
                                    mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
                                    vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
-            tr = Wt[m, 0] * (a - CV[k, 0])
-            tg = Wt[m, 1] * (b - CV[k, 1])
-            tb = Wt[m, 2] * (c - CV[k, 2])
-            sr += tr
-            sg += tg
-            sb += tb
-            y = 0.2126 * tr + 0.7152 * tg + 0.0722 * tb
-            sy2 += y * y
-        out[j, 0] = sr / n_rays
-        out[j, 1] = sg / n_rays
-        out[j, 2] = sb / n_rays
-        # variance of the mean of the N terms: (Σy² − N ȳ²) / (N (N − 1))
-        if n_rays > 1:
-            ym = (0.2126 * sr + 0.7152 * sg + 0.0722 * sb) / n_rays
-            out_var[j] = max((sy2 - n_rays * ym * ym) / (n_rays * (n_rays - 1.0)), 0.0)
-        else:
-            out_var[j] = 0.0
+            sr, sg, sb, sy2 = add_lobe_term(sr, sg, sb, sy2, Wt[m, 0], Wt[m, 1], Wt[m, 2], a, b, c, CV[k, 0], CV[k, 1],
+                                            CV[k, 2])
+        out[j, 0], out[j, 1], out[j, 2], out_var[j] = mean_estimate(sr, sg, sb, sy2, n_rays)
+
+
+@inline
+def add_lobe_term(sr, sg, sb, sy2, wr, wg, wb, lr, lg, lb, cr, cg, cb):
+    """The sums of :func:`lobe_sum` with one more lobe ray's term, weight × (incoming radiance
+    L − the control variate L̄)."""
+    tr = wr * (lr - cr)
+    tg = wg * (lg - cg)
+    tb = wb * (lb - cb)
+    y = 0.2126 * tr + 0.7152 * tg + 0.0722 * tb
+    return sr + tr, sg + tg, sb + tb, sy2 + y * y
+
+
+@inline
+def mean_estimate(sr, sg, sb, sy2, n):
+    """The mean of N terms from their sums per channel and the sum of their luminance²:
+    (mean_r, mean_g, mean_b, the luminance variance of the mean)."""
+    # variance of the mean of the N terms: (Σy² − N ȳ²) / (N (N − 1))
+    var = 0.0
+    if n > 1:
+        ym = (0.2126 * sr + 0.7152 * sg + 0.0722 * sb) / n
+        var = max((sy2 - n * ym * ym) / (n * (n - 1.0)), 0.0)
+    return sr / n, sg / n, sb / n, var
 
 
 @pjit_exact
