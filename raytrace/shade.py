@@ -55,6 +55,7 @@ Depth, normals and ids are never supersampled: they stay exact at the pixel cent
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from dataclasses import dataclass, field
@@ -228,6 +229,16 @@ _CHUNK_RAYS = 1 << 18
 # in the second pass; 0, numba's static split, measured 0.95–1.03× on four scenes)
 _FUSED_GATHER = True
 _FUSED_CHUNK = 1
+
+
+@contextlib.contextmanager
+def _fused_schedule():
+    """numba's parallel loops launched inside hand out _FUSED_CHUNK iterations at a time."""
+    old = numba.set_parallel_chunksize(_FUSED_CHUNK)
+    try:
+        yield
+    finally:
+        numba.set_parallel_chunksize(old)
 
 
 def _balanced_aa(samples: int) -> int:
@@ -629,14 +640,11 @@ class _Context:
             v = np.empty(len(idx))
             light = self.lighting
             sx, sy, sz = (float(x) for x in light.sun_dir_body)
-            old_chunk = numba.set_parallel_chunksize(_FUSED_CHUNK)
-            try:
+            with _fused_schedule():
                 _paths.lobe_traced(direct.handle, idx, s["P"], s["NS"], s["NG"], s["WO"], s["comp"], n_rays, seed,
                                    seed ^ _LOBE_STREAM, np.asarray(pix, dtype=np.int64), self.eps, sx, sy, sz,
                                    light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
                                    np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(), lbar, val, v)
-            finally:
-                numba.set_parallel_chunksize(old_chunk)
             out[idx] = val
             if var is not None:
                 var[idx] = v
@@ -725,16 +733,13 @@ class _Context:
         h = np.empty(n, dtype=np.int64)
         light = self.lighting
         sx, sy, sz = (float(x) for x in light.sun_dir_body)
-        old_chunk = numba.set_parallel_chunksize(_FUSED_CHUNK)
-        try:
+        with _fused_schedule():
             _paths.gather_traced(direct.handle, s["P"], s["NS"], s["NG"], start, first, seeds[0], seeds[1],
                                  pix.astype(np.int64), kmul, self.eps, sx, sy, sz,
                                  light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
                                  np.float32(_FIRST_NEAR_SPACINGS * self.cache.spacing_m),
                                  np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(),
                                  self.env_irradiance, GATHER_ALPHA, E, var, h)
-        finally:
-            numba.set_parallel_chunksize(old_chunk)
         if hits is not None:
             hits[:] = h
         return E
