@@ -1,9 +1,12 @@
 """Render snapshots: every built-in target × pattern, rendered small (160×120, frames 1-3 of a
 5-frame sequence, clean RGB, paper D4 and physical degradation, mask, depth, normals) through
 the pipeline's own ``plan_sequence``/``render_frame_images``, against the references committed
-in tests/snapshots/. Masks must match exactly, depth and normals within tight tolerances, RGB
-by PSNR >= 45 dB (per frame and over the target's window). A failure names the snapshot, the
-modality and the metric, and writes a diff image under pytest's temporary folder.
+in tests/snapshots/. Masks must match exactly (but for ties between touching parts, which
+Embree decides by the CPU's vector width), depth and normals within tight tolerances, RGB by
+PSNR >= 45 dB (per frame and over the target's window; the degraded images when their input is
+the reference's bit for bit, and the degradation chain on the stored inputs). A failure names
+the snapshot, the modality and the metric, and writes a diff image under pytest's temporary
+folder.
 
 Updating the references is deliberate: ``python cli.py snapshots --update`` (never automatic).
 The second half tests the comparison itself: a deliberately changed pixel must fail.
@@ -38,6 +41,7 @@ def test_every_target_and_pattern_has_small_references():
     assert ref["rgb"].shape == ref["rgb_paper"].shape == ref["rgb_physical"].shape == (h, w, 3)
     assert ref["rgb"].dtype == np.uint8 and ref["mask"].dtype == np.uint16 and ref["mask"].shape == (h, w)
     assert ref["depth"].dtype == np.float32 and ref["normal"].dtype == np.float32 and ref["normal"].shape == (h, w, 3)
+    assert ref["radiance"].dtype == np.float32 and ref["radiance"].shape == (h, w, 3)
 
 
 def test_references_round_trip_bit_for_bit(tmp_path):
@@ -50,7 +54,8 @@ def test_references_round_trip_bit_for_bit(tmp_path):
     images = {"rgb": rng.integers(0, 256, (h, w, 3), dtype=np.uint8), "mask": rng.integers(0, 65536, (h, w),
                                                                                         dtype=np.uint16),
               "rgb_paper": rng.integers(0, 256, (h, w, 3), dtype=np.uint8),
-              "rgb_physical": rng.integers(0, 256, (h, w, 3), dtype=np.uint8), "depth": depth, "normal": normal}
+              "rgb_physical": rng.integers(0, 256, (h, w, 3), dtype=np.uint8), "depth": depth, "normal": normal,
+              "radiance": rng.lognormal(0.0, 3.0, (h, w, 3)).astype(np.float32)}
     cli.write_snapshot(str(tmp_path), "x", images)
     back = cli.read_snapshot(str(tmp_path), "x")
     for m, a in images.items():
@@ -66,6 +71,7 @@ def test_render_matches_reference(name, tmp_path_factory):
     assert (ref["mask"] > 0).any(), f"{name}: the reference shows no target; the snapshot would guard nothing"
     diff_dir = tmp_path_factory.mktemp(f"snapshot-diff-{name}")
     msgs = cli.compare_snapshot(name, ref, new, diff_dir=str(diff_dir))
+    msgs += cli.check_snapshot_degradation(name, ref, diff_dir=str(diff_dir))
     assert not msgs, ("render snapshots moved (if intended: python cli.py snapshots --update):\n"
                       + "\n".join(msgs))
 
@@ -225,3 +231,74 @@ def test_snapshots_command_leaves_no_empty_temporary_folder(tmp_path, monkeypatc
     (kept,) = tmp.iterdir()
     assert (kept / f"{SMALL_TARGET}.mask.diff.png").is_file()
     assert str(kept) in capsys.readouterr().out
+
+
+def _part_boundary_pixel(ref: dict) -> tuple:
+    """A pixel on the target whose right-hand neighbour shows another part (both hit)."""
+    m = ref["mask"].astype(np.int64)
+    ys, xs = np.nonzero((m[:, :-1] > 0) & (m[:, 1:] > 0) & (m[:, :-1] != m[:, 1:]))
+    assert len(ys), "the reference shows no boundary between two parts"
+    return int(ys[0]), int(xs[0])
+
+
+def test_a_tie_between_touching_parts_passes_and_other_id_changes_fail(ref, tmp_path):
+    y, x = _part_boundary_pixel(ref)
+    other = ref["mask"][y, x + 1]
+    tie = _copy(ref)  # the neighbouring part reported at the same distance: another CPU's tie
+    tie["mask"][y, x] = other
+    assert cli.compare_snapshot(SMALL_TARGET, ref, tie, diff_dir=str(tmp_path)) == []
+    deeper = _copy(tie)  # the same id change, but the hit moved: not a tie
+    deeper["depth"][y, x] += np.float32(0.01)
+    msgs = cli.compare_snapshot(SMALL_TARGET, ref, deeper, diff_dir=str(tmp_path))
+    assert [m.split(":")[1].strip() for m in msgs] == ["mask", "depth"]
+    assert msgs[0].startswith(f"{SMALL_TARGET}: mask: 1 of")
+    far = _copy(ref)  # an id that no neighbour has
+    far["mask"][y, x] = int(ref["mask"].max()) + 1
+    msgs = cli.compare_snapshot(SMALL_TARGET, ref, far, diff_dir=str(tmp_path))
+    assert len(msgs) == 1 and msgs[0].startswith(f"{SMALL_TARGET}: mask: 1 of")
+
+
+def test_more_ties_than_the_bound_all_fail(ref, tmp_path):
+    m = ref["mask"].astype(np.int64)
+    boundary = np.zeros(m.shape, dtype=bool)  # pixels whose right-hand neighbour is another part
+    boundary[:, :-1] = (m[:, :-1] > 0) & (m[:, 1:] > 0) & (m[:, :-1] != m[:, 1:])
+    n_target = np.count_nonzero(m > 0)
+    need = int(cli.SNAPSHOT_MASK_TIES * n_target) + 1
+    ys, xs = np.nonzero(boundary)
+    if len(ys) < need:
+        pytest.skip(f"{SMALL_TARGET} has only {len(ys)} part-boundary pixels, {need} needed")
+    new = _copy(ref)
+    new["mask"][ys[:need], xs[:need]] = ref["mask"][ys[:need], xs[:need] + 1]
+    msgs = cli.compare_snapshot(SMALL_TARGET, ref, new, diff_dir=str(tmp_path))
+    assert len(msgs) == 1 and msgs[0].startswith(f"{SMALL_TARGET}: mask: {need} of")
+
+
+def test_degraded_images_are_compared_only_with_the_same_input(ref, tmp_path):
+    moved = _copy(ref)  # the clean image moved by 1 DN (another CPU), so the paper noise is another draw
+    y, x = _target_pixel(ref)
+    moved["rgb"][y, x] = np.where(ref["rgb"][y, x] < 255, ref["rgb"][y, x] + 1, 254)
+    moved["rgb_paper"] = np.random.default_rng(5).integers(0, 256, ref["rgb_paper"].shape, dtype=np.uint8)
+    assert cli.compare_snapshot(SMALL_TARGET, ref, moved, diff_dir=str(tmp_path)) == []
+    moved = _copy(ref)  # the radiance moved in its last bit: the physical noise is another draw
+    moved["radiance"][y, x, 0] = np.nextafter(ref["radiance"][y, x, 0], np.float32(np.inf))
+    moved["rgb_physical"] = 255 - ref["rgb_physical"]
+    assert cli.compare_snapshot(SMALL_TARGET, ref, moved, diff_dir=str(tmp_path)) == []
+    moved["rgb_paper"] = 255 - ref["rgb_paper"]  # its own input (the clean RGB) did not move: compared
+    msgs = cli.compare_snapshot(SMALL_TARGET, ref, moved, diff_dir=str(tmp_path))
+    assert len(msgs) == 1 and msgs[0].startswith(f"{SMALL_TARGET}: rgb_paper: PSNR ")
+
+
+def test_the_chain_reproduces_the_stored_degraded_images_and_catches_a_change(ref, tmp_path):
+    assert cli.check_snapshot_degradation(SMALL_TARGET, ref, diff_dir=str(tmp_path)) == []
+    for modality in ("rgb_paper", "rgb_physical"):
+        changed = _copy(ref)
+        y, x = _target_pixel(ref)
+        changed[modality][y, x] = np.where(ref[modality][y, x] > 127, 0, 255)
+        msgs = cli.check_snapshot_degradation(SMALL_TARGET, changed, diff_dir=str(tmp_path))
+        assert len(msgs) == 1 and msgs[0].startswith(f"{SMALL_TARGET}: {modality}: degrading the reference's own "
+                                                     "input: PSNR "), msgs
+        assert (tmp_path / f"{SMALL_TARGET}.{modality}.diff.png").is_file()
+    dimmer = _copy(ref)  # a chain that sees another input gives other degraded images
+    dimmer["radiance"] = ref["radiance"] * np.float32(0.8)
+    msgs = cli.check_snapshot_degradation(SMALL_TARGET, dimmer, diff_dir=str(tmp_path))
+    assert [m.split(":")[1].strip() for m in msgs] == ["rgb_physical"]
