@@ -183,7 +183,13 @@ def _earth_irradiance(n, earth_dir, dist, radius, albedo, sun, e_sun, n_grid=800
     L = albedo * e_sun * np.clip(m @ sun, 0, None) / math.pi
     w = (L * cos_q * dA / r ** 2).ravel()
     n = np.asarray(n, float)
-    E = np.clip(omega.reshape(-1, 3) @ np.atleast_2d(n).T, 0, None).T @ w  # one value per normal
+    n2 = np.atleast_2d(n)
+    om = omega.reshape(-1, 3)
+    E = np.empty(len(n2))  # one value per normal, in blocks (a (normals × patches) matrix is GBs)
+    for i in range(0, len(n2), 64):
+        cosines = om @ n2[i:i + 64].T
+        np.maximum(cosines, 0.0, out=cosines)
+        E[i:i + 64] = w @ cosines
     return float(E[0]) if n.ndim == 1 else E
 
 
