@@ -23,11 +23,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench_time_error import viewpoints, write_scene  # noqa: E402
+from bench_time_error import scene_frames, viewpoints  # noqa: E402
 
 from raytrace import shade  # noqa: E402
-from raytrace.scene import Scene  # noqa: E402
-from raytrace.scenefile import load_scene_file  # noqa: E402
 from raytrace.targets import BUILTIN_TARGETS  # noqa: E402
 
 
@@ -41,33 +39,26 @@ def main() -> None:
     ap.add_argument("--views", nargs="*", default=[v[0] for v in viewpoints()])
     args = ap.parse_args()
     ratios, t_batched, t_fused = [], [], []
-    for target in args.targets:
-        for view, spath in write_scene(target, Path(args.scenes) / target, args.width):
-            if view not in args.views:
-                continue
-            spec = load_scene_file(str(spath))
-            scene = Scene(spec.model)
-            scene.radiance_cache()
-            frame_args = (scene, spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting)
-            times = {False: [], True: []}
-            img = {}
-            for r in range(args.repeats + 1):
-                for fused in ((False, True) if r % 2 == 0 else (True, False)):
-                    shade._FUSED_GATHER = fused
-                    t0 = time.perf_counter()
-                    f = shade.render(*frame_args, quality="balanced", samples=args.samples, seed=3 + r)
-                    dt = time.perf_counter() - t0
-                    if r:  # the first round warms up (JIT, the direct Embree scene)
-                        times[fused].append(dt)
-                    if r == 1:
-                        img[fused] = f.radiance.astype(np.float64)
-            tb, tf = statistics.median(times[False]), statistics.median(times[True])
-            diff = float(np.abs(img[True] - img[False]).max() / max(img[False].max(), 1e-30))
-            ratios.append(tf / tb)
-            t_batched.append(tb)
-            t_fused.append(tf)
-            print(f"{target:12s} {view:8s} batched {tb:7.3f} s  fused {tf:7.3f} s  ratio {tf / tb:.3f}  "
-                  f"max difference {diff:.1e}", flush=True)
+    for target, view, _spath, frame_args in scene_frames(Path(args.scenes), args.width, args.targets, args.views):
+        times = {False: [], True: []}
+        img = {}
+        for r in range(args.repeats + 1):
+            for fused in ((False, True) if r % 2 == 0 else (True, False)):
+                shade._FUSED_GATHER = fused
+                t0 = time.perf_counter()
+                f = shade.render(*frame_args, quality="balanced", samples=args.samples, seed=3 + r)
+                dt = time.perf_counter() - t0
+                if r:  # the first round warms up (JIT, the direct Embree scene)
+                    times[fused].append(dt)
+                if r == 1:
+                    img[fused] = f.radiance.astype(np.float64)
+        tb, tf = statistics.median(times[False]), statistics.median(times[True])
+        diff = float(np.abs(img[True] - img[False]).max() / max(img[False].max(), 1e-30))
+        ratios.append(tf / tb)
+        t_batched.append(tb)
+        t_fused.append(tf)
+        print(f"{target:12s} {view:8s} batched {tb:7.3f} s  fused {tf:7.3f} s  ratio {tf / tb:.3f}  "
+              f"max difference {diff:.1e}", flush=True)
     shade._FUSED_GATHER = True
     print(f"median over scenes: batched {statistics.median(t_batched):.3f} s, fused {statistics.median(t_fused):.3f} s, "
           f"median ratio {statistics.median(ratios):.3f} ({min(ratios):.3f}-{max(ratios):.3f})")

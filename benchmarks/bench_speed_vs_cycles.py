@@ -27,10 +27,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_time_error import bpy_python, cycles, viewpoints, write_scene  # noqa: E402
+from bench_time_error import bpy_python, cycles, scene_frames, viewpoints  # noqa: E402
 
-from raytrace.scene import Scene  # noqa: E402
-from raytrace.scenefile import load_scene_file  # noqa: E402
 from raytrace.shade import render  # noqa: E402
 from raytrace.targets import BUILTIN_TARGETS  # noqa: E402
 
@@ -53,34 +51,27 @@ def main() -> None:
     per_scene = {k: [] for k in names}
     tmp = Path(args.scenes) / "_cycles_out.exr"
     print("scene".ljust(21) + "".join(f"{k:>14s}" for k in names), flush=True)
-    for target in args.targets:
-        for view, spath in write_scene(target, Path(args.scenes) / target, args.width):
-            if view not in args.views:
-                continue
-            spec = load_scene_file(str(spath))
-            scene = Scene(spec.model)
-            scene.radiance_cache()
-            frame = (scene, spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting)
-            for q, n in presets:
-                render(*frame, quality=q, samples=n, seed=0)  # warm-up: JIT, the cache's transfer
-            times = {k: [] for k in names}
-            for r in range(args.repeats):
-                for (q, n), k in zip(presets, names):
-                    t0 = time.perf_counter()
-                    render(*frame, quality=q, samples=n, seed=r + 1)
-                    times[k].append(time.perf_counter() - t0)
-                for n in args.cycles_spp:
-                    s, _img = cycles(spath, n, tmp, py)
-                    times[f"cycles-{n}"].append(s)
-            row = {k: statistics.median(v) for k, v in times.items()}
-            for k, v in row.items():
-                per_scene[k].append(v)
-            print(f"{target:12s} {view:8s}" + "".join(f"{row[k]:14.3f}" for k in names), flush=True)
+    for target, view, spath, frame in scene_frames(Path(args.scenes), args.width, args.targets, args.views):
+        for q, n in presets:
+            render(*frame, quality=q, samples=n, seed=0)  # warm-up: JIT, the cache's transfer
+        times = {k: [] for k in names}
+        for r in range(args.repeats):
+            for (q, n), k in zip(presets, names):
+                t0 = time.perf_counter()
+                render(*frame, quality=q, samples=n, seed=r + 1)
+                times[k].append(time.perf_counter() - t0)
+            for n in args.cycles_spp:
+                s, _img = cycles(spath, n, tmp, py)
+                times[f"cycles-{n}"].append(s)
+        row = {k: statistics.median(v) for k, v in times.items()}
+        for k, v in row.items():
+            per_scene[k].append(v)
+        print(f"{target:12s} {view:8s}" + "".join(f"{row[k]:14.3f}" for k in names), flush=True)
     tmp.unlink(missing_ok=True)
     print("median".ljust(21) + "".join(f"{statistics.median(per_scene[k]):14.3f}" for k in names))
     for n in args.cycles_spp:
         c = per_scene[f"cycles-{n}"]
-        for (q, m), k in zip(presets, names):
+        for k in names[:len(presets)]:
             ratios = [a / b for a, b in zip(c, per_scene[k])]
             print(f"cycles-{n} / {k}: median of per-scene ratios {statistics.median(ratios):.2f} "
                   f"({min(ratios):.2f}-{max(ratios):.2f})")

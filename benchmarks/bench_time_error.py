@@ -103,6 +103,20 @@ def write_scene(target: str, folder: Path, width: int) -> list[tuple[str, Path]]
     return out
 
 
+def scene_frames(folder: Path, width: int, targets, views):
+    """The benchmark scenes (written into ``folder`` if missing), one at a time with its
+    radiance cache built: (target, view, scene file, the first five arguments of
+    :func:`raytrace.shade.render`)."""
+    for target in targets:
+        for view, spath in write_scene(target, Path(folder) / target, width):
+            if view not in views:
+                continue
+            spec = load_scene_file(str(spath))
+            scene = Scene(spec.model)
+            scene.radiance_cache()
+            yield target, view, spath, (scene, spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting)
+
+
 def rel_err(a: np.ndarray, b: np.ndarray, m: np.ndarray) -> float:
     return float(np.sqrt(((a[m] - b[m]) ** 2).sum() / (b[m] ** 2).sum()))
 
