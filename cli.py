@@ -1865,10 +1865,17 @@ def compare_snapshot(name: str, ref: dict, new: dict, *, diff_dir: str) -> list:
         path = _write_diff(diff_dir, name, modality, ref[modality], new[modality], bad)
         msgs.append(f"{name}: {modality}: {text}; diff image {path}")
 
+    d0, d1 = ref["depth"].astype(np.float64), new["depth"].astype(np.float64)
+    f0, f1 = np.isfinite(d0), np.isfinite(d1)
+    both = f0 & f1
+    err = np.zeros_like(d0)
+    err[both] = np.abs(d1[both] - d0[both])
+    atol, rtol = SNAPSHOT_DEPTH_TOL
+    depth_bad = (f0 != f1) | (both & (err > atol + rtol * np.where(both, np.abs(d0), 0.0)))
     m0, m1 = ref["mask"], new["mask"]
     bad = m0 != m1
     if bad.any():
-        tie = _mask_ties(m0, m1, ref["depth"], new["depth"]) & bad
+        tie = _mask_ties(m0, m1, both & ~depth_bad) & bad
         n_target = max(int(np.count_nonzero(m0 > 0)), 1)
         if np.count_nonzero(tie) <= SNAPSHOT_MASK_TIES * n_target:
             bad &= ~tie  # a tie between two parts at the same depth, decided otherwise here
@@ -1881,13 +1888,7 @@ def compare_snapshot(name: str, ref: dict, new: dict, *, diff_dir: str) -> list:
         iou, k = min(ious) if ious else (1.0, 0)
         fail("mask", f"{np.count_nonzero(bad)} of {bad.size} pixels have other instance ids (must match exactly "
              f"but for ties between touching parts; lowest instance IoU {iou:.4f}, id {k})", bad)
-    d0, d1 = ref["depth"].astype(np.float64), new["depth"].astype(np.float64)
-    f0, f1 = np.isfinite(d0), np.isfinite(d1)
-    both = f0 & f1
-    err = np.zeros_like(d0)
-    err[both] = np.abs(d1[both] - d0[both])
-    atol, rtol = SNAPSHOT_DEPTH_TOL
-    bad = (f0 != f1) | (both & (err > atol + rtol * np.where(both, np.abs(d0), 0.0)))
+    bad = depth_bad
     if bad.any():
         fail("depth", f"{np.count_nonzero(bad)} pixels outside |Δ| <= {atol:g} m + {rtol:g}·depth or hit/miss "
              f"changed ({np.count_nonzero(f0 != f1)}); max |Δ| {err.max():.3g} m", bad)
@@ -1903,8 +1904,7 @@ def compare_snapshot(name: str, ref: dict, new: dict, *, diff_dir: str) -> list:
     # when their input is the reference's bit for bit (check_snapshot_degradation checks the
     # chain itself from the reference's inputs)
     same_input = {"rgb_paper": np.array_equal(ref["rgb"], new["rgb"]),
-                  "rgb_physical": "radiance" in ref and "radiance" in new
-                  and np.array_equal(ref["radiance"], new["radiance"])}
+                  "rgb_physical": np.array_equal(ref["radiance"], new["radiance"])}
     for m in ("rgb", "rgb_paper", "rgb_physical"):
         if same_input.get(m, True):
             _compare_rgb(m, ref[m], new[m], m0, m1, fail)
@@ -1959,10 +1959,10 @@ def check_snapshot_degradation(name: str, ref: dict, *, diff_dir: str) -> list:
     return msgs
 
 
-def _mask_ties(m0: np.ndarray, m1: np.ndarray, d0: np.ndarray, d1: np.ndarray) -> np.ndarray:
-    """Pixels where two masks may differ by a tie: both hit, at the same depth (within
-    :data:`SNAPSHOT_DEPTH_TOL`), and each one's id is found among the other mask's 3×3
-    neighbours there. Where two parts touch or overlap in one plane (a mounting face sunk a few
+def _mask_ties(m0: np.ndarray, m1: np.ndarray, same_depth: np.ndarray) -> np.ndarray:
+    """Pixels where two masks may differ by a tie: both hit, at the same depth (``same_depth``:
+    both depths finite and within :data:`SNAPSHOT_DEPTH_TOL`), and each one's id is found among
+    the other mask's 3×3 neighbours there. Where two parts touch or overlap in one plane (a mounting face sunk a few
     millimetres into its mount), a pixel centre on the shared strip hits both at one distance,
     and which of the two Embree reports depends on its traversal order, i.e. on the CPU's
     vector width (AVX2 and AVX-512 differ)."""
@@ -1975,12 +1975,7 @@ def _mask_ties(m0: np.ndarray, m1: np.ndarray, d0: np.ndarray, d1: np.ndarray) -
         for dx in range(3):
             in0 |= p0[dy:dy + h, dx:dx + w] == m1
             in1 |= p1[dy:dy + h, dx:dx + w] == m0
-    a, b = np.asarray(d0, np.float64), np.asarray(d1, np.float64)
-    both = np.isfinite(a) & np.isfinite(b) & (m0 > 0) & (m1 > 0)
-    atol, rtol = SNAPSHOT_DEPTH_TOL
-    near = np.zeros((h, w), dtype=bool)
-    near[both] = np.abs(a[both] - b[both]) <= atol + rtol * np.abs(a[both])
-    return both & near & in0 & in1
+    return same_depth & (m0 > 0) & (m1 > 0) & in0 & in1
 
 
 def _snapshot_settings_json() -> str:
