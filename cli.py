@@ -1150,31 +1150,57 @@ def _progress(total: int, initial: int, desc: str, quiet: bool):
                 dynamic_ncols=True, smoothing=0.1, mininterval=0.5)
 
 
-def _kernels_not_compiled() -> bool:
-    """Whether numba's on-disk cache holds no compiled shading kernel yet (a fresh install, or
-    a new NUMBA_CACHE_DIR): the cache index of one kernel, where numba's own cache locator puts
-    it (next to the source when writable, else the user's cache directory). False if numba's
-    cache internals cannot be read (no guess then)."""
+def _precompile_groups(quality: str) -> list:
+    """The kernel groups of raytrace._precompile a ``quality`` frame calls: the main job's, the
+    preset's own, and for ``balanced`` on an embreex wheel without Embree 4 the batched
+    fallback's."""
+    groups = ["fast"]
+    if quality == "balanced":
+        from raytrace import _embree
+        groups += ["balanced"] if _embree.available() else ["balanced", "batched"]
+    elif quality == "reference":
+        groups.append("reference")
+    return groups
+
+
+def _kernels_not_compiled(quality: str = "fast") -> list:
+    """The groups of :func:`_precompile_groups` whose kernels numba's on-disk cache does not
+    hold yet (a fresh install, a new NUMBA_CACHE_DIR, a first ``balanced`` run): judged by the
+    cache index of one kernel per group, where numba's own cache locator puts it (next to the
+    source when writable, else the user's cache directory). Empty if numba's cache internals
+    cannot be read (no guess then)."""
     try:
-        from raytrace import _shading
-        return not os.path.exists(_shading.surfaces._cache._cache_file._index_path)
+        from raytrace._precompile import dispatcher, probe
+        missing = []
+        for group in _precompile_groups(quality):
+            name = probe(group)
+            if name is not None and not os.path.exists(dispatcher(name)._cache._cache_file._index_path):
+                missing.append(group)
+        return missing
     except Exception:  # noqa: BLE001 (numba internals of another version)
-        return False
+        return []
 
 
-def _compile_kernels(quiet: bool) -> None:
-    """A fresh install: compile the main job's numba kernels into numba's cache on all cores
-    at once (raytrace._precompile), before the workers start and would each compile all of
-    them. A kernel this misses compiles on its first call, as it would anyway."""
+def _compile_kernels(groups: list, quiet: bool) -> None:
+    """A fresh install (or a preset's first run): compile the numba kernels of ``groups`` into
+    numba's cache on all cores at once (raytrace._precompile), before the workers start and
+    would each compile all of them. A kernel this misses compiles on its first call, as it
+    would anyway."""
     cores = default_workers()
     if not quiet:
-        print(f"first run: compiling the ray-tracing kernels into numba's cache on {cores} "
-              f"core{'s' if cores > 1 else ''} (once; about {45 // min(cores, 2)} s)", file=sys.stderr)
+        try:
+            from raytrace._precompile import group_signatures
+            seconds = sum(c for c, _ in group_signatures(groups).values()) / min(cores, 4)
+            about = f"about {5 * max(1, round(seconds / 5))} s"
+        except Exception:  # noqa: BLE001 (the estimate only)
+            about = "a minute or two"
+        print(f"first run: compiling the ray-tracing kernels ({', '.join(groups)}) into numba's cache on {cores} "
+              f"core{'s' if cores > 1 else ''} (once; {about})", file=sys.stderr)
     if cores < 2:
         return  # one core: the first frame compiles them, in the same time
     try:
         from raytrace._precompile import precompile
-        precompile(min(cores, 4))
+        precompile(min(cores, 4), groups)
     except Exception:  # noqa: BLE001 (an optimisation: without it the kernels compile lazily)
         pass
 
@@ -1195,8 +1221,9 @@ def run_plans(jobs: list, args: argparse.Namespace, *, desc: str | None = None) 
                       "visible": sum(f["visible"] for f in plan["result"]["frames"])})
     skipped = sum(s["skipped"] for s in stats)
     t0 = time.perf_counter()
-    if all_tasks and args.scheduler is None and _kernels_not_compiled():
-        _compile_kernels(quiet=args.quiet)
+    missing = _kernels_not_compiled(getattr(args, "quality", "fast")) if all_tasks and args.scheduler is None else []
+    if missing:
+        _compile_kernels(missing, quiet=args.quiet)
     bar = _progress(len(all_tasks) + skipped, skipped, desc or jobs[0][0]["name"], args.quiet)
     try:
         for _ in execute(all_tasks, workers=workers, scheduler=args.scheduler, progress=bar):
@@ -1465,6 +1492,9 @@ def render_scene_main(argv: list[str]) -> int:
             sys.stderr.write(f"{PROG}: warning: sun.shadow_fraction is {spec.lighting.shadow_fraction:g} but the "
                              f"scene's Earth leaves {nu_geo:.3g} of the solar disc visible from the target; the "
                              "render uses shadow_fraction (set it to match if the eclipse is meant)\n")
+        missing = _kernels_not_compiled(quality)
+        if missing:
+            _compile_kernels(missing, quiet=False)
         t0 = time.perf_counter()
         frame = render(Scene(spec.model), spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting,
                        quality=quality, samples=samples, seed=seed)

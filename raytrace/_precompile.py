@@ -1,19 +1,25 @@
-"""Compile the main job's numba kernels into numba's on-disk cache on several processes at once.
+"""Compile the numba kernels into numba's on-disk cache on several processes at once.
 
 On a fresh install the first frame of ``python cli.py --target … --pattern …`` waits for numba
 to compile some fifty kernels, ~40 s on one core, and every worker process compiles all of
-them. :func:`precompile` splits the kernels the main job calls (:data:`SIGNATURES`, from
-``raytrace/_jit_signatures.py``) over ``processes`` spawned processes, each calling
-``Dispatcher.compile`` on its share with ``cache=True``, so the cache is written once, in
-parallel; the workers then load every kernel from it. A kernel whose recorded signature no
-longer matches the code is skipped (it compiles on first call, as without this step).
+them; ``--quality balanced`` adds ~110 s of kernels on one core (the fused final gather and
+lobe paths ~80 s of it), ``reference`` ~15 s (a 2-core AMD EPYC, 2026-11-27). :func:`precompile` splits the kernels of the requested groups over
+``processes`` spawned processes, each calling ``Dispatcher.compile`` on its share with
+``cache=True``, so the cache is written once, in parallel; the workers then load every kernel
+from it. A kernel whose recorded signature no longer matches the code is skipped (it compiles
+on first call, as without this step).
 
-Regenerate the signatures after changing a kernel's arguments::
+The groups (``raytrace/_jit_signatures.py``): ``fast``, the kernels one frame of the main job
+calls (:data:`SIGNATURES`); then, each holding only what the one before did not compile,
+``balanced`` (a ``--quality balanced`` frame), ``batched`` (the same frame through the
+batched fallback, :data:`raytrace.shade._FUSED_GATHER` False: what a machine whose embreex
+wheel has no Embree 4 library runs) and ``reference``. Regenerate them after changing a
+kernel's arguments::
 
     python -m raytrace._precompile --record
 
-which runs one frame of the main job in a fresh process with an empty numba cache and writes
-each kernel's signatures and compile time (the time balances the shares).
+which runs the four frames in a fresh process with an empty numba cache and writes each
+kernel's signatures and compile time (the time balances the shares).
 """
 
 from __future__ import annotations
@@ -75,38 +81,49 @@ def shares(signatures: dict, processes: int) -> list:
     return [s for s in out if s]
 
 
-def precompile(processes: int) -> list:
-    """Compile the main job's kernels on ``processes`` spawned processes (see the module
-    notes); returns the entries that failed (empty when all compiled)."""
+GROUPS = ("fast", "balanced", "batched", "reference")
+
+
+def group_signatures(groups=("fast",)) -> dict:
+    """{qualname: (seconds, [signatures])} of the kernels of ``groups`` (names in
+    :data:`GROUPS`), merged: a kernel in several groups gets the union of its signatures and
+    the sum of their compile times."""
+    from ._jit_signatures import EXTRA_SIGNATURES, SIGNATURES
+    out = {}
+    for g in groups:
+        if g not in GROUPS:
+            raise ValueError(f"precompile group must be one of {', '.join(GROUPS)}, got {g!r}")
+        for qualname, (cost, sigs) in (SIGNATURES if g == "fast" else EXTRA_SIGNATURES[g]).items():
+            c0, s0 = out.get(qualname, (0.0, []))
+            out[qualname] = (round(c0 + cost, 2), s0 + [x for x in sigs if x not in s0])
+    return out
+
+
+def probe(group: str) -> str | None:
+    """The kernel whose presence in numba's cache stands for ``group`` being compiled: its
+    costliest kernel that no earlier group holds (None if it has none of its own)."""
+    from ._jit_signatures import EXTRA_SIGNATURES, SIGNATURES
+    if group == "fast":
+        return "raytrace._shading.surfaces"
+    earlier = set(group_signatures(GROUPS[:GROUPS.index(group)]))
+    own = [(c, q) for q, (c, _) in EXTRA_SIGNATURES[group].items() if q not in earlier]
+    return max(own)[1] if own else None
+
+
+def precompile(processes: int, groups=("fast",)) -> list:
+    """Compile the kernels of ``groups`` (see the module notes) on ``processes`` spawned
+    processes; returns the entries that failed (empty when all compiled)."""
     from concurrent.futures import ProcessPoolExecutor
     import multiprocessing
-    from ._jit_signatures import SIGNATURES
-    parts = shares(SIGNATURES, processes)
+    parts = shares(group_signatures(groups), processes)
     with ProcessPoolExecutor(max_workers=len(parts), mp_context=multiprocessing.get_context("spawn")) as pool:
         return [f for failed in pool.map(_compile_share, parts) for f in failed]
 
 
-def _record_here(out_dir: str) -> dict:
-    """One frame of the main job in this process (numba's cache empty), with every kernel's
-    compile time: {qualname: (seconds, [signature reprs])}."""
-    from numba.core import event
+def _dispatchers() -> dict:
+    """{qualname: [signature reprs]} of every compiled kernel of our packages loaded now
+    (literal-typed signatures left out: they cannot be compiled ahead)."""
     from numba.core.registry import CPUDispatcher
-    sys.path.insert(0, str(_ROOT))
-    import cli
-    cli._kernels_not_compiled = lambda: False  # compile here, where the recorder sees it
-    with event.install_recorder("numba:compile") as rec:
-        status = cli.main(["--target", "cassini", "--pattern", "spiral", "--frames", "1", "--workers", "1",
-                           "--out", out_dir, "--quiet"])
-    if status != 0:
-        raise RuntimeError(f"the main job failed (exit {status})")
-    spent, start = {}, {}
-    for ts, ev in rec.buffer:
-        d = ev.data["dispatcher"]
-        key = (f"{d.py_func.__module__}.{d.py_func.__name__}", str(ev.data.get("args")))
-        if ev.is_start:
-            start[key] = ts
-        elif key in start:
-            spent[key[0]] = spent.get(key[0], 0.0) + ts - start.pop(key)
     out = {}
     for name, mod in sorted(sys.modules.items()):
         if name.split(".")[0] not in ("raytrace", "degrade", "orbit"):
@@ -115,28 +132,90 @@ def _record_here(out_dir: str) -> dict:
             if isinstance(obj, CPUDispatcher) and obj.__module__ == name and obj.signatures:
                 sigs = [repr(tuple(s)) for s in obj.signatures if "Literal" not in repr(tuple(s))]
                 if sigs:
-                    out[f"{name}.{attr}"] = (round(spent.get(f"{name}.{attr}", 0.0), 2), sigs)
+                    out[f"{name}.{attr}"] = sigs
     return out
 
 
+# the frames each group is recorded from (after the main job's, group "fast"): full-size
+# frames, so that every stage of the preset runs (edge pixels, coverage, Earth behind)
+_RECORD_ARGS = {
+    "fast": [],
+    "balanced": ["--quality", "balanced", "--samples", "16"],
+    "batched": ["--quality", "balanced", "--samples", "16"],
+    "reference": ["--quality", "reference", "--samples", "2"],
+}
+
+
+def _record_here(out_dir: str) -> dict:
+    """One frame per group (:data:`GROUPS`) in this process (numba's cache empty), with every
+    kernel's compile time: {group: {qualname: (seconds, [signature reprs new in the group])}}."""
+    from numba.core import event
+    sys.path.insert(0, str(_ROOT))
+    import cli
+    from raytrace import shade
+    cli._kernels_not_compiled = lambda *a, **k: []  # compile here, where the recorder sees it
+    seen: dict = {}
+    result = {}
+    for group in GROUPS:
+        shade._FUSED_GATHER = group != "batched"
+        with event.install_recorder("numba:compile") as rec:
+            status = cli.main(["--target", "cassini", "--pattern", "spiral", "--frames", "1", "--workers", "1",
+                               "--out", str(Path(out_dir) / group), "--quiet", *_RECORD_ARGS[group]])
+        if status != 0:
+            raise RuntimeError(f"the {group} frame failed (exit {status})")
+        spent, start = {}, {}
+        for ts, ev in rec.buffer:
+            d = ev.data["dispatcher"]
+            key = (f"{d.py_func.__module__}.{d.py_func.__name__}", str(ev.data.get("args")))
+            if ev.is_start:
+                start[key] = ts
+            elif key in start:
+                spent[key[0]] = spent.get(key[0], 0.0) + ts - start.pop(key)
+        out = {}
+        for qualname, sigs in _dispatchers().items():
+            new = [x for x in sigs if x not in seen.get(qualname, ())]
+            if new:
+                out[qualname] = (round(spent.get(qualname, 0.0), 2), new)
+                seen.setdefault(qualname, set()).update(new)
+        result[group] = out
+    shade._FUSED_GATHER = True
+    return result
+
+
+def _entries(sig: dict, indent: str) -> list:
+    lines = []
+    for qualname, (cost, sigs) in sig.items():
+        lines.append(f"{indent}{qualname!r}: ({cost}, [")
+        lines += [f"{indent}    {s!r}," for s in sigs]
+        lines.append(f"{indent}]),")
+    return lines
+
+
 def record() -> None:
-    """Write ``raytrace/_jit_signatures.py`` from one frame of the main job in a fresh process."""
+    """Write ``raytrace/_jit_signatures.py`` from one frame per group in a fresh process."""
     with tempfile.TemporaryDirectory() as tmp:
         env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "numba"))
         res = subprocess.run([sys.executable, "-m", "raytrace._precompile", "--record-here", str(Path(tmp) / "o")],
                              cwd=_ROOT, env=env, capture_output=True, text=True, check=True)
-    sig = json.loads(res.stdout.strip().splitlines()[-1])
+    groups = json.loads(res.stdout.strip().splitlines()[-1])
     lines = ['"""Signatures and compile times [s] of the numba kernels one frame of the main job calls',
-             '(generated by ``python -m raytrace._precompile --record``; see raytrace._precompile)."""', "",
+             "(SIGNATURES, group ``fast``), and those a ``balanced``, a batched ``balanced`` and a",
+             "``reference`` frame add (EXTRA_SIGNATURES); generated by",
+             '``python -m raytrace._precompile --record`` (see raytrace._precompile)."""', "",
              "SIGNATURES = {"]
-    for qualname, (cost, sigs) in sig.items():
-        lines.append(f"    {qualname!r}: ({cost}, [")
-        lines += [f"        {s!r}," for s in sigs]
-        lines.append("    ]),")
+    lines += _entries(groups["fast"], "    ")
+    lines += ["}", "", "EXTRA_SIGNATURES = {"]
+    for g in GROUPS[1:]:
+        lines.append(f"    {g!r}: {{")
+        lines += _entries(groups[g], "        ")
+        lines.append("    },")
     lines.append("}")
     _OUT.write_text("\n".join(lines) + "\n")
-    print(f"{len(sig)} kernels, {sum(len(v[1]) for v in sig.values())} signatures, "
-          f"{sum(v[0] for v in sig.values()):.1f} s of compile time -> {_OUT}")
+    for g in GROUPS:
+        sig = groups[g]
+        print(f"{g}: {len(sig)} kernels, {sum(len(v[1]) for v in sig.values())} signatures, "
+              f"{sum(v[0] for v in sig.values()):.1f} s of compile time")
+    print(f"-> {_OUT}")
 
 
 if __name__ == "__main__":
@@ -147,7 +226,7 @@ if __name__ == "__main__":
         print(json.dumps(result))
     elif sys.argv[1:2] == ["--time"]:
         t0 = time.perf_counter()
-        bad = precompile(int(sys.argv[2]) if len(sys.argv) > 2 else 2)
+        bad = precompile(int(sys.argv[2]) if len(sys.argv) > 2 else 2, sys.argv[3:] or ("fast",))
         print(f"{time.perf_counter() - t0:.1f} s, failed: {bad}")
     else:
-        sys.exit("usage: python -m raytrace._precompile --record | --time [processes]")
+        sys.exit("usage: python -m raytrace._precompile --record | --time [processes [group ...]]")

@@ -269,14 +269,18 @@ def test_render_scene_stars_in_the_background_only(tmp_path):
 
 
 def test_a_fresh_numba_cache_is_detected_and_filled_by_the_precompile_step(tmp_path):
-    """cli._kernels_not_compiled in a process whose numba cache directory is empty: True; after
-    raytrace._precompile compiled the kernel it looks for into that directory: False."""
-    code = ("import cli, sys; from raytrace import _precompile as P; from raytrace._jit_signatures import SIGNATURES; "
-            "a = cli._kernels_not_compiled(); "
-            "bad = P._compile_share([('raytrace._shading.surfaces', SIGNATURES['raytrace._shading.surfaces'][1])]); "
-            "print(a, bad, cli._kernels_not_compiled())")
+    """cli._kernels_not_compiled in a process whose numba cache directory is empty: every group
+    a ``reference`` frame calls; after raytrace._precompile compiled the kernel standing for
+    the main job's group into that directory, the preset's group only; after its own, none."""
+    code = ("import cli, sys; from raytrace import _precompile as P; "
+            "a = cli._kernels_not_compiled('reference'); "
+            "bad = P._compile_share([(n, P.group_signatures(['fast', 'reference'])[n][1]) for n in [P.probe('fast')]]); "
+            "b = cli._kernels_not_compiled('reference'); "
+            "bad += P._compile_share([(n, P.group_signatures(['fast', 'reference'])[n][1]) "
+            "for n in [P.probe('reference')]]); "
+            "print(','.join(a), bad, ','.join(b), ','.join(cli._kernels_not_compiled('reference')) or '-')")
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300,
                        check=False)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split() == ["True", "[]", "False"]
+    assert r.stdout.split() == ["fast,reference", "[]", "reference", "-"]

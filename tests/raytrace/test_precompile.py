@@ -1,18 +1,23 @@
-"""raytrace._precompile: the recorded signatures of the main job's kernels still match the code
-(regenerate with ``python -m raytrace._precompile --record`` when this fails), the shares are
-balanced, and compiling a share reports stale entries instead of failing."""
+"""raytrace._precompile: the recorded signatures of every group's kernels still match the code
+(regenerate with ``python -m raytrace._precompile --record`` when this fails), the groups merge
+without losing a signature, the shares are balanced, and compiling a share reports stale
+entries instead of failing."""
 import inspect
+
+import pytest
 
 from numba.core import types
 from numba.core.registry import CPUDispatcher
 
 from raytrace import _precompile as P
-from raytrace._jit_signatures import SIGNATURES
+from raytrace._jit_signatures import EXTRA_SIGNATURES, SIGNATURES
 
 
-def test_every_recorded_kernel_exists_and_takes_its_recorded_arguments():
-    assert len(SIGNATURES) >= 30
-    for qualname, (cost, sigs) in SIGNATURES.items():
+@pytest.mark.parametrize("group", P.GROUPS)
+def test_every_recorded_kernel_exists_and_takes_its_recorded_arguments(group):
+    entries = SIGNATURES if group == "fast" else EXTRA_SIGNATURES[group]
+    assert len(entries) >= (30 if group == "fast" else 1)
+    for qualname, (cost, sigs) in entries.items():
         f = P.dispatcher(qualname)
         assert isinstance(f, CPUDispatcher), qualname
         assert cost >= 0.0 and sigs
@@ -40,3 +45,28 @@ def test_a_share_compiles_into_the_cache_and_reports_a_stale_entry():
     assert P._compile_share([good]) == []
     failed = P._compile_share([stale])
     assert len(failed) == 1 and failed[0].startswith("raytrace._shading.ray_groups(int64,)")
+
+
+def test_groups_merge_into_the_union_of_their_signatures():
+    merged = P.group_signatures(P.GROUPS)
+    for group in P.GROUPS:
+        for qualname, (cost, sigs) in (SIGNATURES if group == "fast" else EXTRA_SIGNATURES[group]).items():
+            assert set(sigs) <= set(merged[qualname][1]), (group, qualname)
+            assert merged[qualname][0] >= cost
+    for qualname, (cost, sigs) in merged.items():
+        assert len(set(sigs)) == len(sigs), qualname  # a signature in two groups is compiled once
+    assert P.group_signatures() == {q: (c, list(s)) for q, (c, s) in SIGNATURES.items()}
+    with pytest.raises(ValueError, match="precompile group must be one of fast, balanced, batched, reference"):
+        P.group_signatures(["slow"])
+
+
+def test_each_preset_group_is_probed_by_a_kernel_of_its_own():
+    """The probe of a group (the kernel whose cache entry says the group is compiled) is one
+    that no earlier group compiles: otherwise a warm ``fast`` cache would hide a cold
+    ``balanced`` one. The fused final gather stands for ``balanced``."""
+    assert P.probe("fast") in SIGNATURES
+    assert P.probe("balanced") in ("raytrace._paths.gather_traced", "raytrace._paths.lobe_traced")
+    for group in P.GROUPS[1:]:
+        name = P.probe(group)
+        assert name in EXTRA_SIGNATURES[group]
+        assert name not in P.group_signatures(P.GROUPS[:P.GROUPS.index(group)])
