@@ -99,23 +99,43 @@ def group_signatures(groups=("fast",)) -> dict:
     return out
 
 
+# modules whose kernels call Embree themselves: they cannot compile (link) where the embreex
+# wheel has no Embree 4 library, so none of them may stand for a group (it would never be
+# found in the cache, and every run would compile the group again)
+_DIRECT_EMBREE = ("raytrace._paths.", "raytrace._embree.")
+
+
 def probe(group: str) -> str | None:
     """The kernel whose presence in numba's cache stands for ``group`` being compiled: its
-    costliest kernel that no earlier group holds (None if it has none of its own)."""
-    from ._jit_signatures import EXTRA_SIGNATURES, SIGNATURES
+    costliest kernel that no earlier group holds and that does not call Embree itself (None if
+    it has none such)."""
+    from ._jit_signatures import EXTRA_SIGNATURES
     if group == "fast":
         return "raytrace._shading.surfaces"
     earlier = set(group_signatures(GROUPS[:GROUPS.index(group)]))
-    own = [(c, q) for q, (c, _) in EXTRA_SIGNATURES[group].items() if q not in earlier]
+    own = [(c, q) for q, (c, _) in EXTRA_SIGNATURES[group].items()
+           if q not in earlier and not q.startswith(_DIRECT_EMBREE)]
     return max(own)[1] if own else None
 
 
+def entries_to_compile(groups=("fast",)) -> dict:
+    """:func:`group_signatures` of ``groups``, without the kernels that call Embree themselves
+    where the embreex wheel has no Embree 4 library (they could not link; the batched fallback
+    runs instead)."""
+    from . import _embree
+    entries = group_signatures(groups)
+    if not _embree.available():
+        entries = {q: e for q, e in entries.items() if not q.startswith(_DIRECT_EMBREE)}
+    return entries
+
+
 def precompile(processes: int, groups=("fast",)) -> list:
-    """Compile the kernels of ``groups`` (see the module notes) on ``processes`` spawned
-    processes; returns the entries that failed (empty when all compiled)."""
+    """Compile the kernels of ``groups`` (see the module notes; :func:`entries_to_compile`) on
+    ``processes`` spawned processes; returns the entries that failed (empty when all
+    compiled)."""
     from concurrent.futures import ProcessPoolExecutor
     import multiprocessing
-    parts = shares(group_signatures(groups), processes)
+    parts = shares(entries_to_compile(groups), processes)
     with ProcessPoolExecutor(max_workers=len(parts), mp_context=multiprocessing.get_context("spawn")) as pool:
         return [f for failed in pool.map(_compile_share, parts) for f in failed]
 

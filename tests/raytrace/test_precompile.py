@@ -63,10 +63,27 @@ def test_groups_merge_into_the_union_of_their_signatures():
 def test_each_preset_group_is_probed_by_a_kernel_of_its_own():
     """The probe of a group (the kernel whose cache entry says the group is compiled) is one
     that no earlier group compiles: otherwise a warm ``fast`` cache would hide a cold
-    ``balanced`` one. The fused final gather stands for ``balanced``."""
+    ``balanced`` one; and one that does not call Embree itself, so that it compiles where the
+    embreex wheel has no Embree 4 (where the fused gather never could, and would be looked for
+    in vain on every run)."""
     assert P.probe("fast") in SIGNATURES
-    assert P.probe("balanced") in ("raytrace._paths.gather_traced", "raytrace._paths.lobe_traced")
     for group in P.GROUPS[1:]:
         name = P.probe(group)
         assert name in EXTRA_SIGNATURES[group]
         assert name not in P.group_signatures(P.GROUPS[:P.GROUPS.index(group)])
+        assert P.dispatcher(name).__module__ in ("raytrace._shading", "raytrace.pathtrace", "raytrace.cache",
+                                                 "raytrace.environment")
+    assert "raytrace._paths.gather_traced" in EXTRA_SIGNATURES["balanced"]
+
+
+def test_kernels_calling_embree_are_left_out_only_where_embree_4_is_missing(monkeypatch):
+    from raytrace import _embree
+    monkeypatch.setattr(_embree, "available", lambda: True)
+    with_embree = P.entries_to_compile(P.GROUPS)
+    assert with_embree == P.group_signatures(P.GROUPS)
+    assert "raytrace._paths.gather_traced" in with_embree
+    monkeypatch.setattr(_embree, "available", lambda: False)
+    without = P.entries_to_compile(P.GROUPS)
+    assert not [q for q in without if q.startswith(("raytrace._paths.", "raytrace._embree."))]
+    assert "raytrace._shading.gather_sum" in without  # the batched fallback's own gather
+    assert set(without) == {q for q in with_embree if not q.startswith(("raytrace._paths.", "raytrace._embree."))}
