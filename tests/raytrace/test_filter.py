@@ -22,7 +22,7 @@ TAPS = np.array([1, 4, 6, 4, 1]) / 16.0
 
 def _flat_plane():
     """AOVs of a plane facing the camera at 10 m: one part, equal normals and depths."""
-    inst = np.ones((H, W), dtype=np.int32)
+    inst = np.ones((H, W), dtype=np.uint16)
     normal = np.zeros((H, W, 3))
     normal[..., 2] = -1.0
     depth = np.full((H, W), 10.0)

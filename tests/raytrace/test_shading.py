@@ -529,20 +529,20 @@ def test_sliver_pixels_marks_exactly_the_pixels_a_thin_triangle_overlaps():
     F = np.array([[0, 1, 2]])
     R, t = np.eye(3), np.zeros(3)
     out = np.zeros((H, W), dtype=bool)
-    sliver_pixels(V, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), np.inf), out)
+    sliver_pixels(V, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), np.inf, dtype=np.float32), out)
     want = _dense_cover(px, py, W, H, n=2000)
     assert want.sum() > 50
     assert np.array_equal(out, want)
     out[:] = False
-    sliver_pixels(V, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), 5.0), out)  # a surface in front
+    sliver_pixels(V, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), 5.0, dtype=np.float32), out)  # a surface in front
     assert not out.any()
     out[:] = False
-    sliver_pixels(V, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), 20.0), out)  # a surface behind it
+    sliver_pixels(V, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), 20.0, dtype=np.float32), out)  # a surface behind it
     assert np.array_equal(out, want)
     wide = np.column_stack([(np.array([30.3, 70.1, 50.0]) - c) * z / f, (np.array([40.2, 52.7, 80.0]) - c) * z / f,
                             np.full(3, z)])
     out[:] = False
-    sliver_pixels(wide, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), np.inf), out)
+    sliver_pixels(wide, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), np.inf, dtype=np.float32), out)
     assert not out.any()
 
 
@@ -552,7 +552,7 @@ def test_donor_rows_takes_the_centre_else_the_nearest_neighbour_on_the_same_surf
     of another part, a normal more than 25° away or off their plane by more than a footprint."""
     from raytrace._shading import donor_rows
     W = H = 3
-    inst = np.full(W * H, 1, dtype=np.int32)  # part 0 everywhere ...
+    inst = np.full(W * H, 1, dtype=np.uint16)  # part 0 everywhere ...
     inst[2] = 2  # ... but pixel (0, 2): part 1
     row_of_pixel = np.arange(W * H, dtype=np.int32)
     row_of_pixel[8] = -1  # pixel (2, 2) saw space

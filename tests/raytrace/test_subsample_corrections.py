@@ -17,7 +17,7 @@ def _plane(parts):
     P_c = np.column_stack([0.01 * uu.ravel(), 0.01 * vv.ravel(), np.full(H * W, 10.0)])
     N_c = np.tile([0.0, 0.0, -1.0], (H * W, 1))
     foot = np.full(H * W, 0.01)
-    return P_c, N_c, foot, np.arange(H * W, dtype=np.int32), parts.ravel().astype(np.int32)
+    return P_c, N_c, foot, np.arange(H * W, dtype=np.int32), parts.ravel().astype(np.uint16)
 
 
 FX = FY = 1000.0

@@ -61,7 +61,7 @@ def test_allocation_without_any_noise_is_an_even_split():
 
 def test_same_part_mean_is_the_mean_of_the_other_pixels_of_the_same_part():
     rng = np.random.default_rng(1)
-    inst = rng.integers(0, 3, (17, 23)).astype(np.int32)
+    inst = rng.integers(0, 3, (17, 23)).astype(np.uint16)
     inst[5, 5] = 7  # a part of one pixel: its own value
     img = rng.random(inst.shape)
     out = np.full(inst.shape, -1.0)
@@ -191,7 +191,7 @@ def plate_points():
     assert np.all(h["geomID"] == 1)
     face = scene.face_offset[h["geomID"]] + h["primID"].astype(np.int64)
     s = ctx.surfaces(O, D, face)
-    inst = np.concatenate([np.full(ys.shape, 2), np.full(ys.shape, 3)], axis=1).astype(np.int32)
+    inst = np.concatenate([np.full(ys.shape, 2), np.full(ys.shape, 3)], axis=1).astype(np.uint16)
     v, u = np.unravel_index(np.arange(ys.size), ys.shape)
     at = (np.concatenate([v, v]), np.concatenate([u, u + 6]))
     expect = np.array([RHO_A * E_SUN * _form_factor_to_floor(y, z) for y, z in zip(ys.ravel(), zs.ravel())])
