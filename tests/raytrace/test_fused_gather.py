@@ -16,6 +16,7 @@ import trimesh
 
 from orbit.pose import look_at
 from raytrace import _embree, shade
+from raytrace import scene as scene_module
 from raytrace.camera import Camera
 from raytrace.lighting import Earth, Lighting
 from raytrace.model import Component, TargetModel
@@ -44,7 +45,7 @@ def scene():
     return _scene()
 
 
-def test_direct_embree_hits_equal_embreex_bit_for_bit(scene):
+def test_direct_embree_hits_equal_embreex_bit_for_bit(scene, monkeypatch):
     rng = np.random.default_rng(5)
     n = 20000
     V = scene.vertices
@@ -56,6 +57,7 @@ def test_direct_embree_hits_equal_embreex_bit_for_bit(scene):
     D = targets - O
     D[::7] = rng.normal(size=(len(D[::7]), 3))  # and some in any direction (many misses)
     O[::11] = V[rng.integers(0, len(V), len(O[::11]))] * 0.5  # some from inside the parts
+    monkeypatch.setattr(scene_module, "_DIRECT_BATCHES", False)  # Scene.intersect through embreex
     want = scene.intersect(O, D)
     direct = scene.direct
     g = np.empty(n, np.int64)
@@ -65,17 +67,33 @@ def test_direct_embree_hits_equal_embreex_bit_for_bit(scene):
     t = np.empty(n, np.float32)
     _embree.intersect_batch(direct.handle, O, D, g, p, u, v, t)
     assert (want["geomID"] >= 0).mean() > 0.3 and (want["geomID"] < 0).mean() > 0.05
+    # every ray, misses included (embreex's: primID −1, u = v = 0, tfar its initial 1e37)
     np.testing.assert_array_equal(g, want["geomID"])
-    hit = g >= 0
-    np.testing.assert_array_equal(p[hit], want["primID"][hit])
-    np.testing.assert_array_equal(u[hit], want["u"][hit])
-    np.testing.assert_array_equal(v[hit], want["v"][hit])
-    np.testing.assert_array_equal(t[hit], want["tfar"][hit])
-    assert np.all(t[~hit] == np.inf) and np.all(want["tfar"][~hit] >= 1e37)  # embreex starts rays at 1e37
+    np.testing.assert_array_equal(p, want["primID"])
+    np.testing.assert_array_equal(u, want["u"])
+    np.testing.assert_array_equal(v, want["v"])
+    np.testing.assert_array_equal(t, want["tfar"])
+    assert np.all(t[g < 0] == np.float32(1e37))
     occ = np.empty(n, np.bool_)
     _embree.occluded_batch(direct.handle, O, D, occ)
     np.testing.assert_array_equal(occ, scene.occluded(O, D))
-    np.testing.assert_array_equal(occ, hit)
+    # Scene.intersect / occluded through the direct kernels (the default): the same arrays and
+    # dtypes, from float32 rows and from broadcast float64 rows alike
+    monkeypatch.setattr(scene_module, "_DIRECT_BATCHES", True)
+    for O_, D_ in ((O, D), (O.astype(np.float32), D.astype(np.float32)),
+                   (np.broadcast_to(O[0], O.shape), D)):
+        monkeypatch.setattr(scene_module, "_DIRECT_BATCHES", False)
+        ref = scene.intersect(O_, D_)
+        ref_occ = scene.occluded(O_, D_)
+        monkeypatch.setattr(scene_module, "_DIRECT_BATCHES", True)
+        got = scene.intersect(O_, D_)
+        for k in ("geomID", "primID", "u", "v", "tfar"):
+            assert got[k].dtype == ref[k].dtype, k
+            np.testing.assert_array_equal(got[k], ref[k], err_msg=k)
+        np.testing.assert_array_equal(scene.occluded(O_, D_), ref_occ)
+    assert scene._direct_rays(O, D, None) is not None  # the direct path was the one taken
+    assert scene._direct_rays(O, D, np.ones(n)) is None  # a tfar goes through embreex
+    np.testing.assert_array_equal(occ, g >= 0)
 
 
 def _frame(scene, light, monkeypatch, fused: bool, samples: int = 16):
