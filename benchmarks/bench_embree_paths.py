@@ -30,11 +30,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_time_error import scene_frames, viewpoints  # noqa: E402
+from bench_time_error import add_scene_options, parse_presets, scene_frames  # noqa: E402
 
 from raytrace import scene as scene_module  # noqa: E402
 from raytrace.shade import render  # noqa: E402
-from raytrace.targets import BUILTIN_TARGETS  # noqa: E402
 
 
 def _paths(flag: bool) -> None:
@@ -58,14 +57,9 @@ def subpixel_batch(scene, camera, R, t, per_pixel: int = 36, seed: int = 0):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--scenes", required=True, help="folder of the bench_time_error.py scenes (written if missing)")
-    ap.add_argument("--width", type=int, default=1280)
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--presets", nargs="*", default=["fast", "balanced:16", "balanced:64"])
-    ap.add_argument("--targets", nargs="*", default=list(BUILTIN_TARGETS))
-    ap.add_argument("--views", nargs="*", default=[v[0] for v in viewpoints()])
+    add_scene_options(ap)
     args = ap.parse_args()
-    presets = [(p.split(":")[0], int(p.split(":")[1]) if ":" in p else None) for p in args.presets]
+    presets = parse_presets(args.presets)
     rays, frames = [], {p: [] for p in presets}
     same_rays = same_frames = True
     for target, view, _, rargs in scene_frames(Path(args.scenes), args.width, args.targets, args.views):

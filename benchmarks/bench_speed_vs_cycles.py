@@ -27,26 +27,20 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_time_error import bpy_python, cycles, scene_frames, viewpoints  # noqa: E402
+from bench_time_error import add_scene_options, bpy_python, cycles, parse_presets, scene_frames  # noqa: E402
 
 from raytrace.shade import render  # noqa: E402
-from raytrace.targets import BUILTIN_TARGETS  # noqa: E402
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--scenes", required=True, help="folder of the bench_time_error.py scenes (written if missing)")
-    ap.add_argument("--width", type=int, default=1280)
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--presets", nargs="*", default=["fast", "balanced:16", "balanced:64"])
+    add_scene_options(ap)
     ap.add_argument("--cycles-spp", type=int, nargs="*", default=[16, 64])
-    ap.add_argument("--targets", nargs="*", default=list(BUILTIN_TARGETS))
-    ap.add_argument("--views", nargs="*", default=[v[0] for v in viewpoints()])
     args = ap.parse_args()
     py = bpy_python()
     if py is None and args.cycles_spp:
         sys.exit("bench_speed_vs_cycles: no .bpyenv/bin/python and BPY_PYTHON unset (benchmarks/README_cycles.md)")
-    presets = [(p.split(":")[0], int(p.split(":")[1]) if ":" in p else None) for p in args.presets]
+    presets = parse_presets(args.presets)
     names = [f"{q}-{n}" if n else q for q, n in presets] + [f"cycles-{n}" for n in args.cycles_spp]
     per_scene = {k: [] for k in names}
     tmp = Path(args.scenes) / "_cycles_out.exr"

@@ -117,6 +117,23 @@ def scene_frames(folder: Path, width: int, targets, views):
             yield target, view, spath, (scene, spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting)
 
 
+def add_scene_options(ap, presets=("fast", "balanced:16", "balanced:64")) -> None:
+    """The options of the side-by-side timing scripts on these scenes: --scenes (folder, written
+    if missing), --width, --repeats, --presets (``name`` or ``name:samples``), --targets,
+    --views."""
+    ap.add_argument("--scenes", required=True, help="folder of the bench_time_error.py scenes (written if missing)")
+    ap.add_argument("--width", type=int, default=1280)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--presets", nargs="*", default=list(presets))
+    ap.add_argument("--targets", nargs="*", default=list(BUILTIN_TARGETS))
+    ap.add_argument("--views", nargs="*", default=[v[0] for v in viewpoints()])
+
+
+def parse_presets(specs) -> list:
+    """[(quality, samples or None)] of --presets entries ``name`` / ``name:samples``."""
+    return [(p.split(":")[0], int(p.split(":")[1]) if ":" in p else None) for p in specs]
+
+
 def rel_err(a: np.ndarray, b: np.ndarray, m: np.ndarray) -> float:
     return float(np.sqrt(((a[m] - b[m]) ** 2).sum() / (b[m] ** 2).sum()))
 

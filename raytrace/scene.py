@@ -362,9 +362,10 @@ class Scene:
         Embree's ``geomID``, ``primID``, ``u``, ``v``, ``tfar`` arrays (geomID −1 on a miss;
         ``tfar`` in units of the direction's length). Where Embree 4 can be called from numba
         (:mod:`raytrace._embree`) and no ``tfar`` is given, the rays go through
-        :func:`raytrace._embree.intersect_batch` on numba's threads (1.3× faster than embreex on
-        1.2 M sub-pixel rays of Tiangong, the same arrays bit for bit); else through embreex in
-        chunks on the thread pool."""
+        :func:`raytrace._embree.intersect_batch` on numba's threads (the same arrays bit for bit;
+        on batches of 0.5–5.8 M sub-pixel rays of the 12 benchmark scenes 0.85–1.07× embreex's
+        time, median 0.91, ``benchmarks/bench_embree_paths.py``); else through embreex in chunks
+        on the thread pool."""
         fast = self._direct_rays(origins, directions, tfar)
         if fast is not None:
             from . import _embree
