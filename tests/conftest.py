@@ -20,8 +20,8 @@ def pytest_sessionstart(session):
     one. On a fresh clone that is ~250 s of compiling on one core, 120 s on two (a 2-core AMD
     EPYC; the ``balanced`` paths ~110 s of it): the suite from a cold cache went from 11 min 3 s
     (the main job's kernels precompiled, the rest compiled where first called) to 9 min 39 s.
-    With a warm cache it takes ~2 s. A failure here only means the kernels compile on first call, as they would
-    without it."""
+    With a warm cache it takes ~3 s. A failure here only means the kernels compile on first
+    call, as they would without it."""
     try:
         from raytrace._precompile import GROUPS, precompile
         precompile(max(1, min(os.cpu_count() or 1, 4)), GROUPS)
