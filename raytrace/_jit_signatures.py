@@ -4,354 +4,355 @@
 ``python -m raytrace._precompile --record`` (see raytrace._precompile)."""
 
 SIGNATURES = {
-    'degrade.convolve._convolve_interleaved': (1.62, [
+    'degrade.convolve._convolve_interleaved': (1.74, [
         "(Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'degrade.encode._encode': (2.13, [
+    'degrade.encode._encode': (1.91, [
         "(Array(float32, 3, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
         "(Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True))",
     ]),
-    'degrade.encode._encode8': (1.55, [
+    'degrade.encode._encode8': (1.38, [
         "(Array(float32, 3, 'C', False, aligned=True), Array(int16, 1, 'C', True, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
     ]),
-    'degrade.sensor._adc': (0.3, [
+    'degrade.sensor._adc': (0.24, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, bool, Array(float32, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._embree.intersect_batch': (4.36, [
+    'raytrace._embree.intersect_batch': (2.36, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True))",
-        "(int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._embree.occluded_batch': (2.96, [
+    'raytrace._embree.occluded_batch': (1.02, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
-        "(int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.corner_normals': (1.26, [
+    'raytrace._kernels.corner_normals': (0.9, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
     ]),
     'raytrace._kernels.make_rays': (0.31, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.ray_origins32': (0.68, [
+    'raytrace._kernels.ray_origins32': (0.91, [
         "(Array(float64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.refine_hits': (1.94, [
+    'raytrace._kernels.refine_hits': (1.68, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(int32, 2, 'C', False, aligned=True), bool, bool)",
     ]),
-    'raytrace._paths.sun_visibility': (2.93, [
+    'raytrace._paths.sun_visibility': (2.65, [
         "(int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, float64, Array(float64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading._strata': (0.09, [
+    'raytrace._shading._strata': (0.12, [
         '(int64,)',
     ]),
-    'raytrace._shading.add_diffuse': (0.67, [
+    'raytrace._shading.add_diffuse': (0.59, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.add_mirror': (13.3, [
+    'raytrace._shading.add_mirror': (11.28, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), bool, Array(float64, 3, 'C', False, aligned=True), Array(float64, 4, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.cache_irradiance': (1.35, [
+    'raytrace._shading.cache_irradiance': (1.49, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.coverage_combine': (1.3, [
+    'raytrace._shading.coverage_combine': (1.18, [
         "(Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.coverage_unshaded_first': (0.66, [
+    'raytrace._shading.coverage_unshaded_first': (0.53, [
         "(Array(int64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.earth_background': (4.48, [
+    'raytrace._shading.earth_background': (3.9, [
         "(Array(uint16, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.edge_pixels': (1.96, [
+    'raytrace._shading.edge_pixels': (1.73, [
         "(Array(uint16, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.env_along': (3.21, [
+    'raytrace._shading.env_along': (3.18, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
     'raytrace._shading.group_means': (0.87, [
         "(Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.incoming': (2.36, [
+    'raytrace._shading.incoming': (2.65, [
         "(int32, int32, float64, float64, float64, float64, float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64)",
     ]),
-    'raytrace._shading.mirror_rays': (1.1, [
+    'raytrace._shading.mirror_rays': (1.15, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.permute': (0.22, [
+    'raytrace._shading.permute': (0.16, [
         '(int64, int64, int64)',
     ]),
-    'raytrace._shading.put_rows': (0.57, [
+    'raytrace._shading.put_rows': (0.54, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.ray_groups': (0.78, [
+    'raytrace._shading.ray_groups': (0.73, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.shade_sun': (1.54, [
+    'raytrace._shading.shade_sun': (1.18, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.subpixel_rays': (2.51, [
+    'raytrace._shading.subpixel_rays': (2.18, [
         "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.subsample_hits': (1.52, [
+    'raytrace._shading.subsample_hits': (0.95, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.sun_disc_dirs': (1.5, [
+    'raytrace._shading.sun_disc_dirs': (1.32, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.sun_rays': (0.72, [
+    'raytrace._shading.sun_rays': (1.27, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(bool, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.surfaces': (3.3, [
+    'raytrace._shading.surfaces': (3.45, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
     'raytrace.brdf._ggx_d': (0.1, [
         '(float64, float64)',
     ]),
-    'raytrace.brdf._lambda': (0.25, [
+    'raytrace.brdf._lambda': (0.28, [
         '(float64, float64)',
         '(float32, float64)',
     ]),
-    'raytrace.brdf._radical_inverse2': (0.09, [
+    'raytrace.brdf._radical_inverse2': (0.1, [
         '(int64,)',
     ]),
-    'raytrace.brdf._spec_prob': (0.21, [
+    'raytrace.brdf._spec_prob': (0.22, [
         '(float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf._split_sum': (3.98, [
+    'raytrace.brdf._split_sum': (3.63, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.brdf.brdf_cos': (1.35, [
+    'raytrace.brdf.brdf_cos': (1.33, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
         '(float32, float32, float32, float32, float32, float32, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.cosine_direction': (0.15, [
+    'raytrace.brdf.cosine_direction': (0.19, [
         '(float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.onb': (0.25, [
+    'raytrace.brdf.onb': (0.22, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.brdf.pdf_brdf': (0.6, [
+    'raytrace.brdf.pdf_brdf': (0.52, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.sample_brdf': (2.88, [
+    'raytrace.brdf.sample_brdf': (2.61, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.specular_albedo': (0.74, [
+    'raytrace.brdf.specular_albedo': (0.64, [
         "(Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64, float64)",
     ]),
-    'raytrace.cache._bin_hits': (1.74, [
+    'raytrace.cache._bin_hits': (1.56, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
         "(int64, Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._cache_rays': (1.6, [
+    'raytrace.cache._cache_rays': (1.51, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, int64, int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._glints': (2.74, [
+    'raytrace.cache._glints': (3.02, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._glossy_bounce': (3.83, [
+    'raytrace.cache._glossy_bounce': (3.51, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._hash01': (0.65, [
+    'raytrace.cache._hash01': (0.56, [
         '(int64, int64)',
     ]),
-    'raytrace.cache._hash32': (0.36, [
+    'raytrace.cache._hash32': (0.32, [
         '(int64, int64)',
     ]),
-    'raytrace.cache._interp_rows': (0.42, [
+    'raytrace.cache._interp_rows': (0.54, [
         "(Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._jacobi_step': (4.13, [
+    'raytrace.cache._jacobi_step': (4.4, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._lattice_local': (0.11, [
+    'raytrace.cache._lattice_local': (0.08, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.cache._lattice_points': (0.85, [
+    'raytrace.cache._lattice_points': (0.58, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._oct_cells': (1.03, [
+    'raytrace.cache._oct_cells': (0.86, [
         "(Array(float64, 2, 'C', False, aligned=True), int64)",
     ]),
-    'raytrace.cache._ray_cells': (1.55, [
+    'raytrace.cache._ray_cells': (1.64, [
         "(Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, Array(int64, 1, 'C', False, aligned=True))",
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._rows_irradiance': (1.4, [
+    'raytrace.cache._rows_irradiance': (1.47, [
         "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._sun_rays': (0.67, [
+    'raytrace.cache._sun_rays': (1.04, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache.glossy_draw': (0.26, [
+    'raytrace.cache.glossy_draw': (0.24, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.cache.lattice_weights': (0.25, [
+    'raytrace.cache.lattice_weights': (0.24, [
         '(int64, float64, float64)',
     ]),
-    'raytrace.environment._direction_cells': (3.42, [
+    'raytrace.environment._direction_cells': (4.23, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._glossy_nodes': (1.12, [
+    'raytrace.environment._glossy_nodes': (1.27, [
         "(int64, int64, float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._hash3': (0.11, [
+    'raytrace.environment._hash3': (0.1, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.environment._irradiance_nodes': (1.4, [
+    'raytrace.environment._irradiance_nodes': (1.51, [
         "(int64, int64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._lobe_kernel': (0.07, [
+    'raytrace.environment._lobe_kernel': (0.11, [
         '(float64, float64)',
     ]),
-    'raytrace.environment._node_direction': (0.29, [
+    'raytrace.environment._node_direction': (0.37, [
         '(int64, int64, int64)',
         '(uint64, int64, int64)',
     ]),
-    'raytrace.environment._smoothstep': (0.2, [
+    'raytrace.environment._smoothstep': (0.16, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.environment._value_noise': (0.64, [
+    'raytrace.environment._value_noise': (0.58, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.environment.env_cells': (3.91, [
+    'raytrace.environment.env_cells': (4.36, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, int64)",
     ]),
-    'raytrace.environment.oct_cell': (0.52, [
+    'raytrace.environment.oct_cell': (0.5, [
         '(float64, float64, float64, int64)',
         '(float32, float32, float32, int64)',
     ]),
-    'raytrace.environment.oct_direction': (0.16, [
+    'raytrace.environment.oct_direction': (0.18, [
         '(float64, float64)',
     ]),
-    'raytrace.environment.procedural_albedo': (1.52, [
+    'raytrace.environment.procedural_albedo': (1.35, [
         '(float64, float64, float64)',
     ]),
 }
 
 EXTRA_SIGNATURES = {
     'balanced': {
-        'raytrace._paths.gather_traced': (40.61, [
+        'raytrace._paths.gather_traced': (41.39, [
             "(int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(int64, 1, 'C', False, aligned=True), int64, float64, float64, float64, float64, bool, int64, float32, float32, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._paths.lobe_traced': (36.47, [
+        'raytrace._paths.lobe_traced': (34.69, [
             "(int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, float64, float64, float64, bool, int64, float32, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading._allotted': (0.19, [
+        'raytrace._shading._allotted': (0.14, [
             "(float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64)",
         ]),
-        'raytrace._shading._edge_top': (0.18, [
+        'raytrace._shading._edge_top': (0.11, [
             '(float64, float64, float64, float64, float64, float64)',
         ]),
-        'raytrace._shading._laine_karras32': (0.06, [
+        'raytrace._shading._laine_karras32': (0.08, [
             '(int64, int64)',
         ]),
-        'raytrace._shading._owen_scramble32': (0.22, [
+        'raytrace._shading._owen_scramble32': (0.32, [
             '(int64, int64)',
         ]),
-        'raytrace._shading._owen_sobol2_keyed': (0.41, [
+        'raytrace._shading._owen_sobol2_keyed': (0.61, [
             '(int64, int64, int64, int64)',
         ]),
-        'raytrace._shading._reverse_bits32': (0.08, [
+        'raytrace._shading._reverse_bits32': (0.12, [
             '(int64,)',
         ]),
-        'raytrace._shading._sobol2_y': (0.1, [
+        'raytrace._shading._sobol2_y': (0.14, [
             '(int64,)',
         ]),
-        'raytrace._shading.add_interpolated_rows': (3.84, [
+        'raytrace._shading.add_interpolated_rows': (3.9, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(uint16, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.add_rows': (0.77, [
+        'raytrace._shading.add_rows': (0.66, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.allocate_rays': (0.75, [
+        'raytrace._shading.allocate_rays': (0.55, [
             "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64, float64, Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.atrous': (2.47, [
+        'raytrace._shading.atrous': (2.1, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, float64, Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.bounce_sun_rays': (0.97, [
+        'raytrace._shading.bounce_sun_rays': (0.82, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.donor_rows': (3.27, [
+        'raytrace._shading.donor_rows': (2.22, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(uint16, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), bool, Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.guide_images': (1.53, [
+        'raytrace._shading.guide_images': (1.84, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.incoming': (2.41, [
+        'raytrace._shading.incoming': (1.92, [
             "(int64, int64, float64, float64, float64, float64, float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64)",
         ]),
-        'raytrace._shading.near_shadow_slivers': (1.66, [
+        'raytrace._shading.near_shadow_slivers': (2.19, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.residual_image': (0.78, [
+        'raytrace._shading.residual_image': (1.01, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.residual_rows': (1.7, [
+        'raytrace._shading.residual_rows': (0.78, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.same_part_mean': (1.37, [
+        'raytrace._shading.same_part_mean': (1.78, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.shadow_map_of_slivers': (2.0, [
+        'raytrace._shading.shadow_map_of_slivers': (1.22, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.sliver_pixels': (3.02, [
+        'raytrace._shading.sliver_pixels': (2.47, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.subsample_contrast': (0.84, [
+        'raytrace._shading.subsample_contrast': (0.55, [
             "(Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True))",
         ]),
     },
     'batched': {
-        'raytrace._shading.bounce2_rays': (3.24, [
+        'raytrace._embree.occluded_batch': (2.35, [
+            "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', True, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
+        ]),
+        'raytrace._shading.bounce2_rays': (2.68, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.gather_rays': (1.38, [
+        'raytrace._shading.gather_rays': (1.24, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.gather_sum': (11.3, [
+        'raytrace._shading.gather_sum': (9.18, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.hit_or_miss': (0.6, [
+        'raytrace._shading.hit_or_miss': (0.53, [
             "(Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.hit_or_miss_rows': (0.64, [
+        'raytrace._shading.hit_or_miss_rows': (0.5, [
             "(Array(int32, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.incoming_rays': (6.14, [
+        'raytrace._shading.incoming_rays': (6.21, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.lobe_rays': (3.01, [
+        'raytrace._shading.lobe_rays': (3.74, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.lobe_sum': (6.76, [
+        'raytrace._shading.lobe_sum': (6.42, [
             "(int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.put_weighted_rows': (0.75, [
+        'raytrace._shading.put_weighted_rows': (0.76, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.take_rows': (1.45, [
+        'raytrace._shading.take_rows': (0.52, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
     },
     'reference': {
-        'raytrace._shading.background': (3.53, [
+        'raytrace._shading.background': (2.66, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._add_shadowed': (0.69, [
+        'raytrace.pathtrace._add_shadowed': (0.59, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._escape': (3.03, [
+        'raytrace.pathtrace._escape': (2.56, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._primary': (1.27, [
+        'raytrace.pathtrace._primary': (0.98, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._rand': (0.27, [
+        'raytrace.pathtrace._rand': (0.24, [
             '(int64, int64, int64, int64)',
         ]),
-        'raytrace.pathtrace._vertex': (4.41, [
+        'raytrace.pathtrace._vertex': (3.08, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
     },

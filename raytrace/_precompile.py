@@ -109,11 +109,8 @@ def probe(group: str) -> str | None:
     """The kernel whose presence in numba's cache stands for ``group`` being compiled: its
     costliest kernel that no earlier group holds and that does not call Embree itself (None if
     it has none such)."""
-    from ._jit_signatures import EXTRA_SIGNATURES
-    if group == "fast":
-        return "raytrace._shading.surfaces"
     earlier = set(group_signatures(GROUPS[:GROUPS.index(group)]))
-    own = [(c, q) for q, (c, _) in EXTRA_SIGNATURES[group].items()
+    own = [(c, q) for q, (c, _) in group_signatures([group]).items()
            if q not in earlier and not q.startswith(_DIRECT_EMBREE)]
     return max(own)[1] if own else None
 

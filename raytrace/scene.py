@@ -341,7 +341,8 @@ class Scene:
 
     def _direct_rays(self, origins, directions, tfar):
         """(direct scene, O, D) for the kernels of raytrace._embree when they can take this
-        batch (Embree 4 loaded, no ``tfar``, a non-empty batch of (n, 3) rows), else None."""
+        batch (Embree 4 loaded, no ``tfar``, a non-empty batch of (n, 3) rows), else None. The
+        rows become float32, as :meth:`_run` makes them for embreex."""
         if tfar is not None or not _DIRECT_BATCHES:
             return None
         O = np.asarray(origins)
@@ -351,11 +352,7 @@ class Scene:
         direct = self.direct
         if direct is None:
             return None
-        O = np.ascontiguousarray(O, dtype=O.dtype if O.dtype in (np.float32, np.float64) else np.float64)
-        D = np.ascontiguousarray(D, dtype=D.dtype if D.dtype in (np.float32, np.float64) else np.float64)
-        if O.dtype != D.dtype:
-            O, D = O.astype(np.float64), D.astype(np.float64)
-        return direct, O, D
+        return direct, np.ascontiguousarray(O, dtype=np.float32), np.ascontiguousarray(D, dtype=np.float32)
 
     def intersect(self, origins, directions, *, tfar=None) -> dict:
         """Closest hits of a batch of rays (float32 body frame; directions need not be unit):
