@@ -1,0 +1,96 @@
+"""The radiance cache's per-frame solve against a direct sparse solve of the same system.
+
+``RadianceCache.solve`` iterates (Gauss–Seidel sweeps) on E = E0 + W_ss (ρ ⊙ E) + W_g (ρ_b ⊙ E).
+Here the same matrices and source term go through a sparse LU factorisation
+(``scipy.sparse.linalg.spsolve``, one channel at a time), a second method that shares nothing
+with the iteration but its input. The scene is an open box whose white walls and gold floor
+face each other, so light bounces many times (slow modes) and the glossy transfer W_g is
+present."""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+import scipy.sparse as sp
+import trimesh
+from scipy.sparse.linalg import spsolve
+
+from raytrace import environment as env
+from raytrace.lighting import Lighting
+from raytrace.model import Component, TargetModel
+from raytrace.scene import Scene
+
+
+def _open_box():
+    parts = [Component("floor", _plate((4.0, 4.0, 0.05), (0.0, 0.0, -0.025)), "gold_mli", "bus", 1.0)]
+    for k, (size, at) in enumerate((((0.05, 4.0, 3.0), (2.025, 0.0, 1.5)), ((0.05, 4.0, 3.0), (-2.025, 0.0, 1.5)),
+                                    ((4.0, 0.05, 3.0), (0.0, 2.025, 1.5)), ((4.0, 0.05, 3.0), (0.0, -2.025, 1.5)))):
+        parts.append(Component(f"wall{k}", _plate(size, at), "white_paint", "bus", 1.0))
+    return Scene(TargetModel("open box", tuple(parts)))
+
+
+def _plate(size, at):
+    m = trimesh.creation.box(size)
+    m.apply_translation(at)
+    return m
+
+
+def _direct_solution(cache, lighting):
+    """E on the coarse rows by LU, per channel, from the cache's own matrices and sources."""
+    p, tex = lighting.packed()
+    L_env = env.env_cells(p, tex, cache.n_cells, 4)
+    table = env.irradiance_table(p, tex)
+    c = cache._c
+    _, E0 = cache._sources(cache._c_pos, cache._c_nrm, cache._c_solved, c, lighting, table, L_env, None)
+    n = cache.n_coarse_rows
+    E = np.zeros((n, 3))
+    for ch in range(3):
+        A = sp.identity(n, format="csr") - c["W_ss"] @ sp.diags(cache._c_rho_ss[:, ch])
+        if c["W_g"] is not None:
+            g_ptr, g_idx, g_data = c["W_g"]
+            A = A - sp.csr_matrix((g_data[:, ch], g_idx, g_ptr), shape=(n, n)) @ sp.diags(cache._c_rho_bounce[:, ch])
+        E[:, ch] = spsolve(A.tocsc(), E0[:, ch])
+    E[~cache._c_solved] = 0.0
+    return E, float(np.abs(E0).max())
+
+
+def test_solve_matches_a_direct_sparse_solve_and_does_not_depend_on_threads():
+    scene = _open_box()
+    cache = scene.radiance_cache(spacing_m=0.4, contact_refine=False)
+    assert cache._c["W_g"] is not None and cache._f is None  # glossy transfer present, no contact rows
+    sun = np.array([0.3, -0.2, 1.0])
+    lighting = Lighting(sun_dir_body=sun / np.linalg.norm(sun), sun_irradiance_W_m2=1361.0,
+                        ambient_radiance_W_m2_sr=1.0)
+    E_lu, scale = _direct_solution(cache, lighting)
+    E_lu = E_lu[cache._alias]
+    indirect_share = float(np.abs(E_lu - E_lu.min()).max())
+    assert indirect_share > 0.0
+
+    tight = cache.solve(lighting, tolerance=1e-13, max_iterations=5000)
+    assert tight.iterations < 5000
+    np.testing.assert_allclose(tight.irradiance_W_m2, E_lu, rtol=0.0, atol=1e-9 * scale)
+
+    frame = cache.solve(lighting)  # the renderer's tolerance, 1e-3 of the largest source
+    assert 1 < frame.iterations < 64
+    err = np.abs(frame.irradiance_W_m2 - E_lu).max()
+    assert err <= 5e-3 * scale, err / scale
+    # the bounce light is far above that error: a solve that stopped after one sweep would fail
+    one = cache.solve(lighting, max_iterations=1)
+    assert np.abs(one.irradiance_W_m2 - E_lu).max() > 10.0 * err
+
+    # the per-row products come from the solved irradiance exactly
+    np.testing.assert_array_equal(frame.indirect_W_m2, frame.irradiance_W_m2 - frame.sun_irradiance_W_m2[:, None])
+    np.testing.assert_array_equal(frame.radiance_out, cache.rho_bounce / math.pi * frame.irradiance_W_m2)
+
+    # one thread or all: the same bits
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        single = cache.solve(lighting)
+    finally:
+        numba.set_num_threads(threads)
+    for a, b in ((single.irradiance_W_m2, frame.irradiance_W_m2), (single.radiance_out, frame.radiance_out),
+                 (single.sun_irradiance_W_m2, frame.sun_irradiance_W_m2)):
+        assert np.array_equal(a, b)
