@@ -265,6 +265,35 @@ def test_same_seed_same_bytes_and_seed_changes_noise(sphere):
     assert a.dtype == np.float32 and a.shape == (H, W, 3)
 
 
+@pytest.mark.parametrize("quality,samples", [("fast", None), ("balanced", 8)])
+def test_context_built_on_a_side_thread_gives_the_same_bytes(monkeypatch, quality, samples):
+    """The frame's context (cache solve, environment tables) is built on a side thread during
+    the geometry pass; the frame must be the one built in line, bit for bit."""
+    import threading
+
+    from raytrace import shade
+    scene = _plates(0.8, 0.6)  # inter-reflection: the cache's solve matters
+    R, t = _pose([3.0, -4.0, 2.5])
+    sun, earth = np.array([0.3, -0.5, 0.81]), np.array([0.2, 0.1, -1.0])
+    light = Lighting(sun_dir_body=tuple(sun / np.linalg.norm(sun)), ambient_radiance_W_m2_sr=1.0,
+                     earth=Earth(tuple(earth / np.linalg.norm(earth)), 6.778e6))
+    built_on = []
+    init = shade._Context.__init__
+
+    def spy(self, *a, **k):
+        built_on.append(threading.current_thread().name)
+        init(self, *a, **k)
+
+    monkeypatch.setattr(shade._Context, "__init__", spy)
+    monkeypatch.setattr(shade, "_CONTEXT_ON_SIDE_THREAD", False)
+    a = render(scene, CAM, R, t, light, quality=quality, samples=samples, seed=5)
+    monkeypatch.setattr(shade, "_CONTEXT_ON_SIDE_THREAD", True)
+    b = render(scene, CAM, R, t, light, quality=quality, samples=samples, seed=5)
+    assert built_on[0] == threading.current_thread().name and built_on[1].startswith("raytrace-context")
+    assert a.radiance.tobytes() == b.radiance.tobytes()
+    assert (a.radiance > 0).mean() > 0.05
+
+
 def test_earth_disc_in_the_background_has_day_and_night():
     # looking at Earth (below) past a small sphere: lit limb on the Sun's side, dark night side
     scene = _sphere_scene()
