@@ -998,8 +998,9 @@ def _check_finite(stage: str, a: np.ndarray) -> None:
 # The frame's context (:class:`_Context`: the radiance cache's solve, the environment's tables)
 # does not depend on the camera, so it is built on a side thread while the geometry pass runs:
 # the cache's Gauss–Seidel sweeps run on one core, and the geometry pass's chunks fill the
-# other. The same frames bit for bit (tests/raytrace/test_shading.py); 12 benchmark scenes,
-# ``fast``, median per-scene time ratio 0.963–0.965 (BENCHMARKS.md). False: one after the other.
+# other. The same frames bit for bit (tests/raytrace/test_shading.py); 12 benchmark scenes, median
+# per-scene time ratio to building it in line 0.95–0.97 for ``fast``, 0.98 for ``balanced``-16
+# (BENCHMARKS.md, "The context on a side thread"). False: one after the other.
 _CONTEXT_ON_SIDE_THREAD = True
 _SIDE_POOL = None
 
