@@ -1002,15 +1002,31 @@ def _check_finite(stage: str, a: np.ndarray) -> None:
 # per-scene time ratio to building it in line 0.95–0.97 for ``fast``, 0.98 for ``balanced``-16
 # (BENCHMARKS.md, "The context on a side thread"). False: one after the other.
 _CONTEXT_ON_SIDE_THREAD = True
-_SIDE_POOL = None
+# The anti-aliasing's chunks (:func:`_supersample`) two at a time: a chunk's Python and NumPy
+# steps run on one core, which the other chunk's kernels then use. Each chunk's samples are
+# keyed by pixel, so the same bytes (tests/raytrace/test_shading.py); 12 benchmark scenes,
+# median per-scene time ratio 0.95 for ``balanced``-16 and -64 (BENCHMARKS.md). ``fast``'s
+# anti-aliasing is one chunk on all of them.
+_AA_CHUNKS_ON_TWO_THREADS = True
+_POOLS = {}
 
 
-def _side_pool():
-    global _SIDE_POOL
-    if _SIDE_POOL is None:
+def _submit(name: str, workers: int, fn, *args):
+    """``fn(*args)`` on the thread pool ``name`` (``workers`` threads, made on first use), with
+    the caller's numba thread count: it is thread-local, and a worker process of the CLI that
+    shares the cores with others (``cli.py``'s pool initializer) must not run its kernels on
+    more threads from a side thread."""
+    pool = _POOLS.get(name)
+    if pool is None:
         from concurrent.futures import ThreadPoolExecutor
-        _SIDE_POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix="raytrace-context")
-    return _SIDE_POOL
+        pool = _POOLS[name] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix=f"raytrace-{name}")
+    threads = numba.get_num_threads()
+
+    def run():
+        numba.set_num_threads(threads)
+        return fn(*args)
+
+    return pool.submit(run)
 
 
 def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lighting, *,
@@ -1054,10 +1070,10 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     R, t = _check_pose(R_cam_from_body, t_cam_m)
     timings = {}
     pending = None
-    if _CONTEXT_ON_SIDE_THREAD and q.name != "reference":
+    if _CONTEXT_ON_SIDE_THREAD and q.name != "reference" and numba.get_num_threads() > 1:
         # what both threads use and the scene builds on first use, built here, once
         scene.embree, scene.direct, scene.radiance_cache(**(cache_options or {}))
-        pending = _side_pool().submit(_Context, scene, lighting, cache_options or {}, q.gather_rays == 0)
+        pending = _submit("context", 1, _Context, scene, lighting, cache_options or {}, q.gather_rays == 0)
     t0 = time.perf_counter()
     geo = geometry if geometry is not None else scene.render_geometry(camera, R, t)
     timings["geometry"] = time.perf_counter() - t0
@@ -1335,10 +1351,15 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     if len(epix) <= per:
         return _supersample_chunk(ctx, scene, camera, R, t, o_body, geo, epix, n_grid, seed, residual, gather_rays,
                                   centre_surface, cov_grid, borrow, own_at_boundary, contrast_out)
-    return np.concatenate([_supersample_chunk(ctx, scene, camera, R, t, o_body, geo, epix[i:i + per], n_grid, seed,
-                                              residual, gather_rays, centre_surface, cov_grid, borrow,
-                                              own_at_boundary, None if contrast_out is None else contrast_out[i:i + per])
-                           for i in range(0, len(epix), per)])
+    def chunk(i):
+        return _supersample_chunk(ctx, scene, camera, R, t, o_body, geo, epix[i:i + per], n_grid, seed, residual,
+                                  gather_rays, centre_surface, cov_grid, borrow, own_at_boundary,
+                                  None if contrast_out is None else contrast_out[i:i + per])
+
+    starts = range(0, len(epix), per)
+    if _AA_CHUNKS_ON_TWO_THREADS and numba.get_num_threads() > 1:
+        return np.concatenate([f.result() for f in [_submit("aa", 2, chunk, i) for i in starts]])
+    return np.concatenate([chunk(i) for i in starts])
 
 
 def _supersample_chunk(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,

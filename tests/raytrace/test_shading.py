@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 import pytest
 import trimesh
@@ -272,6 +273,8 @@ def test_context_built_on_a_side_thread_gives_the_same_bytes(monkeypatch, qualit
     import threading
 
     from raytrace import shade
+    if numba.get_num_threads() < 2:
+        pytest.skip("one numba thread: render builds the context in line")
     scene = _plates(0.8, 0.6)  # inter-reflection: the cache's solve matters
     R, t = _pose([3.0, -4.0, 2.5])
     sun, earth = np.array([0.3, -0.5, 0.81]), np.array([0.2, 0.1, -1.0])
@@ -292,6 +295,49 @@ def test_context_built_on_a_side_thread_gives_the_same_bytes(monkeypatch, qualit
     assert built_on[0] == threading.current_thread().name and built_on[1].startswith("raytrace-context")
     assert a.radiance.tobytes() == b.radiance.tobytes()
     assert (a.radiance > 0).mean() > 0.05
+
+
+def test_anti_aliasing_chunks_on_two_threads_give_the_same_bytes(monkeypatch, sphere):
+    """Anti-aliasing chunks run two at a time on a side pool; with chunks small enough that a
+    frame has several, the frame must be the one computed chunk after chunk, bit for bit."""
+    import threading
+
+    from raytrace import shade
+    if numba.get_num_threads() < 2:
+        pytest.skip("one numba thread: the chunks run one after the other")
+    R, t = _pose([1.0, -5.0, 2.0])
+    light = Lighting(sun_dir_body=(0.6, -0.48, 0.64), ambient_radiance_W_m2_sr=2.0,
+                     earth=Earth((0, 0, -1), 6.778e6))
+    monkeypatch.setattr(shade, "_CHUNK_RAYS", 36 * 40)  # 40 edge pixels per chunk at 8 rays
+    ran_on = []
+    chunk = shade._supersample_chunk
+
+    def spy(*a, **k):
+        ran_on.append(threading.current_thread().name)
+        return chunk(*a, **k)
+
+    monkeypatch.setattr(shade, "_supersample_chunk", spy)
+    monkeypatch.setattr(shade, "_AA_CHUNKS_ON_TWO_THREADS", False)
+    a = render(sphere, CAM, R, t, light, quality="balanced", samples=8, seed=2).radiance
+    serial = len(ran_on)
+    monkeypatch.setattr(shade, "_AA_CHUNKS_ON_TWO_THREADS", True)
+    b = render(sphere, CAM, R, t, light, quality="balanced", samples=8, seed=2).radiance
+    assert serial > 4 and len(ran_on) == 2 * serial
+    assert all(n == threading.current_thread().name for n in ran_on[:serial])
+    assert all(n.startswith("raytrace-aa") for n in ran_on[serial:])
+    assert a.tobytes() == b.tobytes()
+
+
+def test_side_threads_run_with_the_callers_numba_thread_count():
+    from raytrace import shade
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        assert shade._submit("context", 1, numba.get_num_threads).result() == 1
+        assert shade._submit("aa", 2, numba.get_num_threads).result() == 1
+    finally:
+        numba.set_num_threads(threads)
+    assert shade._submit("aa", 2, numba.get_num_threads).result() == threads
 
 
 def test_earth_disc_in_the_background_has_day_and_night():
