@@ -363,6 +363,26 @@ def _sun_rays(rows, pos, nrm, eps, sx, sy, sz, cos_out, out_o, out_d):
         out_d[r, 2] = sz
 
 
+@inline
+def _row_sum(i, indptr, indices, data, Y, g_ptr, g_idx, g_data, Yb, X0):
+    """Row i of X0 + W_ss Y + W_g Yb (CSR; W_g's entries RGB), the terms in stored order."""
+    s0 = X0[i, 0]
+    s1 = X0[i, 1]
+    s2 = X0[i, 2]
+    for k in range(indptr[i], indptr[i + 1]):
+        j = indices[k]
+        w = data[k]
+        s0 += w * Y[j, 0]
+        s1 += w * Y[j, 1]
+        s2 += w * Y[j, 2]
+    for k in range(g_ptr[i], g_ptr[i + 1]):
+        j = g_idx[k]
+        s0 += g_data[k, 0] * Yb[j, 0]
+        s1 += g_data[k, 1] * Yb[j, 1]
+        s2 += g_data[k, 2] * Yb[j, 2]
+    return s0, s1, s2
+
+
 @pjit_exact
 def _jacobi_step(indptr, indices, data, Y, g_ptr, g_idx, g_data, Yb, X, X0, out):
     """out = X0 + W_ss Y + W_g Yb for CSR matrices: W_ss (rows, rows) with RGB rows Y (= ρ ⊙ X),
@@ -374,20 +394,7 @@ def _jacobi_step(indptr, indices, data, Y, g_ptr, g_idx, g_data, Yb, X, X0, out)
     n = X.shape[0]
     dmax = np.zeros(n)
     for i in numba.prange(n):
-        s0 = X0[i, 0]
-        s1 = X0[i, 1]
-        s2 = X0[i, 2]
-        for k in range(indptr[i], indptr[i + 1]):
-            j = indices[k]
-            w = data[k]
-            s0 += w * Y[j, 0]
-            s1 += w * Y[j, 1]
-            s2 += w * Y[j, 2]
-        for k in range(g_ptr[i], g_ptr[i + 1]):
-            j = g_idx[k]
-            s0 += g_data[k, 0] * Yb[j, 0]
-            s1 += g_data[k, 1] * Yb[j, 1]
-            s2 += g_data[k, 2] * Yb[j, 2]
+        s0, s1, s2 = _row_sum(i, indptr, indices, data, Y, g_ptr, g_idx, g_data, Yb, X0)
         out[i, 0] = s0
         out[i, 1] = s1
         out[i, 2] = s2
@@ -419,20 +426,7 @@ def _gauss_seidel_sweep(indptr, indices, data, g_ptr, g_idx, g_data, rho, rho_b,
     glossy = Yb.shape[0] > 0
     dmax = 0.0
     for i in range(n):
-        s0 = X0[i, 0]
-        s1 = X0[i, 1]
-        s2 = X0[i, 2]
-        for k in range(indptr[i], indptr[i + 1]):
-            j = indices[k]
-            w = data[k]
-            s0 += w * Y[j, 0]
-            s1 += w * Y[j, 1]
-            s2 += w * Y[j, 2]
-        for k in range(g_ptr[i], g_ptr[i + 1]):
-            j = g_idx[k]
-            s0 += g_data[k, 0] * Yb[j, 0]
-            s1 += g_data[k, 1] * Yb[j, 1]
-            s2 += g_data[k, 2] * Yb[j, 2]
+        s0, s1, s2 = _row_sum(i, indptr, indices, data, Y, g_ptr, g_idx, g_data, Yb, X0)
         d = max(abs(s0 - X[i, 0]), abs(s1 - X[i, 1]), abs(s2 - X[i, 2]))
         if d > dmax:
             dmax = d
