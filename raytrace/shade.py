@@ -441,7 +441,9 @@ class RenderFrame:
         pixel where anti-aliased [W/(m²·sr)].
     quality : Quality
     timings_s : dict
-        Seconds per stage.
+        Seconds per stage, wall clock. ``cache`` is the wait for the frame's lighting context
+        after the geometry pass: the context is built on a side thread during that pass
+        (``_CONTEXT_ON_SIDE_THREAD``), so its own time is partly inside ``geometry``.
     """
 
     geometry: GeometryFrame
