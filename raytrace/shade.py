@@ -452,6 +452,21 @@ class RenderFrame:
     timings_s: dict = field(default_factory=dict)
 
 
+def _surfaces(scene: Scene, O, D, face) -> dict:
+    """The surface points where rays O + t D hit triangles ``face`` of ``scene``: point,
+    shading and geometric normals, direction to the viewer, barycentrics, side, part
+    (:func:`raytrace._shading.surfaces`)."""
+    n = len(D)
+    out = {k: np.empty((n, 3)) for k in ("P", "NS", "NG", "WO")}
+    out["B"] = np.empty((n, 2))
+    out["SIDE"] = np.empty(n, dtype=np.int64)
+    out["face"] = face
+    out["comp"] = scene.component_of_face[face]
+    K.surfaces(O, D, face, scene.vertices, scene.faces, scene.face_normal, scene.corner_normal, out["P"], out["NS"],
+               out["NG"], out["WO"], out["B"], out["SIDE"])
+    return out
+
+
 class _Context:
     """Per-frame constants the kernels need."""
 
@@ -496,15 +511,7 @@ class _Context:
         self.sun = np.array([*lighting.sun_dir_body, lighting.sun_irradiance_at_target_W_m2])
 
     def surfaces(self, O, D, face):
-        n = len(D)
-        out = {k: np.empty((n, 3)) for k in ("P", "NS", "NG", "WO")}
-        out["B"] = np.empty((n, 2))
-        out["SIDE"] = np.empty(n, dtype=np.int64)
-        out["face"] = face
-        out["comp"] = self.scene.component_of_face[face]
-        K.surfaces(O, D, face, self.scene.vertices, self.scene.faces, self.scene.face_normal,
-                   self.scene.corner_normal, out["P"], out["NS"], out["NG"], out["WO"], out["B"], out["SIDE"])
-        return out
+        return _surfaces(self.scene, O, D, face)
 
     def direct(self, s, E_point, *, disc=None, occluder_t=None, lbar_out=None):
         """Sunlight (shadowed) and the cheap specular term of everything else
@@ -1089,17 +1096,14 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         _stars(rad, scene, camera, R, t, lighting, timings)
         return RenderFrame(geo, rad, q, timings)
 
-    t0 = time.perf_counter()
-    ctx = pending.result() if pending is not None else \
-        _Context(scene, lighting, cache_options or {}, prefiltered_glossy=q.gather_rays == 0)
-    timings["cache"] = time.perf_counter() - t0
     H, W = camera.height, camera.width
     R_bc = np.ascontiguousarray(R.T)
     o_body = -R_bc @ t
     rad = np.zeros((H * W, 3), dtype=np.float32)
     lit_img = np.zeros(H * W, dtype=bool)
 
-    # ---- pixel centres on the target
+    # ---- pixel centres on the target (their surfaces need the geometry only: found while the
+    # context may still be solving on its side thread)
     t0 = time.perf_counter()
     pix = np.flatnonzero(geo.instance.ravel() > 0)
     u = (pix % W).astype(np.float64)
@@ -1108,7 +1112,13 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     D = rows_times_matrix(D_cam, R_bc.T)
     O = np.ascontiguousarray(np.broadcast_to(o_body, D.shape))
     face = geo.face_index.ravel()[pix].astype(np.int64)
-    s = ctx.surfaces(O, D, face)
+    s = _surfaces(scene, O, D, face)
+    t_centres = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    ctx = pending.result() if pending is not None else \
+        _Context(scene, lighting, cache_options or {}, prefiltered_glossy=q.gather_rays == 0)
+    timings["cache"] = time.perf_counter() - t0
+    t0 = time.perf_counter() - t_centres  # the centres count in "direct"
     lbar = np.zeros((len(pix), 3))
     E = ctx.cache_E(s)
     soft = q.sun_rays > 1 and lighting.sun_angular_diameter_rad > 0.0
