@@ -308,7 +308,7 @@ def test_anti_aliasing_chunks_on_two_threads_give_the_same_bytes(monkeypatch, sp
     R, t = _pose([1.0, -5.0, 2.0])
     light = Lighting(sun_dir_body=(0.6, -0.48, 0.64), ambient_radiance_W_m2_sr=2.0,
                      earth=Earth((0, 0, -1), 6.778e6))
-    monkeypatch.setattr(shade, "_CHUNK_RAYS", 36 * 40)  # 40 edge pixels per chunk at 8 rays
+    monkeypatch.setattr(shade, "_CHUNK_RAYS", 16 * 90)  # 90 edge pixels per chunk (a 4 × 4 grid at 8 rays)
     ran_on = []
     chunk = shade._supersample_chunk
 
