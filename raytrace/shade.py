@@ -510,9 +510,6 @@ class _Context:
         self.cf = self.cache.solve(lighting, env_irradiance=self.env_irradiance)
         self.sun = np.array([*lighting.sun_dir_body, lighting.sun_irradiance_at_target_W_m2])
 
-    def surfaces(self, O, D, face):
-        return _surfaces(self.scene, O, D, face)
-
     def direct(self, s, E_point, *, disc=None, occluder_t=None, lbar_out=None):
         """Sunlight (shadowed) and the cheap specular term of everything else
         (:func:`raytrace._shading.add_mirror`; ``E_point`` the points' cache irradiance):
@@ -1457,7 +1454,7 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, camera: Camera, 
         n_idx = np.empty(len(idx), np.int64)  # and its number there
         K.subsample_hits(idx, h["geomID"], h["primID"], scene.face_offset, D, np.asarray(centre, np.int64),
                          np.asarray(number, np.int64), face, Dh, c_idx, n_idx)
-        s = ctx.surfaces(np.ascontiguousarray(np.broadcast_to(o_body, Dh.shape)), Dh, face)
+        s = _surfaces(scene, np.ascontiguousarray(np.broadcast_to(o_body, Dh.shape)), Dh, face)
         E = ctx.cache_E(s)
         disc = None
         if ctx.lighting.sun_angular_diameter_rad > 0.0 and S > 1:

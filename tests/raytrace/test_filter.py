@@ -9,7 +9,7 @@ import pytest
 from scipy.ndimage import binary_erosion
 
 from raytrace.lighting import Lighting
-from raytrace.shade import _atrous_passes, _Context, _filter_residual, render
+from raytrace.shade import _atrous_passes, _Context, _filter_residual, _surfaces, render
 
 from .test_shading import CAM, _form_factor_to_floor, _plates, _pose
 
@@ -151,7 +151,7 @@ def test_gather_variance_matches_the_spread_of_independent_estimates():
     D_cam = np.column_stack([(u - CAM.cx) / CAM.fx, (v - CAM.cy) / CAM.fy, np.ones(len(pix))])
     D = D_cam @ R  # body frame: R.T @ d for each row
     O = np.broadcast_to(-R.T @ t, D.shape).copy()
-    s = ctx.surfaces(O, D, geo.face_index.ravel()[pix].astype(np.int64))
+    s = _surfaces(ctx.scene, O, D, geo.face_index.ravel()[pix].astype(np.int64))
     luma = np.array([0.2126, 0.7152, 0.0722])
     n_rays, n_seeds = 16, 40
     Y = np.empty((n_seeds, len(pix)))

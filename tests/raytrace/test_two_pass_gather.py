@@ -190,7 +190,7 @@ def plate_points():
     h = scene.intersect(O, D)
     assert np.all(h["geomID"] == 1)
     face = scene.face_offset[h["geomID"]] + h["primID"].astype(np.int64)
-    s = ctx.surfaces(O, D, face)
+    s = shade._surfaces(ctx.scene, O, D, face)
     inst = np.concatenate([np.full(ys.shape, 2), np.full(ys.shape, 3)], axis=1).astype(np.uint16)
     v, u = np.unravel_index(np.arange(ys.size), ys.shape)
     at = (np.concatenate([v, v]), np.concatenate([u, u + 6]))
