@@ -158,7 +158,13 @@ def test_render_scene_writes_a_frame(tmp_path):
     ({"extra": 1}, "unknown keys"),
     ({"stars": {"limit_mag": 6.0}}, "stars.R_body_from_eci is required"),
     ({"stars": {"R_body_from_eci": [1, 0, 0, 0, 1, 0, 0, 0, 1], "limit_mag": 20}}, "limit magnitude"),
-    ({"stars": {"R_body_from_eci": [1, 0, 0, 0, 1, 0, 0, 0, -1]}}, "R_body_from_eci must be a 3x3 rotation"),
+    ({"stars": {"R_body_from_eci": [1, 0, 0, 0, 1, 0, 0, 0, -1]}}, "stars.R_body_from_eci must be a rotation matrix"),
+    ({"camera": {"K": [[120.0, 0, 31.5], [0, 120.0, 23.5], [0, 0, 1]], "width": 64, "height": 48,
+                 "R_cam_from_body": [1, 0, 0, 0, 1, 0, 0, 0, -1], "t_cam_m": [0, 0, 5]}},
+     "camera.R_cam_from_body must be a rotation matrix"),
+    ({"camera": {"K": [[120.0, 0, 31.5], [0, 120.0, 23.5], [0, 0, 1]], "width": 64, "height": 48,
+                 "R_cam_from_body": [1.01, 0, 0, 0, 1, 0, 0, 0, 1], "t_cam_m": [0, 0, 5]}},
+     "camera.R_cam_from_body must be a rotation matrix (orthonormal to 0.001"),
     ({"stars": {"R_body_from_eci": [1, 0, 0, 0, 1, 0, 0, 0, 1], "catalogue": "none.csv"}}, "none.csv"),
     ({"camera": {"K": [[120.0, 0, 31.5], [0, 120.0, 23.5], [0, 0, 1]], "width": 64, "height": 48, "fov": 30,
                  "R_cam_from_body": np.eye(3).ravel().tolist(), "t_cam_m": [0, 0, 5]}}, "camera: unknown keys ['fov']"),
@@ -177,6 +183,25 @@ def test_render_scene_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys,
     err = capsys.readouterr().err
     assert match in err and err.count("\n") == 1
     assert not out.exists()
+
+
+def test_render_scene_takes_a_rotation_rounded_in_print(tmp_path):
+    """A pose printed to 4 decimals (|R Rᵀ − I| ~ 1e-4) is a pose, not an error: the frame is
+    rendered with the nearest rotation, which frame.json gives; an exact one is kept as is."""
+    from raytrace.scenefile import load_scene_file
+    path = _tiny_scene(tmp_path)
+    exact = load_scene_file(str(path)).R_cam_from_body
+    data = json.loads(path.read_text())
+    assert np.array_equal(exact.ravel(), data["camera"]["R_cam_from_body"])  # kept bit for bit
+    data["camera"]["R_cam_from_body"] = [round(v, 4) for v in data["camera"]["R_cam_from_body"]]
+    assert np.abs(np.reshape(data["camera"]["R_cam_from_body"], (3, 3)) @ np.reshape(
+        data["camera"]["R_cam_from_body"], (3, 3)).T - np.eye(3)).max() > 1e-6  # the old bound refused it
+    path.write_text(json.dumps(data))
+    out = tmp_path / "out"
+    assert cli.main(["render-scene", str(path), "--out", str(out)]) == 0
+    R = np.reshape(json.loads((out / "frame.json").read_text())["R_cam_from_body"], (3, 3))
+    assert np.abs(R @ R.T - np.eye(3)).max() < 1e-12 and np.linalg.det(R) > 0
+    assert np.abs(R - exact).max() < 2e-4  # the pose that was rounded
 
 
 def test_render_scene_warns_when_shadow_fraction_contradicts_the_earth(tmp_path, capsys):
