@@ -80,6 +80,7 @@ from scipy.spatial import cKDTree
 
 from . import environment as env
 from ._jit import inline, jit, jit_exact, pjit, pjit_exact
+from ._threads import submit
 from .brdf import bounce_albedo, brdf_cos, cosine_direction, sample_brdf
 
 __all__ = ["CacheFrame", "RadianceCache"]
@@ -98,6 +99,14 @@ _CONTACT_REACH = 1.0
 def _EMPTY_CSR3(n_rows):
     """An empty (indptr, indices, data (0, 3)) matrix of ``n_rows`` rows."""
     return np.zeros(n_rows + 1, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
+
+
+# the cache rays go in chunks of about _CAST_CHUNK_RAYS rays (RadianceCache._cast), two at a time
+# on a side pool (raytrace._threads.submit); False: one after the other. The same cache bit for
+# bit (tests/raytrace/test_cache_solve.py); the four built-in targets' caches built in 0.64–0.85×
+# the time (BENCHMARKS.md, "Building the radiance cache").
+_CAST_CHUNK_RAYS = 1 << 18
+_CAST_CHUNKS_ON_TWO_THREADS = True
 
 
 def _row_ids(key):
@@ -761,7 +770,7 @@ class RadianceCache:
         _CONTACT_DISTANCE lattice spacings (``near``)."""
         scene = self.scene
         G = self.G
-        chunk = max(1, (1 << 18) // G)
+        chunk = max(1, _CAST_CHUNK_RAYS // G)
         raw = {k: [] for k in ("hit_rows", "hit_cols", "hit_w", "blk_rows", "blk_cells", "g_rows", "g_cols", "g_w",
                                "gb_rows", "gb_cells", "gb_w")}
         rec = {k: [] for k in ("row", "face", "u", "v", "side", "n", "wo")}
@@ -770,7 +779,11 @@ class RadianceCache:
         corner_normal = scene.corner_normal.astype(np.float64) if any_glossy else None
         buried = np.zeros(len(rows_all), dtype=np.int64)
         near = np.zeros(len(rows_all), dtype=np.int64)
-        for a in range(0, len(rows_all), chunk):
+
+        def one(a):
+            """Chunk ``a``'s pieces of ``raw`` and ``rec`` (its rows of buried and near in place)."""
+            part = {k: [] for k in raw}
+            part_rec = {k: [] for k in rec}
             rows = rows_all[a:a + chunk]
             n = len(rows) * G
             o = np.empty((n, 3), dtype=np.float32)
@@ -783,18 +796,33 @@ class RadianceCache:
             nh = _bin_hits(G, d, h["geomID"], h["primID"], h["u"].astype(np.float64), h["v"].astype(np.float64),
                            scene.face_offset, scene.face_normal, self.two_sided_face, self._c_face_s,
                            self._c_lat_start, self._c_lat_ids, hr, hc, hw, buried[a:a + len(rows)])
-            raw["hit_rows"].append(rows[hr[:nh] // G])
-            raw["hit_cols"].append(hc[:nh])
-            raw["hit_w"].append(hw[:nh])
+            part["hit_rows"].append(rows[hr[:nh] // G])
+            part["hit_cols"].append(hc[:nh])
+            part["hit_w"].append(hw[:nh])
             blocked = np.flatnonzero(h["geomID"] >= 0)
             close = blocked[h["tfar"][blocked] < _CONTACT_DISTANCE * self.spacing_m]
             near[a:a + len(rows)] = np.bincount(close // G, minlength=len(rows))
             cells = np.empty(len(blocked), np.int64)
             _ray_cells(d, blocked, self.n_cells, cells)
-            raw["blk_rows"].append(rows[blocked // G])
-            raw["blk_cells"].append(cells)
+            part["blk_rows"].append(rows[blocked // G])
+            part["blk_cells"].append(cells)
             if any_glossy:
-                self._glossy_chunk(rows, o, d, h, glossy_face, corner_normal, key_base + a, raw, rec)
+                self._glossy_chunk(rows, o, d, h, glossy_face, corner_normal, key_base + a, part, part_rec)
+            return part, part_rec
+
+        starts = range(0, len(rows_all), chunk)
+        if _CAST_CHUNKS_ON_TWO_THREADS and numba.get_num_threads() > 1 and len(starts) > 1:
+            # a chunk's NumPy steps run on one core, which the other chunk's Embree and kernels
+            # then use; every ray is keyed by its row, so the pieces are the same bits in any
+            # order, and they are put back in chunk order
+            parts = [f.result() for f in [submit("cache", 2, one, a) for a in starts]]
+        else:
+            parts = [one(a) for a in starts]
+        for part, part_rec in parts:
+            for k, v in part.items():
+                raw[k] += v
+            for k, v in part_rec.items():
+                rec[k] += v
         raw.update(rows=rows_all, buried=buried, near=near, rec=rec)
         return raw
 
@@ -841,8 +869,11 @@ class RadianceCache:
             rec = raw["rec"]
             rr = np.concatenate(rec["row"]) - row0
             keep = ok[rr]
-            order = np.argsort(rr[keep], kind="stable")
-            glint = {k: np.ascontiguousarray(np.concatenate(v)[keep][order]) for k, v in rec.items()}
+            rk = rr[keep]
+            # the chunks go in row order, so the records mostly are already: no reordering then
+            order = None if np.all(rk[1:] >= rk[:-1]) else np.argsort(rk, kind="stable")
+            glint = {k: np.ascontiguousarray(np.concatenate(v)[keep] if order is None else np.concatenate(v)[keep][order])
+                     for k, v in rec.items()}
             glint["row"] = glint["row"] - row0
             glint["ptr"] = np.searchsorted(glint["row"], np.arange(n_rows + 1)).astype(np.int64)
             out["glint"] = glint

@@ -65,6 +65,7 @@ import numpy as np
 
 from . import _paths, _shading as K
 from ._kernels import ray_origins32, rows_times_matrix
+from ._threads import submit as _submit
 from .brdf import split_sum_table
 from .camera import Camera
 from .lighting import Lighting
@@ -1014,25 +1015,6 @@ _CONTEXT_ON_SIDE_THREAD = True
 # median per-scene time ratio 0.95 for ``balanced``-16 and -64 (BENCHMARKS.md). ``fast``'s
 # anti-aliasing is one chunk on all of them.
 _AA_CHUNKS_ON_TWO_THREADS = True
-_POOLS = {}
-
-
-def _submit(name: str, workers: int, fn, *args):
-    """``fn(*args)`` on the thread pool ``name`` (``workers`` threads, made on first use), with
-    the caller's numba thread count: it is thread-local, and a worker process of the CLI that
-    shares the cores with others (``cli.py``'s pool initializer) must not run its kernels on
-    more threads from a side thread."""
-    pool = _POOLS.get(name)
-    if pool is None:
-        from concurrent.futures import ThreadPoolExecutor
-        pool = _POOLS[name] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix=f"raytrace-{name}")
-    threads = numba.get_num_threads()
-
-    def run():
-        numba.set_num_threads(threads)
-        return fn(*args)
-
-    return pool.submit(run)
 
 
 def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lighting, *,

@@ -94,3 +94,47 @@ def test_solve_matches_a_direct_sparse_solve_and_does_not_depend_on_threads():
     for a, b in ((single.irradiance_W_m2, frame.irradiance_W_m2), (single.radiance_out, frame.radiance_out),
                  (single.sun_irradiance_W_m2, frame.sun_irradiance_W_m2)):
         assert np.array_equal(a, b)
+
+
+def _same(a, b, where):
+    if isinstance(a, dict):
+        assert a.keys() == b.keys(), where
+        for k in a:
+            _same(a[k], b[k], f"{where}.{k}")
+    elif isinstance(a, (list, tuple)):
+        assert len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b)):
+            _same(x, y, f"{where}[{i}]")
+    elif sp.issparse(a):
+        for part in ("indptr", "indices", "data"):
+            assert np.array_equal(getattr(a, part), getattr(b, part)), f"{where}.{part}"
+    elif isinstance(a, np.ndarray):
+        assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True), where
+    else:
+        assert a == b, where
+
+
+def test_cache_rays_in_chunks_on_two_threads_build_the_same_cache(monkeypatch):
+    """``RadianceCache._cast`` runs its chunks of rays two at a time (raytrace._threads): the
+    matrices, glossy records and per-row flags are the same bits as one chunk after another,
+    and with one numba thread. Chunks of 16 rows, so the box's rows (coarse and contact) make
+    dozens of them."""
+    from raytrace import cache as cache_mod
+    monkeypatch.setattr(cache_mod, "_CAST_CHUNK_RAYS", 16 * 128)
+    built = []
+    for two, threads in ((True, numba.get_num_threads()), (False, numba.get_num_threads()), (True, 1)):
+        monkeypatch.setattr(cache_mod, "_CAST_CHUNKS_ON_TWO_THREADS", two)
+        old = numba.get_num_threads()
+        numba.set_num_threads(threads)
+        try:
+            built.append(_open_box().radiance_cache(spacing_m=0.4))
+        finally:
+            numba.set_num_threads(old)
+    first = built[0]
+    assert first._f is not None and first._c["W_g"] is not None  # contact rows and glossy transfer present
+    assert first.n_coarse_rows > 4 * 16
+    members = [k for k in dir(first) if not k.startswith("__") and k != "scene"
+               and not callable(getattr(first, k))]
+    for other in built[1:]:
+        for k in members:
+            _same(getattr(first, k), getattr(other, k), k)
