@@ -913,7 +913,7 @@ def run_frame(task: dict) -> dict:
     digests = {}
     for m in task["modalities"]:
         path = os.path.join(seq_dir, rel[m])
-        F.atomic_write_image(path, images[m])
+        F.atomic_write_image(path, images[m], noisy=m == "rgb_degraded")
         digests[rel[m]] = F.sha256_file(path)
     label = dict(task["label"])
     label.update(info)

@@ -56,7 +56,15 @@ _TMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<host>[A-Za-z0-9_-]+)\.(?P<pid>\d+)\.
 
 
 # --------------------------------------------------------------------------- images
-def write_image(path: str, pixels: np.ndarray) -> None:
+# PNG of a noisy image (``write_image(..., noisy=True)``): every row filtered by the average
+# predictor (libpng's PNG_FILTER_AVG), deflated at zlib level 1. libpng's default (each row's
+# filter picked among all five, level 6) spends its time on noise that does not compress: a
+# degraded 1280×960 frame of the main job took 0.44–0.64 s to write (the frame's render
+# took 0.13 s), 0.05–0.08 s so, for 12–20 % more bytes (BENCHMARKS.md, "Writing the frames").
+_PNG_NOISY = {"png:filter": 64, "png:compressionLevel": 1}
+
+
+def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False) -> None:
     """Write an image with OpenImageIO, format from the extension (PNG: 8/16 bit, EXR: float32
     with zip compression).
 
@@ -66,6 +74,9 @@ def write_image(path: str, pixels: np.ndarray) -> None:
         Destination; its extension picks the format.
     pixels : ndarray, shape (H, W) or (H, W, C), uint8, uint16 or float32
         Pixel values, row 0 at the top.
+    noisy : bool, keyword-only
+        The image is mostly noise (a degraded camera frame): a PNG is filtered and deflated
+        for speed (:data:`_PNG_NOISY`), not for the last bytes. The pixels are the same.
 
     Notes
     -----
@@ -93,6 +104,9 @@ def write_image(path: str, pixels: np.ndarray) -> None:
         raise OSError(f"cannot create {path}: {oiio.geterror()}")
     h, w, c = pixels.shape
     spec = oiio.ImageSpec(w, h, c, formats[pixels.dtype])
+    if noisy and path.endswith(".png"):
+        for key, value in _PNG_NOISY.items():
+            spec.attribute(key, value)
     if path.endswith(".exr"):
         spec.attribute("compression", "zip")
         spec.attribute("DateTime", "")  # no capture date: the same pixels give the same bytes
@@ -140,11 +154,11 @@ def _unlink(path: str) -> None:
         pass
 
 
-def atomic_write_image(path: str, pixels: np.ndarray) -> None:
+def atomic_write_image(path: str, pixels: np.ndarray, *, noisy: bool = False) -> None:
     """:func:`write_image` to a temporary name in the same folder, then rename into place."""
     tmp = _temporary(path)
     try:
-        write_image(tmp, pixels)
+        write_image(tmp, pixels, noisy=noisy)
     except BaseException:
         _unlink(tmp)
         raise

@@ -403,6 +403,22 @@ def test_another_sequence_in_the_folder_is_refused(ref, tmp_path, capsys):
 
 
 # --------------------------------------------------------------------------- files
+@pytest.mark.parametrize("dtype,channels", [(np.uint8, 3), (np.uint16, 1)])
+def test_noisy_png_is_lossless_deterministic_and_written_its_own_way(tmp_path, dtype, channels):
+    """``noisy=True`` (the degraded frames) changes how a PNG is filtered and deflated, not its
+    pixels; the same pixels give the same bytes."""
+    rng = np.random.default_rng(7)
+    px = rng.integers(0, np.iinfo(dtype).max, size=(48, 64, channels), endpoint=True).astype(dtype)
+    px[:10] = 0  # some black space, as in a frame
+    paths = [str(tmp_path / f"{k}.png") for k in ("noisy1", "noisy2", "default")]
+    F.atomic_write_image(paths[0], px, noisy=True)
+    F.write_image(paths[1], px, noisy=True)
+    F.write_image(paths[2], px)
+    for p in paths:
+        np.testing.assert_array_equal(F.read_image(p), px[..., 0] if channels == 1 else px)
+    assert F.sha256_file(paths[0]) == F.sha256_file(paths[1]) != F.sha256_file(paths[2])
+
+
 def test_atomic_writes_leave_no_temporary(tmp_path):
     with pytest.raises(ValueError, match="uint8, uint16 or float32"):
         F.atomic_write_image(str(tmp_path / "a.png"), np.zeros((2, 2), np.int64))
