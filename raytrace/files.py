@@ -56,11 +56,15 @@ _TMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<host>[A-Za-z0-9_-]+)\.(?P<pid>\d+)\.
 
 
 # --------------------------------------------------------------------------- images
-# PNG of a noisy image (``write_image(..., noisy=True)``): every row filtered by the average
-# predictor (libpng's PNG_FILTER_AVG), deflated at zlib level 1. libpng's default (each row's
-# filter picked among all five, level 6) spends its time on noise that does not compress: a
-# degraded 1280×960 frame of the main job took 0.44–0.64 s to write (the frame's render
-# took 0.13 s), 0.05–0.08 s so, for 12–20 % more bytes (BENCHMARKS.md, "Writing the frames").
+# How PNGs are filtered (libpng's PNG_FILTER_* bits) and deflated (zlib level), chosen on the
+# main job's 1280×960 frames (BENCHMARKS.md, "Writing the frames"). libpng's default, each row's
+# filter picked among all five at level 6, spends its time trying filters:
+# * a rendered frame or mask (black space around the target, flat parts): no filter, level 6,
+#   2–2.5× faster than the default (RGB 0.07–0.08 → 0.03–0.04 s), −20 % to +5 % bytes;
+# * a noisy image (``write_image(..., noisy=True)``: the degraded frames): the average
+#   predictor at level 1, 0.44–0.64 → 0.05–0.08 s (the frame's render takes 0.13 s), 12–20 % more
+#   bytes than the default on noise that does not compress.
+_PNG = {"png:filter": 8}
 _PNG_NOISY = {"png:filter": 64, "png:compressionLevel": 1}
 
 
@@ -76,7 +80,8 @@ def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False) -> None:
         Pixel values, row 0 at the top.
     noisy : bool, keyword-only
         The image is mostly noise (a degraded camera frame): a PNG is filtered and deflated
-        for speed (:data:`_PNG_NOISY`), not for the last bytes. The pixels are the same.
+        for speed (:data:`_PNG_NOISY`), not for the last bytes; otherwise :data:`_PNG`. The
+        pixels are the same.
 
     Notes
     -----
@@ -104,8 +109,8 @@ def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False) -> None:
         raise OSError(f"cannot create {path}: {oiio.geterror()}")
     h, w, c = pixels.shape
     spec = oiio.ImageSpec(w, h, c, formats[pixels.dtype])
-    if noisy and path.endswith(".png"):
-        for key, value in _PNG_NOISY.items():
+    if path.endswith(".png"):
+        for key, value in (_PNG_NOISY if noisy else _PNG).items():
             spec.attribute(key, value)
     if path.endswith(".exr"):
         spec.attribute("compression", "zip")
