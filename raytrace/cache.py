@@ -872,8 +872,10 @@ class RadianceCache:
             rk = rr[keep]
             # the chunks go in row order, so the records mostly are already: no reordering then
             order = None if np.all(rk[1:] >= rk[:-1]) else np.argsort(rk, kind="stable")
-            glint = {k: np.ascontiguousarray(np.concatenate(v)[keep] if order is None else np.concatenate(v)[keep][order])
-                     for k, v in rec.items()}
+            glint = {}
+            for k, v in rec.items():
+                a = np.concatenate(v)[keep]
+                glint[k] = np.ascontiguousarray(a if order is None else a[order])
             glint["row"] = glint["row"] - row0
             glint["ptr"] = np.searchsorted(glint["row"], np.arange(n_rows + 1)).astype(np.int64)
             out["glint"] = glint

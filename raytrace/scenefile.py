@@ -128,14 +128,15 @@ ROTATION_TOL = 1e-3
 def _rotation(name: str, value) -> np.ndarray:
     """A rotation matrix from 9 numbers (row-major, or 3×3) that may have been rounded in
     print: within ROTATION_TOL of orthonormal (max |R Rᵀ − I|) with det > 0, replaced (unless
-    orthonormal to 1e-12 already) by the nearest rotation (the orthogonal factor of its polar decomposition, U Vᵀ of its SVD:
-    Higham 1986, "Computing the polar decomposition", SIAM J. Sci. Stat. Comput. 7(4)), so
-    the pose rendered and written to frame.json is exactly a rotation."""
+    orthonormal to 1e-12 already) by the nearest rotation, the orthogonal factor of its polar
+    decomposition, U Vᵀ of its SVD (Higham 1986, "Computing the polar decomposition", SIAM J.
+    Sci. Stat. Comput. 7(4)), so the pose rendered and written to frame.json is exactly a
+    rotation."""
     R = _numbers(name, value, 9).reshape(3, 3)
     dev = float(np.abs(R @ R.T - np.eye(3)).max())
     if dev > ROTATION_TOL or np.linalg.det(R) <= 0:
-        raise _err(f"{name} must be a rotation matrix (orthonormal to {ROTATION_TOL:g}, det +1), got max |R Rᵀ − I| "
-                   f"= {dev:.3g}, det {np.linalg.det(R):.6g}")
+        raise _err(f"{name} must be a rotation matrix (orthonormal to {ROTATION_TOL:g}, det +1), got "
+                   f"max |R Rᵀ − I| = {dev:.3g}, det {np.linalg.det(R):.6g}")
     if dev <= 1e-12:  # a rotation to float64 precision: the file's numbers, as given
         return R
     U, _, Vt = np.linalg.svd(R)
