@@ -13,6 +13,7 @@ import math
 
 import numba
 import numpy as np
+import pytest
 import scipy.sparse as sp
 import trimesh
 from scipy.sparse.linalg import spsolve
@@ -120,16 +121,29 @@ def test_cache_rays_in_chunks_on_two_threads_build_the_same_cache(monkeypatch):
     and with one numba thread. Chunks of 16 rows, so the box's rows (coarse and contact) make
     dozens of them."""
     from raytrace import cache as cache_mod
+    if numba.get_num_threads() < 2:
+        pytest.skip("one numba thread: the chunks run one after the other")
     monkeypatch.setattr(cache_mod, "_CAST_CHUNK_RAYS", 16 * 128)
-    built = []
+    submitted = []
+    submit = cache_mod.submit
+
+    def spy(*a):
+        submitted.append(a[0])
+        return submit(*a)
+
+    monkeypatch.setattr(cache_mod, "submit", spy)
+    built, on_pool = [], []
     for two, threads in ((True, numba.get_num_threads()), (False, numba.get_num_threads()), (True, 1)):
         monkeypatch.setattr(cache_mod, "_CAST_CHUNKS_ON_TWO_THREADS", two)
         old = numba.get_num_threads()
         numba.set_num_threads(threads)
+        submitted.clear()
         try:
             built.append(_open_box().radiance_cache(spacing_m=0.4))
         finally:
             numba.set_num_threads(old)
+        on_pool.append(len(submitted))
+    assert on_pool[0] > 4 and on_pool[1:] == [0, 0]  # the side pool ran the first build only
     first = built[0]
     assert first._f is not None and first._c["W_g"] is not None  # contact rows and glossy transfer present
     assert first.n_coarse_rows > 4 * 16
