@@ -7,243 +7,243 @@ SIGNATURES = {
     'degrade.convolve._convolve_interleaved': (1.65, [
         "(Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'degrade.encode._encode': (2.35, [
+    'degrade.encode._encode': (2.39, [
         "(Array(float32, 3, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
         "(Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True))",
     ]),
     'degrade.encode._encode8': (1.65, [
         "(Array(float32, 3, 'C', False, aligned=True), Array(int16, 1, 'C', True, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
     ]),
-    'degrade.sensor._adc': (0.33, [
+    'degrade.sensor._adc': (0.27, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, bool, Array(float32, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._embree.intersect_batch': (2.68, [
+    'raytrace._embree.intersect_batch': (2.65, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._embree.occluded_batch': (0.86, [
+    'raytrace._embree.occluded_batch': (1.46, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.corner_normals': (1.08, [
+    'raytrace._kernels.corner_normals': (0.8, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.make_rays': (0.34, [
+    'raytrace._kernels.make_rays': (0.33, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.ray_origins32': (0.42, [
+    'raytrace._kernels.ray_origins32': (0.5, [
         "(Array(float64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.refine_hits': (1.54, [
+    'raytrace._kernels.refine_hits': (1.85, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(int32, 2, 'C', False, aligned=True), bool, bool)",
     ]),
-    'raytrace._paths.sun_visibility': (1.98, [
+    'raytrace._paths.sun_visibility': (2.62, [
         "(int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, float64, Array(float64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading._strata': (0.1, [
+    'raytrace._shading._strata': (0.08, [
         '(int64,)',
     ]),
-    'raytrace._shading.add_diffuse': (0.67, [
+    'raytrace._shading.add_diffuse': (0.41, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.add_mirror': (12.41, [
+    'raytrace._shading.add_mirror': (11.73, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), bool, Array(float64, 3, 'C', False, aligned=True), Array(float64, 4, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.cache_irradiance': (1.22, [
+    'raytrace._shading.cache_irradiance': (1.14, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.coverage_combine': (1.21, [
+    'raytrace._shading.coverage_combine': (1.19, [
         "(Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.coverage_unshaded_first': (1.02, [
+    'raytrace._shading.coverage_unshaded_first': (0.69, [
         "(Array(int64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.earth_background': (3.91, [
-        "(Array(uint16, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
+    'raytrace._shading.earth_background': (14.23, [
+        "(Array(uint16, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, float64, float64, Array(bool, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.edge_pixels': (1.8, [
+    'raytrace._shading.edge_pixels': (1.73, [
         "(Array(uint16, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.env_along': (2.34, [
+    'raytrace._shading.env_along': (3.01, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.group_means': (0.63, [
+    'raytrace._shading.group_means': (0.87, [
         "(Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.incoming': (2.29, [
+    'raytrace._shading.incoming': (1.84, [
         "(int32, int32, float64, float64, float64, float64, float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64)",
     ]),
-    'raytrace._shading.mirror_rays': (1.25, [
+    'raytrace._shading.mirror_rays': (0.92, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.permute': (0.22, [
+    'raytrace._shading.permute': (0.14, [
         '(int64, int64, int64)',
     ]),
-    'raytrace._shading.put_rows': (0.43, [
+    'raytrace._shading.put_rows': (0.6, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.ray_groups': (0.47, [
+    'raytrace._shading.ray_groups': (0.78, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.shade_sun': (1.18, [
+    'raytrace._shading.shade_sun': (0.99, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.subpixel_rays': (1.81, [
+    'raytrace._shading.subpixel_rays': (2.49, [
         "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.subsample_hits': (0.58, [
+    'raytrace._shading.subsample_hits': (1.06, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.sun_disc_dirs': (1.36, [
+    'raytrace._shading.sun_disc_dirs': (1.09, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.sun_rays': (0.76, [
+    'raytrace._shading.sun_rays': (0.96, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(bool, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.surfaces': (2.45, [
+    'raytrace._shading.surfaces': (2.69, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
     'raytrace.brdf._ggx_d': (0.1, [
         '(float64, float64)',
     ]),
-    'raytrace.brdf._lambda': (0.22, [
+    'raytrace.brdf._lambda': (0.16, [
         '(float64, float64)',
         '(float32, float64)',
     ]),
-    'raytrace.brdf._radical_inverse2': (0.11, [
+    'raytrace.brdf._radical_inverse2': (0.06, [
         '(int64,)',
     ]),
-    'raytrace.brdf._spec_prob': (0.23, [
+    'raytrace.brdf._spec_prob': (0.12, [
         '(float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf._split_sum': (3.64, [
+    'raytrace.brdf._split_sum': (2.65, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.brdf.brdf_cos': (1.16, [
+    'raytrace.brdf.brdf_cos': (1.15, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
         '(float32, float32, float32, float32, float32, float32, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.cosine_direction': (0.18, [
+    'raytrace.brdf.cosine_direction': (0.15, [
         '(float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.onb': (0.2, [
+    'raytrace.brdf.onb': (0.12, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.brdf.pdf_brdf': (0.6, [
+    'raytrace.brdf.pdf_brdf': (0.47, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.sample_brdf': (2.57, [
+    'raytrace.brdf.sample_brdf': (1.98, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.specular_albedo': (0.72, [
+    'raytrace.brdf.specular_albedo': (0.53, [
         "(Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64, float64)",
     ]),
-    'raytrace.cache._bin_hits': (1.41, [
+    'raytrace.cache._bin_hits': (1.19, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
         "(int64, Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._cache_rays': (1.5, [
+    'raytrace.cache._cache_rays': (1.28, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, int64, int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._gauss_seidel_sweep': (0.74, [
+    'raytrace.cache._gauss_seidel_sweep': (0.95, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._glints': (2.22, [
+    'raytrace.cache._glints': (2.3, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._glossy_bounce': (3.95, [
+    'raytrace.cache._glossy_bounce': (3.1, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._hash01': (0.73, [
+    'raytrace.cache._hash01': (0.46, [
         '(int64, int64)',
     ]),
-    'raytrace.cache._hash32': (0.41, [
+    'raytrace.cache._hash32': (0.24, [
         '(int64, int64)',
     ]),
-    'raytrace.cache._interp_rows': (0.48, [
+    'raytrace.cache._interp_rows': (0.36, [
         "(Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._jacobi_step': (3.69, [
+    'raytrace.cache._jacobi_step': (3.79, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
     'raytrace.cache._lattice_local': (0.09, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.cache._lattice_points': (0.68, [
+    'raytrace.cache._lattice_points': (0.52, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._lookup_rows': (0.95, [
+    'raytrace.cache._lookup_rows': (1.3, [
         "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._oct_cells': (0.91, [
+    'raytrace.cache._oct_cells': (0.72, [
         "(Array(float64, 2, 'C', False, aligned=True), int64)",
     ]),
-    'raytrace.cache._ray_cells': (1.5, [
+    'raytrace.cache._ray_cells': (1.16, [
         "(Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, Array(int64, 1, 'C', False, aligned=True))",
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._rows_irradiance': (1.16, [
+    'raytrace.cache._rows_irradiance': (1.36, [
         "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._sun_rays': (0.76, [
+    'raytrace.cache._sun_rays': (0.87, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache.glossy_draw': (0.24, [
+    'raytrace.cache.glossy_draw': (0.16, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.cache.lattice_weights': (0.24, [
+    'raytrace.cache.lattice_weights': (0.2, [
         '(int64, float64, float64)',
     ]),
-    'raytrace.environment._direction_cells': (4.22, [
+    'raytrace.environment._direction_cells': (3.58, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._glossy_nodes': (0.84, [
+    'raytrace.environment._glossy_nodes': (1.05, [
         "(int64, int64, float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._hash3': (0.08, [
+    'raytrace.environment._hash3': (0.07, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.environment._irradiance_nodes': (1.05, [
+    'raytrace.environment._irradiance_nodes': (1.25, [
         "(int64, int64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._lobe_kernel': (0.06, [
+    'raytrace.environment._lobe_kernel': (0.07, [
         '(float64, float64)',
     ]),
-    'raytrace.environment._node_direction': (0.29, [
+    'raytrace.environment._node_direction': (0.26, [
         '(int64, int64, int64)',
         '(uint64, int64, int64)',
     ]),
-    'raytrace.environment._smoothstep': (0.16, [
+    'raytrace.environment._smoothstep': (0.08, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.environment._value_noise': (0.56, [
+    'raytrace.environment._value_noise': (0.54, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.environment.env_cells': (3.49, [
+    'raytrace.environment.env_cells': (4.54, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, int64)",
     ]),
-    'raytrace.environment.oct_cell': (0.47, [
+    'raytrace.environment.oct_cell': (0.31, [
         '(float64, float64, float64, int64)',
         '(float32, float32, float32, int64)',
     ]),
-    'raytrace.environment.oct_direction': (0.1, [
+    'raytrace.environment.oct_direction': (0.19, [
         '(float64, float64)',
     ]),
-    'raytrace.environment.procedural_albedo': (1.29, [
+    'raytrace.environment.procedural_albedo': (1.07, [
         '(float64, float64, float64)',
     ]),
 }
 
 EXTRA_SIGNATURES = {
     'balanced': {
-        'raytrace._paths.gather_traced': (43.17, [
+        'raytrace._paths.gather_traced': (39.43, [
             "(int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(int64, 1, 'C', False, aligned=True), int64, float64, float64, float64, float64, bool, int64, float32, float32, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._paths.lobe_traced': (38.51, [
+        'raytrace._paths.lobe_traced': (33.08, [
             "(int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, float64, float64, float64, bool, int64, float32, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading._allotted': (0.24, [
+        'raytrace._shading._allotted': (0.17, [
             "(float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64)",
         ]),
-        'raytrace._shading._edge_top': (0.15, [
+        'raytrace._shading._edge_top': (0.14, [
             '(float64, float64, float64, float64, float64, float64)',
         ]),
         'raytrace._shading._laine_karras32': (0.06, [
@@ -252,7 +252,7 @@ EXTRA_SIGNATURES = {
         'raytrace._shading._owen_scramble32': (0.21, [
             '(int64, int64)',
         ]),
-        'raytrace._shading._owen_sobol2_keyed': (0.46, [
+        'raytrace._shading._owen_sobol2_keyed': (0.43, [
             '(int64, int64, int64, int64)',
         ]),
         'raytrace._shading._reverse_bits32': (0.07, [
@@ -261,104 +261,104 @@ EXTRA_SIGNATURES = {
         'raytrace._shading._sobol2_y': (0.1, [
             '(int64,)',
         ]),
-        'raytrace._shading.add_interpolated_rows': (3.42, [
+        'raytrace._shading.add_interpolated_rows': (2.99, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(uint16, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.add_rows': (0.66, [
+        'raytrace._shading.add_rows': (0.53, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.allocate_rays': (0.93, [
+        'raytrace._shading.allocate_rays': (0.78, [
             "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64, float64, Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.atrous': (3.13, [
+        'raytrace._shading.atrous': (2.95, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, float64, Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.bounce_sun_rays': (1.24, [
+        'raytrace._shading.bounce_sun_rays': (1.88, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.donor_rows': (2.54, [
+        'raytrace._shading.donor_rows': (1.95, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(uint16, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), bool, Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.guide_images': (2.5, [
+        'raytrace._shading.guide_images': (1.8, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.incoming': (2.68, [
+        'raytrace._shading.incoming': (2.36, [
             "(int64, int64, float64, float64, float64, float64, float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64)",
         ]),
-        'raytrace._shading.near_shadow_slivers': (2.37, [
+        'raytrace._shading.near_shadow_slivers': (2.27, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.residual_image': (0.81, [
+        'raytrace._shading.residual_image': (1.91, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.residual_rows': (1.23, [
+        'raytrace._shading.residual_rows': (1.09, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.same_part_mean': (1.69, [
+        'raytrace._shading.same_part_mean': (1.29, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.shadow_map_of_slivers': (1.71, [
+        'raytrace._shading.shadow_map_of_slivers': (1.7, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.sliver_pixels': (4.71, [
+        'raytrace._shading.sliver_pixels': (3.19, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.subsample_contrast': (0.61, [
+        'raytrace._shading.subsample_contrast': (0.54, [
             "(Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True))",
         ]),
     },
     'batched': {
-        'raytrace._embree.occluded_batch': (1.55, [
+        'raytrace._embree.occluded_batch': (1.17, [
             "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', True, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.bounce2_rays': (3.17, [
+        'raytrace._shading.bounce2_rays': (2.47, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.gather_rays': (2.25, [
+        'raytrace._shading.gather_rays': (2.07, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.gather_sum': (8.77, [
+        'raytrace._shading.gather_sum': (7.65, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.hit_or_miss': (0.47, [
+        'raytrace._shading.hit_or_miss': (0.43, [
             "(Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.hit_or_miss_rows': (0.61, [
+        'raytrace._shading.hit_or_miss_rows': (0.39, [
             "(Array(int32, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.incoming_rays': (6.83, [
+        'raytrace._shading.incoming_rays': (5.13, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.lobe_rays': (2.43, [
+        'raytrace._shading.lobe_rays': (2.34, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.lobe_sum': (6.75, [
+        'raytrace._shading.lobe_sum': (5.93, [
             "(int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.put_weighted_rows': (0.56, [
+        'raytrace._shading.put_weighted_rows': (0.59, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.take_rows': (0.62, [
+        'raytrace._shading.take_rows': (0.44, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
     },
     'reference': {
-        'raytrace._shading.background': (4.54, [
+        'raytrace._shading.background': (2.48, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._add_shadowed': (0.72, [
+        'raytrace.pathtrace._add_shadowed': (0.42, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._escape': (2.84, [
+        'raytrace.pathtrace._escape': (2.74, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._primary': (1.43, [
+        'raytrace.pathtrace._primary': (0.8, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._rand': (0.31, [
+        'raytrace.pathtrace._rand': (0.19, [
             '(int64, int64, int64, int64)',
         ]),
-        'raytrace.pathtrace._vertex': (3.7, [
+        'raytrace.pathtrace._vertex': (2.37, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
     },

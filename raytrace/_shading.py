@@ -1429,31 +1429,137 @@ def background(pix, W, o_body, R_body_from_cam, fx, fy, cx, cy, n_grid, p, tex, 
         out[k, 2] = sb / S
 
 
+@jit
+def _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, mu_min):
+    """Where the unit ray (o, d) meets Earth: (True, albedo RGB, outward normal), or False
+    first on a miss or where the Sun's cosine is ≤ mu_min."""
+    t = env.earth_hit(p, ox, oy, oz, dx, dy, dz)
+    if t < 0.0:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    r = p[env.P_RADIUS]
+    mx = (ox + t * dx - p[env.P_DIST] * p[env.P_EX]) / r
+    my = (oy + t * dy - p[env.P_DIST] * p[env.P_EY]) / r
+    mz = (oz + t * dz - p[env.P_DIST] * p[env.P_EZ]) / r
+    if mx * p[env.P_SX] + my * p[env.P_SY] + mz * p[env.P_SZ] <= mu_min:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    a0, a1, a2 = env.earth_albedo(p, tex, mx, my, mz)
+    return True, a0, a1, a2, mx, my, mz
+
+
+@inline
+def _chord2(M, i0, j0, i1, j1):
+    """Squared distance between the unit normals M[i0, j0] and M[i1, j1]."""
+    a = M[i0, j0, 0] - M[i1, j1, 0]
+    b = M[i0, j0, 1] - M[i1, j1, 1]
+    c = M[i0, j0, 2] - M[i1, j1, 2]
+    return a * a + b * b + c * c
+
+
+@inline
+def _cell_trusted(A, M, C, ok, ok_c, i, j, chord2, tol):
+    """Whether cell (i, j) of :func:`earth_background` interpolates its albedo: all four
+    corners and the centre on Earth's day side, both diagonals shorter than √chord2 on the
+    unit sphere, and the corners' mean within ``tol`` of the centre's albedo (relative)."""
+    if not (ok_c[i, j] and ok[i, j + 1] and ok[i + 1, j] and ok[i + 1, j + 1]):
+        return False
+    if _chord2(M, i, j, i + 1, j + 1) > chord2 or _chord2(M, i, j + 1, i + 1, j) > chord2:
+        return False
+    for c in range(3):
+        mid = 0.25 * (A[i, j, c] + A[i, j + 1, c] + A[i + 1, j, c] + A[i + 1, j + 1, c])
+        if abs(mid - C[i, j, c]) > tol * C[i, j, c]:
+            return False
+    return True
+
+
+@inline
+def _pixel_ray(R, fx, fy, cx, cy, u, v):
+    """Unit body-frame direction of the ray through image point (u, v)."""
+    x = (u - cx) / fx
+    y = (v - cy) / fy
+    dx = R[0, 0] * x + R[0, 1] * y + R[0, 2]
+    dy = R[1, 0] * x + R[1, 1] * y + R[1, 2]
+    dz = R[2, 0] * x + R[2, 1] * y + R[2, 2]
+    dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+    return dx / dn, dy / dn, dz / dn
+
+
 @pjit
-def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, p, tex, earth_px, rad):
+def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, p, tex, step, tol, max_chord, earth_px, rad):
     """Earth behind the target in one pass over the image: ``earth_px[v, u]`` is set where the
     pixel's centre ray meets Earth, and there, off the target (``inst`` 0), ``rad[v, u]``
     (H, W, 3) receives Earth's radiance along it (``p`` without the ambient sky: the sky
-    lights the target but is not drawn)."""
+    lights the target but is not drawn).
+
+    Where and whether the ray meets Earth, and the Sun's cosine there (day, night, terminator,
+    limb), are exact per pixel. The procedural texture's albedo (11 octaves of value noise,
+    :func:`raytrace.environment.procedural_albedo`; its finest detail ~60 km, a pixel ~0.1–1 km
+    from low orbit) is, with ``step`` > 1, evaluated on the corners of step × step cells of
+    the image and interpolated bilinearly inside each cell that spans less than ``max_chord``
+    of Earth's radius (its diagonals on the sphere: so not near the limb, where a pixel covers
+    kilometres) and whose centre it matches there to ``tol`` (relative, per channel); a cell
+    that fails, or whose corners do not all see Earth's day side (or its night side within
+    ``max_chord`` of the terminator: the Sun's cosine changes by less than that across a cell
+    that passes), is evaluated per pixel. Other textures (uniform, an image) are looked up per
+    pixel."""
     H, W = inst.shape
+    ox, oy, oz = o_body[0], o_body[1], o_body[2]
+    interp = step > 1 and int(p[env.P_TEXTURE]) == env.TEX_PROCEDURAL
+    s = step if interp else 1
+    nv = (H - 1) // s + 2 if interp else 1
+    nu = (W - 1) // s + 2 if interp else 1
+    A = np.empty((nv, nu, 3))  # albedo at the cells' corners,
+    M = np.empty((nv, nu, 3))  # Earth's normal there,
+    C = np.empty((nv, nu, 3))  # the albedo at the cells' centres
+    ok = np.zeros((nv, nu), dtype=np.bool_)
+    ok_c = np.zeros((nv, nu), dtype=np.bool_)
+    if interp:
+        for i in numba.prange(nv):
+            for j in range(nu):
+                dx, dy, dz = _pixel_ray(R_body_from_cam, fx, fy, cx, cy, float(j * s), float(i * s))
+                hit, A[i, j, 0], A[i, j, 1], A[i, j, 2], M[i, j, 0], M[i, j, 1], M[i, j, 2] = \
+                    _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -max_chord)
+                ok[i, j] = hit
+                if hit:
+                    dx, dy, dz = _pixel_ray(R_body_from_cam, fx, fy, cx, cy, (j + 0.5) * s, (i + 0.5) * s)
+                    hit, C[i, j, 0], C[i, j, 1], C[i, j, 2], _, _, _ = \
+                        _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -2.0)
+                    ok_c[i, j] = hit
+    chord2 = max_chord * max_chord
+    inv = 1.0 / s
+    k_sun = p[env.P_ESUN] / math.pi
     for v in numba.prange(H):
-        y = (v - cy) / fy
+        i = v // s
+        fv = (v - i * s) * inv
         for u in range(W):
-            x = (u - cx) / fx
-            dx = R_body_from_cam[0, 0] * x + R_body_from_cam[0, 1] * y + R_body_from_cam[0, 2]
-            dy = R_body_from_cam[1, 0] * x + R_body_from_cam[1, 1] * y + R_body_from_cam[1, 2]
-            dz = R_body_from_cam[2, 0] * x + R_body_from_cam[2, 1] * y + R_body_from_cam[2, 2]
-            dn = math.sqrt(dx * dx + dy * dy + dz * dz)
-            dx /= dn
-            dy /= dn
-            dz /= dn
-            hit = env.earth_hit(p, o_body[0], o_body[1], o_body[2], dx, dy, dz) >= 0.0
+            dx, dy, dz = _pixel_ray(R_body_from_cam, fx, fy, cx, cy, float(u), float(v))
+            t = env.earth_hit(p, ox, oy, oz, dx, dy, dz)
+            hit = t >= 0.0
             earth_px[v, u] = hit
-            if hit and inst[v, u] == 0:
-                r, g, b = env.env_radiance(p, tex, o_body[0], o_body[1], o_body[2], dx, dy, dz)
-                rad[v, u, 0] = r
-                rad[v, u, 1] = g
-                rad[v, u, 2] = b
+            if not hit or inst[v, u] != 0:
+                continue
+            rr = p[env.P_RADIUS]
+            mx = (ox + t * dx - p[env.P_DIST] * p[env.P_EX]) / rr
+            my = (oy + t * dy - p[env.P_DIST] * p[env.P_EY]) / rr
+            mz = (oz + t * dz - p[env.P_DIST] * p[env.P_EZ]) / rr
+            mu = mx * p[env.P_SX] + my * p[env.P_SY] + mz * p[env.P_SZ]
+            if mu <= 0.0:
+                rad[v, u, 0] = 0.0
+                rad[v, u, 1] = 0.0
+                rad[v, u, 2] = 0.0
+                continue
+            k = k_sun * mu
+            j = u // s
+            if interp and _cell_trusted(A, M, C, ok, ok_c, i, j, chord2, tol):
+                fu = (u - j * s) * inv
+                for c in range(3):
+                    a = (1.0 - fv) * ((1.0 - fu) * A[i, j, c] + fu * A[i, j + 1, c]) + \
+                        fv * ((1.0 - fu) * A[i + 1, j, c] + fu * A[i + 1, j + 1, c])
+                    rad[v, u, c] = a * k
+            else:
+                a0, a1, a2 = env.earth_albedo(p, tex, mx, my, mz)
+                rad[v, u, 0] = a0 * k
+                rad[v, u, 1] = a1 * k
+                rad[v, u, 2] = a2 * k
 
 
 @pjit
