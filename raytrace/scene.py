@@ -306,6 +306,14 @@ class Scene:
             self._cache_options = dict(options)
         return self._cache
 
+    def adopt_radiance_cache(self, cache, **options) -> None:
+        """Use ``cache`` (built for this scene with ``options``, e.g. in another process and
+        pickled with it) as :meth:`radiance_cache`'s."""
+        if cache.scene is not self:
+            raise ValueError("the radiance cache was built for another scene")
+        self._cache = cache
+        self._cache_options = dict(options)
+
     def __getstate__(self):
         state = self.__dict__.copy()
         state["_embree"] = None

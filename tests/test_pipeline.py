@@ -223,6 +223,64 @@ def test_two_workers_and_shards_give_the_same_bytes(ref, tmp_path):
     assert_same_tree(ref, sh)
 
 
+def test_two_workers_load_the_scene_this_process_built(ref, tmp_path, monkeypatch):
+    """With a pool, this process builds the scene and radiance cache once and pickles them
+    for the workers (cli._prebuild_scenes; what a worker does with the file:
+    test_a_prebuilt_scene_renders_the_same_bits): the bytes are those of one worker, and the
+    temporary folder is gone afterwards."""
+    import tempfile
+
+    folders = []
+    real_mkdtemp = tempfile.mkdtemp
+
+    def mkdtemp(*args, **kwargs):
+        folders.append(real_mkdtemp(*args, **kwargs))
+        return folders[-1]
+
+    monkeypatch.setattr(tempfile, "mkdtemp", mkdtemp)
+    seen = []
+    real_prebuild = cli._prebuild_scenes
+
+    def prebuild(tasks, folder):
+        out = real_prebuild(tasks, folder)
+        seen.append({spec: os.path.getsize(path) for spec, path in out.items()})
+        return out
+
+    monkeypatch.setattr(cli, "_prebuild_scenes", prebuild)
+    assert run_main(*SMALL, *MODS, "--workers", "2", "--out", tmp_path / "w2") == 0
+    assert_same_tree(ref, tmp_path / "w2")
+    assert seen == [{("builtin", "icesat"): seen[0][("builtin", "icesat")]}] and seen[0][("builtin", "icesat")] > 1e6
+    assert folders and not any(os.path.exists(f) for f in folders)
+
+
+def test_a_prebuilt_scene_renders_the_same_bits(tmp_path):
+    """The pickled scene with its cache (what a worker loads) against a scene built afresh:
+    the same radiance bit for bit; a cache is only adopted by the scene it was built for."""
+    from raytrace.camera import Camera
+    from raytrace.lighting import Lighting
+    from raytrace.scene import Scene
+    from raytrace.shade import render
+    from raytrace.targets import load_target
+
+    spec = ("builtin", "icesat")
+    task = {"model_spec": spec, "cfg": {"render": {"quality": "fast"}}, "modalities": ["rgb"]}
+    paths = cli._prebuild_scenes([task], str(tmp_path))
+    loaded = cli._load_prebuilt(paths[spec])
+    assert loaded is not None and loaded._cache is not None
+    fresh = Scene(load_target("icesat"))
+    cam = Camera(160, 120, 150.0, 150.0, 79.5, 59.5)
+    R = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+    light = Lighting(sun_dir_body=(0.6, 0.0, -0.8))
+    a = render(loaded, cam, R, [0.0, 0.0, 12.0], light, quality="fast", seed=3)
+    b = render(fresh, cam, R, [0.0, 0.0, 12.0], light, quality="fast", seed=3)
+    assert a.geometry.mask.any() and np.array_equal(a.radiance, b.radiance)
+    with pytest.raises(ValueError, match="another scene"):
+        fresh.adopt_radiance_cache(loaded.radiance_cache())
+    # geometry-only and reference tasks build nothing
+    assert cli._prebuild_scenes([dict(task, modalities=["mask", "depth"])], str(tmp_path)) == {}
+    assert cli._prebuild_scenes([dict(task, cfg={"render": {"quality": "reference"}})], str(tmp_path)) == {}
+
+
 def test_config_round_trip_reproduces_the_bytes(ref, tmp_path):
     cfg = tomllib.loads((ref / "config.toml").read_text())
     assert cfg["camera"]["width"] == 160 and cfg["sequence"]["target"] == "icesat"
