@@ -1198,10 +1198,11 @@ def execute(tasks: list, *, workers: int, scheduler: str | None = None, progress
         # the workers start and import while this process builds the scenes they will load
         ready = [pool.submit(_worker_ready, tasks[0]["cfg"]["render"]["quality"]) for _ in range(n)]
         if _PREBUILD_SCENES:
-            folder = tempfile.mkdtemp(prefix="orbitsynth-scenes-")
+            import pickle
             try:
+                folder = tempfile.mkdtemp(prefix="orbitsynth-scenes-")
                 prebuilt = _prebuild_scenes(tasks, folder)
-            except OSError as exc:  # e.g. a full temporary folder: each worker builds its own
+            except (OSError, pickle.PicklingError) as exc:  # e.g. no room in the temporary folder
                 sys.stderr.write(f"{PROG}: warning: the workers build their own scenes ({exc})\n")
                 prebuilt = {}
             tasks = [dict(t, prebuilt=prebuilt.get(t["model_spec"])) for t in tasks]

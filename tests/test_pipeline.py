@@ -253,6 +253,18 @@ def test_two_workers_load_the_scene_this_process_built(ref, tmp_path, monkeypatc
     assert folders and not any(os.path.exists(f) for f in folders)
 
 
+def test_workers_build_their_own_scenes_when_the_temporary_folder_fails(ref, tmp_path, monkeypatch, capsys):
+    import tempfile
+
+    def refuse(*args, **kwargs):
+        raise PermissionError(13, "Permission denied", "/tmp")
+
+    monkeypatch.setattr(tempfile, "mkdtemp", refuse)
+    assert run_main(*SMALL, *MODS, "--workers", "2", "--out", tmp_path / "w2") == 0
+    assert_same_tree(ref, tmp_path / "w2")
+    assert "the workers build their own scenes" in capsys.readouterr().err
+
+
 def test_a_prebuilt_scene_renders_the_same_bits(tmp_path):
     """The pickled scene with its cache (what a worker loads) against a scene built afresh:
     the same radiance bit for bit; a cache is only adopted by the scene it was built for."""
