@@ -1018,9 +1018,9 @@ _AA_CHUNKS_ON_TWO_THREADS = True
 # albedo on the corners of 4 × 4 pixel cells, interpolated in cells that span less than 1e-3
 # of Earth's radius (6.4 km; the texture's finest octave is ~60 km) and match their centre's
 # albedo to 0.2 %; elsewhere (near the limb) per pixel. 16 frames of the main job (Cassini,
-# spiral), against every pixel evaluated: largest error 0.08 % of a pixel's radiance, the
-# kernel 3–4× faster where Earth fills the view (130–150 → 34–45 ms). _BACKGROUND_STEP = 1:
-# per pixel everywhere.
+# spiral), against every pixel evaluated: largest error 0.081 % of a pixel's radiance, the
+# kernel 0.26–0.47× the time where Earth fills the view (122–176 → 41–72 ms;
+# benchmarks/bench_background.py). _BACKGROUND_STEP = 1: per pixel everywhere.
 _BACKGROUND_STEP = 4
 _BACKGROUND_TOL = 2e-3
 _BACKGROUND_CHORD = 1e-3
