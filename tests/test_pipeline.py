@@ -336,6 +336,27 @@ def test_killed_run_leaves_no_partial_file_and_resumes(ref, tmp_path):
     assert_same_tree(ref, seq)
 
 
+def test_interrupted_pool_removes_its_temporary_scenes(tmp_path):
+    """Ctrl-C while two workers render: exit 130 with the one-line message, and the scenes the
+    parent pickled for them (in TMPDIR) are gone."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    cmd = [sys.executable, str(ROOT / "cli.py"), *SMALL[:4], "--frames", "48", *SMALL[6:], "--workers", "2",
+           "--out", str(tmp_path / "seq")]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "TMPDIR": str(tmp)},
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    deadline = time.monotonic() + 120
+    while not list(tmp.glob("orbitsynth-scenes-*/*.pickle")) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert proc.poll() is None, proc.communicate()[1]
+    proc.send_signal(signal.SIGINT)
+    err = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 130, err
+    assert "interrupted" in err
+    assert not list(tmp.glob("orbitsynth-scenes-*"))
+
+
 def test_dask_local_cluster_gives_the_same_bytes(ref, tmp_path):
     distributed = pytest.importorskip("distributed")
     import logging
