@@ -788,8 +788,7 @@ def _prebuild_scenes(tasks: list, folder: str) -> dict:
         spec = task["model_spec"]
         if spec in out or task["cfg"]["render"]["quality"] == "reference":
             continue
-        mods = set(task["modalities"]) | ({"rgb"} if task.get("want_rgb") else set())
-        if not mods & {"rgb", "rgb_degraded", "hdr"}:
+        if not _shades(task):
             continue
         from raytrace.scene import Scene
         scene = Scene(_load_model(spec))  # not kept here: only the workers render
@@ -802,6 +801,11 @@ def _prebuild_scenes(tasks: list, folder: str) -> dict:
     return out
 
 
+def _shades(task: dict) -> bool:
+    """Whether a frame task needs the radiance (an image modality), not the geometry alone."""
+    return bool(task.get("want_rgb")) or bool(set(task["modalities"]) & {"rgb", "rgb_degraded", "hdr"})
+
+
 def _worker_ready(quality: str) -> None:
     """A first task for each worker, run while the parent builds the scenes: what a first
     ``quality`` frame would otherwise wait for — the imports (scipy.signal, ~0.6 s, for the
@@ -811,7 +815,7 @@ def _worker_ready(quality: str) -> None:
     import raytrace.shade  # noqa: F401
     from raytrace import _precompile
     from raytrace.brdf import split_sum_table
-    _precompile._compile_share(list(_precompile.entries_to_compile(_precompile_groups(quality)).items()))
+    _precompile.load_here(_precompile_groups(quality))
     if quality != "reference":
         split_sum_table()
 
@@ -925,7 +929,7 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
     render_seed, degrade_seq = frame_seeds(cfg["sequence"]["seed"], task["frame"])
     d = cfg["degrade"]
     need_rgb = task.get("want_rgb") or "rgb" in mods or ("rgb_degraded" in mods and d["degrade"] == "paper")
-    need_radiance = need_rgb or "hdr" in mods or "rgb_degraded" in mods
+    need_radiance = _shades(task)
     images, info = {}, {}
     if need_radiance:
         r = cfg["render"]

@@ -126,6 +126,14 @@ def entries_to_compile(groups=("fast",)) -> dict:
     return entries
 
 
+def load_here(groups=("fast",)) -> list:
+    """The kernels of ``groups`` (:func:`entries_to_compile`) in this process, from numba's
+    on-disk cache where it holds them (compiled where not); returns the entries that failed.
+    What a first call would do, done ahead (the CLI's pool workers, while their scenes are
+    built)."""
+    return _compile_share(list(entries_to_compile(groups).items()))
+
+
 def precompile(processes: int, groups=("fast",)) -> list:
     """Compile the kernels of ``groups`` (see the module notes; :func:`entries_to_compile`) on
     ``processes`` spawned processes; returns the entries that failed (empty when all
