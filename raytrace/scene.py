@@ -79,6 +79,21 @@ def _bounding_vertices(V: np.ndarray, max_vertices: int = 2048, max_points: int 
     return np.ascontiguousarray(inside.intersections, dtype=np.float64)
 
 
+def closed_outward(mesh) -> bool:
+    """Whether a trimesh mesh is closed and every connected body of it is wound outwards: it is
+    watertight, its winding is consistent, and each body's signed volume (the divergence
+    theorem, Σ v0 · (v1 × v2) / 6 over its faces) is positive. Only then can the radiance
+    cache keep the front side of its faces alone; a mesh written with the opposite winding
+    convention (clockwise, or one body inside out) is closed but seen from its faces' back."""
+    if len(mesh.faces) == 0 or not (mesh.is_watertight and mesh.is_winding_consistent):
+        return False
+    import trimesh
+    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, node_count=len(mesh.faces))
+    T = np.asarray(mesh.vertices, dtype=np.float64)[mesh.faces]
+    six_v = np.einsum("ij,ij->i", T[:, 0], np.cross(T[:, 1], T[:, 2]))
+    return bool(np.all(np.bincount(labels, weights=six_v) > 0.0))
+
+
 def _check_pose(R_cam_from_body, t_cam_m) -> tuple[np.ndarray, np.ndarray]:
     R = np.asarray(R_cam_from_body, dtype=np.float64)
     t = np.asarray(t_cam_m, dtype=np.float64)
@@ -291,10 +306,12 @@ class Scene:
 
     @property
     def two_sided(self) -> np.ndarray:
-        """Per component: True when its mesh is open (both sides can be seen and lit), False
-        when it is a closed shell (only the outside is), shape (n_components,), bool."""
+        """Per component: False when its mesh is a closed shell wound outwards (only the
+        outside can be seen and lit: :func:`closed_outward`), True otherwise (open, or closed
+        but wound inwards or inconsistently: either side may face the light), shape
+        (n_components,), bool."""
         if not hasattr(self, "_two_sided"):
-            self._two_sided = np.array([not c.mesh.is_watertight for c in self.model.components])
+            self._two_sided = np.array([not closed_outward(c.mesh) for c in self.model.components])
         return self._two_sided
 
     def radiance_cache(self, **options):
