@@ -29,7 +29,8 @@ Meshes
     welded, degenerate and duplicate faces dropped. Shading normals are the renderer's
     (raytrace.scene, crease 30 deg): per face corner, the angle-weighted mean of the normals
     of the faces around the welded vertex that lie within 30 deg of this face's, set as
-    Blender custom split normals (stored to ~5e-6). Diffuse BSDF, roughness 0 (= exact
+    Blender custom split normals (stored to ~5e-6) on a mesh whose triangles do not share
+    vertices (a shared vertex whose faces mix windings garbled the stored normals). Diffuse BSDF, roughness 0 (= exact
     Lambert, no Oren-Nayar), colour = albedo (1 or 3 numbers); two-sided;
     shadow-terminator offsets 0 (plain shadow rays from the flat triangle).
     [manual: render/shader_nodes/shader/diffuse.html, render/cycles/object_settings/object_data.html]
@@ -230,6 +231,12 @@ def build(sc: dict, base: str, spp: int, threads: int, seed: int, draw_ambient: 
         mat = diffuse(f"albedo{i}", np.broadcast_to(np.asarray(m["albedo"], float).ravel(), (3,)))
         crease = math.radians(DEFAULT_CREASE_DEG)
         for j, (V, F) in enumerate(load_parts(os.path.join(base, m["path"]), float(m.get("unit_scale_m", 1.0)))):
+            N = corner_normals(V, F, crease).astype(np.float32)
+            # each triangle its own three vertices (same positions, so the same watertight
+            # hits): Blender stores a custom normal relative to the fan of faces around its
+            # vertex, and where that fan mixes windings (a mesh with flipped faces) the stored
+            # normal came back wrong -- sunlit panels of icesat2.glb rendered black
+            V, F = V[F].reshape(-1, 3), np.arange(F.size).reshape(-1, 3)
             me = bpy.data.meshes.new(f"mesh{i}_{j}")
             me.vertices.add(len(V))
             me.vertices.foreach_set("co", V.astype(np.float32).ravel())
@@ -241,7 +248,7 @@ def build(sc: dict, base: str, spp: int, threads: int, seed: int, draw_ambient: 
             me.update()
             # custom split normals (stored to ~5e-6); a float "custom_normal" corner attribute
             # reads back right but Cycles 5.0.1 ignores it and shades with smooth vertex normals
-            me.normals_split_custom_set(corner_normals(V, F, crease).astype(np.float32))
+            me.normals_split_custom_set(N.reshape(-1, 3))
             me.materials.append(mat)
             ob = bpy.data.objects.new(me.name, me)
             ob.shadow_terminator_geometry_offset = 0.0  # plain shadow rays from the flat triangle
