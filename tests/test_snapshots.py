@@ -233,10 +233,18 @@ def test_snapshots_command_leaves_no_empty_temporary_folder(tmp_path, monkeypatc
     assert str(kept) in capsys.readouterr().out
 
 
+def _boundary(m: np.ndarray) -> np.ndarray:
+    """Pixels whose right-hand neighbour shows another part (both hit) and whose left-hand
+    neighbour their own: swapping such a pixel's id for its right-hand neighbour's leaves its
+    own id beside it, as a tie between touching parts would."""
+    out = np.zeros(m.shape, dtype=bool)
+    out[:, 1:-1] = (m[:, 1:-1] > 0) & (m[:, 2:] > 0) & (m[:, 1:-1] != m[:, 2:]) & (m[:, :-2] == m[:, 1:-1])
+    return out
+
+
 def _part_boundary_pixel(ref: dict) -> tuple:
-    """A pixel on the target whose right-hand neighbour shows another part (both hit)."""
-    m = ref["mask"].astype(np.int64)
-    ys, xs = np.nonzero((m[:, :-1] > 0) & (m[:, 1:] > 0) & (m[:, :-1] != m[:, 1:]))
+    """A pixel on the target whose right-hand neighbour shows another part (:func:`_boundary`)."""
+    ys, xs = np.nonzero(_boundary(ref["mask"].astype(np.int64)))
     assert len(ys), "the reference shows no boundary between two parts"
     return int(ys[0]), int(xs[0])
 
@@ -260,8 +268,7 @@ def test_a_tie_between_touching_parts_passes_and_other_id_changes_fail(ref, tmp_
 
 def test_more_ties_than_the_bound_all_fail(ref, tmp_path):
     m = ref["mask"].astype(np.int64)
-    boundary = np.zeros(m.shape, dtype=bool)  # pixels whose right-hand neighbour is another part
-    boundary[:, :-1] = (m[:, :-1] > 0) & (m[:, 1:] > 0) & (m[:, :-1] != m[:, 1:])
+    boundary = _boundary(m)  # pixels whose right-hand neighbour is another part
     n_target = np.count_nonzero(m > 0)
     need = int(cli.SNAPSHOT_MASK_TIES * n_target) + 1
     ys, xs = np.nonzero(boundary)

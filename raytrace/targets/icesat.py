@@ -98,6 +98,11 @@ _SHADE_R_IN, _SHADE_R_OUT = 0.525, 0.550    # telescope sunshade tube radii [m]
 _HOLE_R = 0.565                             # aperture hole in the nadir deck [m]
 _SHADE_X0 = -0.12                           # sunshade lip below the nadir deck [m]
 _E = 0.004                                  # attached parts sink this far into their mount [m]
+# the optical bench is this much narrower than the housing and the bus it sinks into: with the
+# same cross-section, their side faces overlapped in the same plane along both 4 mm joints, and
+# which part a ray hit there (its id in the mask, and in Cycles its shadow: black lines) was a
+# tie decided by float rounding
+_INSET = 0.001
 
 _WING_SPAN_M = 2.40                         # panel length along y (estimate, see Notes)
 _WING_HEIGHT_M = 1.50                       # panel width along x (estimate)
@@ -261,7 +266,8 @@ def build() -> TargetModel:
     add("glas_telescope_housing",
         _square_plate_with_hole(_H, _HOLE_R, 0.0, _X_BENCH), "silver_mli", "instrument", 60.0)
     add("glas_optical_bench",
-        _box((_X_BENCH - _E, -_H, -_H), (_X_GLAS_TOP, _H, _H)), "silver_mli", "instrument", 150.0)
+        _box((_X_BENCH - _E, -_H + _INSET, -_H + _INSET), (_X_GLAS_TOP, _H - _INSET, _H - _INSET)),
+        "silver_mli", "instrument", 150.0)
     add("telescope_primary_mirror",
         _primary_mirror(x_rim=0.82, sag=0.05, thickness=0.03 + _E, radius=_TEL_R),
         "aluminium", "instrument", 30.0)

@@ -431,7 +431,10 @@ def _trunk_parts():
     rad_b = _patch(r_trunk, d(0) + gap, d(90) - gap, z0, z1, 0.018, n_az=16)
     fins = []
     root, span, tip = 1.40, 0.55, 0.55
-    poly = [(-0.02, 0.0), (span, 0.0), (span, tip), (-0.02, root)]   # (radial, axial), CCW
+    # (radial, axial), CCW; the root sinks 2 cm into the trunk wall, and starts 1 mm above the
+    # trunk's aft rim, so that the fin's aft face does not overlap the rim in one plane (a tie
+    # between the two parts for the rays that hit it)
+    poly = [(-0.02, 0.001), (span, 0.001), (span, tip), (-0.02, root)]
     for k in range(4):
         az = d(90 * k)
         e_r = np.array([math.cos(az), math.sin(az), 0.0])
