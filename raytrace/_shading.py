@@ -1177,6 +1177,17 @@ def add_interpolated_rows(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P
             outB[m, 2] += b2 / sw
 
 
+@inline
+def _project(V, i, R, t, fx, fy, cx, cy):
+    """Pixel coordinates and z-depth of vertex i (p_cam = R p + t); (0, 0, z) when z ≤ 0."""
+    xc = R[0, 0] * V[i, 0] + R[0, 1] * V[i, 1] + R[0, 2] * V[i, 2] + t[0]
+    yc = R[1, 0] * V[i, 0] + R[1, 1] * V[i, 1] + R[1, 2] * V[i, 2] + t[1]
+    zc = R[2, 0] * V[i, 0] + R[2, 1] * V[i, 1] + R[2, 2] * V[i, 2] + t[2]
+    if zc <= 0.0:
+        return 0.0, 0.0, zc
+    return fx * xc / zc + cx, fy * yc / zc + cy, zc
+
+
 @pjit
 def sliver_pixels(V, F, R, t, fx, fy, cx, cy, z_min, max_width, depth, out):
     """Pixels touched by triangles whose projection is a sliver: narrower than ``max_width``
@@ -1190,23 +1201,15 @@ def sliver_pixels(V, F, R, t, fx, fy, cx, cy, z_min, max_width, depth, out):
     with a vertex nearer than ``z_min`` are skipped (the target is in front of the camera)."""
     H, W = out.shape
     for f in numba.prange(F.shape[0]):  # threads may mark a pixel at once: all write True
-        px = np.empty(3)
-        py = np.empty(3)
-        ok = True
-        z_near = np.inf
-        for k in range(3):
-            i = F[f, k]
-            xc = R[0, 0] * V[i, 0] + R[0, 1] * V[i, 1] + R[0, 2] * V[i, 2] + t[0]
-            yc = R[1, 0] * V[i, 0] + R[1, 1] * V[i, 1] + R[1, 2] * V[i, 2] + t[1]
-            zc = R[2, 0] * V[i, 0] + R[2, 1] * V[i, 1] + R[2, 2] * V[i, 2] + t[2]
-            if zc <= z_min:
-                ok = False
-                break
-            z_near = min(z_near, zc)
-            px[k] = fx * xc / zc + cx
-            py[k] = fy * yc / zc + cy
-        if not ok:
+        # the three projected vertices as tuples (no array allocated per triangle)
+        u_0, v_0, z_0 = _project(V, F[f, 0], R, t, fx, fy, cx, cy)
+        u_1, v_1, z_1 = _project(V, F[f, 1], R, t, fx, fy, cx, cy)
+        u_2, v_2, z_2 = _project(V, F[f, 2], R, t, fx, fy, cx, cy)
+        if z_0 <= z_min or z_1 <= z_min or z_2 <= z_min:
             continue
+        z_near = min(z_0, z_1, z_2)
+        px = (u_0, u_1, u_2)
+        py = (v_0, v_1, v_2)
         area2 = abs((px[1] - px[0]) * (py[2] - py[0]) - (px[2] - px[0]) * (py[1] - py[0]))
         longest = 0.0
         for k in range(3):
