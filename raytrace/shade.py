@@ -123,7 +123,8 @@ class Quality:
         (``tests/raytrace/test_thin_wire.py``) and Tiangong's solar wings seen edge-on
         vanished from one frame of a 160×120 sequence to the next; on the 12 scenes, median
         error 5.32 → 5.30 % (no scene worse; Cassini ``earth`` 6.47 → 6.35 %) for a median
-        per-scene time ratio of 1.039 (0.975–1.208, Cassini's trusses the most).
+        per-scene time ratio of 1.039 (0.975–1.208, Cassini's trusses the most; 1.057 in a
+        second run, after the kernel stopped allocating per triangle: the machine's noise).
     thin_shadows : bool
         Lit pixels near the shadow of a rod or wire thinner than a pixel, which pixel centres
         and corners can both miss, are anti-aliased too: a conservative shadow map of the
