@@ -1439,10 +1439,7 @@ def _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, mu_min):
     t = env.earth_hit(p, ox, oy, oz, dx, dy, dz)
     if t < 0.0:
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    r = p[env.P_RADIUS]
-    mx = (ox + t * dx - p[env.P_DIST] * p[env.P_EX]) / r
-    my = (oy + t * dy - p[env.P_DIST] * p[env.P_EY]) / r
-    mz = (oz + t * dz - p[env.P_DIST] * p[env.P_EZ]) / r
+    mx, my, mz = env.earth_normal(p, ox, oy, oz, dx, dy, dz, t)
     if mx * p[env.P_SX] + my * p[env.P_SY] + mz * p[env.P_SZ] <= mu_min:
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     a0, a1, a2 = env.earth_albedo(p, tex, mx, my, mz)
@@ -1540,10 +1537,7 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, p, tex, step
             earth_px[v, u] = hit
             if not hit or inst[v, u] != 0:
                 continue
-            rr = p[env.P_RADIUS]
-            mx = (ox + t * dx - p[env.P_DIST] * p[env.P_EX]) / rr
-            my = (oy + t * dy - p[env.P_DIST] * p[env.P_EY]) / rr
-            mz = (oz + t * dz - p[env.P_DIST] * p[env.P_EZ]) / rr
+            mx, my, mz = env.earth_normal(p, ox, oy, oz, dx, dy, dz, t)
             mu = mx * p[env.P_SX] + my * p[env.P_SY] + mz * p[env.P_SZ]
             if mu <= 0.0:
                 rad[v, u, 0] = 0.0

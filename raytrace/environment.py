@@ -152,6 +152,14 @@ def earth_hit(p, ox, oy, oz, dx, dy, dz):
 
 
 @inline
+def earth_normal(p, ox, oy, oz, dx, dy, dz, t):
+    """Earth's outward unit normal where the ray o + t·d meets it (t from :func:`earth_hit`)."""
+    r = p[P_RADIUS]
+    return ((ox + t * dx - p[P_DIST] * p[P_EX]) / r, (oy + t * dy - p[P_DIST] * p[P_EY]) / r,
+            (oz + t * dz - p[P_DIST] * p[P_EZ]) / r)
+
+
+@inline
 def env_radiance(p, texture, ox, oy, oz, dx, dy, dz):
     """Radiance (RGB) arriving at o from direction d (unit): Earth's where the ray meets it,
     else the ambient sky [W/(m²·sr)]."""
@@ -159,10 +167,7 @@ def env_radiance(p, texture, ox, oy, oz, dx, dy, dz):
     if t < 0.0:
         a = p[P_AMBIENT]
         return a, a, a
-    r = p[P_RADIUS]
-    mx = (ox + t * dx - p[P_DIST] * p[P_EX]) / r
-    my = (oy + t * dy - p[P_DIST] * p[P_EY]) / r
-    mz = (oz + t * dz - p[P_DIST] * p[P_EZ]) / r
+    mx, my, mz = earth_normal(p, ox, oy, oz, dx, dy, dz, t)
     mu = mx * p[P_SX] + my * p[P_SY] + mz * p[P_SZ]
     if mu <= 0.0:
         return 0.0, 0.0, 0.0
