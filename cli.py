@@ -821,12 +821,56 @@ def _worker_ready(quality: str) -> None:
 
 
 def _worker_init(threads: int) -> None:
-    """Process-pool initializer: share the cores between the workers."""
+    """Process-pool initializer: share the cores between the workers; stop on SIGINT or
+    SIGTERM (:func:`_worker_stop`) and when the parent is gone (:func:`_watch_parent`)."""
+    import signal
+    import threading
+    global _IN_POOL_WORKER
+    _IN_POOL_WORKER = True
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _worker_stop)
+    threading.Thread(target=_watch_parent, args=(os.getppid(),), name="watch-parent", daemon=True).start()
     try:
         import numba
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
     except Exception as exc:  # noqa: BLE001 - a thread count is an optimisation, never an error
         sys.stderr.write(f"{PROG}: warning: could not set the worker's thread count ({exc})\n")
+
+
+_IN_POOL_WORKER = False  # set in the pool's worker processes
+_IN_FRAME = False  # run_frame is running (in a worker: what _watch_parent waits for)
+_WORKER_STOPPING = False
+_PARENT_POLL_S = 0.5
+_STOP_GRACE_S = 30.0  # a worker whose parent died exits by then even if its frame has not let go
+
+
+def _worker_stop(signum, frame) -> None:
+    """A pool worker's SIGINT or SIGTERM (Ctrl-C reaches the whole process group; the parent
+    stops its pool on SIGTERM; a batch scheduler may signal every process): the frame in flight
+    is abandoned where it stands, its temporary files removed on the way out
+    (:func:`raytrace.files.atomic_write_image`), then :func:`run_frame` exits the worker. Once:
+    a second signal must not interrupt that clean-up (it stays handled, as a no-op: a handler
+    set to SIG_IGN while the signal is pending makes Python raise OSError)."""
+    global _WORKER_STOPPING
+    if _WORKER_STOPPING:
+        return
+    _WORKER_STOPPING = True
+    raise KeyboardInterrupt
+
+
+def _watch_parent(ppid: int) -> None:
+    """In a pool worker, on a daemon thread: when the parent process is gone (killed with
+    SIGKILL, crashed) the worker stops as on SIGTERM, instead of waiting for its next task
+    forever with the target's scene in memory."""
+    import signal
+    while os.getppid() == ppid:
+        time.sleep(_PARENT_POLL_S)
+    os.kill(os.getpid(), signal.SIGTERM)
+    deadline = time.monotonic() + _STOP_GRACE_S
+    time.sleep(0.05)  # the main thread takes the signal at its next bytecode
+    while _IN_FRAME and time.monotonic() < deadline:  # the abandoned frame removes its temporaries
+        time.sleep(0.05)
+    os._exit(1)
 
 
 def frame_seeds(seed: int, frame: int) -> tuple:
@@ -967,7 +1011,21 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
 
 def run_frame(task: dict) -> dict:
     """Render, degrade and write one frame (files atomically, then its manifest record);
-    returns the frame's label. With ``task["write"]`` false, returns the images instead."""
+    returns the frame's label. With ``task["write"]`` false, returns the images instead.
+
+    A pool worker told to stop (:func:`_worker_stop`) abandons its frame, and exits rather than
+    start the frame already queued for it."""
+    global _IN_FRAME
+    if _IN_POOL_WORKER and _WORKER_STOPPING:
+        os._exit(1)
+    _IN_FRAME = True
+    try:
+        return _run_frame(task)
+    finally:
+        _IN_FRAME = False
+
+
+def _run_frame(task: dict) -> dict:
     from raytrace import files as F
     images, info = render_frame_images(task)
     if not task.get("write", True):
@@ -1203,8 +1261,10 @@ def execute(tasks: list, *, workers: int, scheduler: str | None = None, progress
         ready = [pool.submit(_worker_ready, tasks[0]["cfg"]["render"]["quality"]) for _ in range(n)]
         if _PREBUILD_SCENES:
             import pickle
+            from raytrace.files import process_folder, remove_stale_process_folders
             try:
-                folder = tempfile.mkdtemp(prefix="orbitsynth-scenes-")
+                remove_stale_process_folders(_SCENES_FOLDER)  # of runs killed before their clean-up
+                folder = process_folder(_SCENES_FOLDER)
                 prebuilt = _prebuild_scenes(tasks, folder)
             except (OSError, pickle.PicklingError) as exc:  # e.g. no room in the temporary folder
                 sys.stderr.write(f"{PROG}: warning: the workers build their own scenes ({exc})\n")
@@ -1220,10 +1280,37 @@ def execute(tasks: list, *, workers: int, scheduler: str | None = None, progress
                 if progress is not None:
                     progress.update(1)
                 yield res
+    except KeyboardInterrupt:  # Ctrl-C, or Terminated
+        _stop_workers(pool)
+        raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         if folder is not None:
             shutil.rmtree(folder, ignore_errors=True)
+
+
+_SCENES_FOLDER = "orbitsynth-scenes-"  # + host.pid-XXXXXXXX in the temporary directory
+
+
+def _stop_workers(pool) -> None:
+    """Stop the pool's workers now (an interrupt): pending frames cancelled,
+    each worker sent SIGTERM (it abandons its frame, removes that frame's temporary files and
+    exits: :func:`_worker_stop`), and killed if it has not exited within _STOP_GRACE_S."""
+    import multiprocessing
+    import signal
+    pool.shutdown(wait=False, cancel_futures=True)
+    procs = multiprocessing.active_children()
+    for p in procs:
+        try:
+            os.kill(p.pid, signal.SIGTERM)
+        except OSError:
+            pass
+    deadline = time.monotonic() + _STOP_GRACE_S
+    for p in procs:
+        p.join(max(0.0, deadline - time.monotonic()))
+        if p.is_alive():
+            p.kill()
+            p.join()
 
 
 def _progress(total: int, initial: int, desc: str, quiet: bool):
@@ -1328,6 +1415,44 @@ def _summary_line(s: dict, elapsed: float) -> str:
             f"skipped {s['skipped']} complete, in {elapsed:.1f} s{rate} -> {s['dir']}/ ({state})\n")
 
 
+# --------------------------------------------------------------------------- termination
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP (``kill``, a batch scheduler's time limit, a closed terminal), raised in
+    the main thread where Ctrl-C raises KeyboardInterrupt, so that the same clean-up runs: the
+    pool's workers stopped (:func:`_stop_workers`), frames in flight abandoned without leaving
+    temporary files, the pool's temporary scenes deleted. Exit status 128 + the signal."""
+
+    def __init__(self, signum: int):
+        import signal
+        super().__init__(signal.Signals(signum).name)
+        self.signum = int(signum)
+
+
+def _termination_signals() -> list:
+    import signal
+    return [sig for sig in (getattr(signal, name, None) for name in ("SIGTERM", "SIGHUP")) if sig is not None]
+
+
+_TERMINATING = False
+
+
+def _on_termination(signum, frame) -> None:
+    global _TERMINATING
+    if _TERMINATING:  # once: a second signal must not interrupt the clean-up
+        return
+    _TERMINATING = True
+    raise Terminated(signum)
+
+
+def install_termination_handlers() -> None:
+    """SIGTERM and SIGHUP raise :class:`Terminated` in the main thread (``cli.py`` as a
+    program), unless the process was started with them ignored (``nohup``)."""
+    import signal
+    for sig in _termination_signals():
+        if signal.getsignal(sig) == signal.SIG_DFL:
+            signal.signal(sig, _on_termination)
+
+
 # --------------------------------------------------------------------------- commands
 def _fail(exc: BaseException) -> int:
     sys.stderr.write(f"{PROG}: error: {exc}\n")
@@ -1343,15 +1468,18 @@ def _render_failed(exc: BaseException) -> int:
 
 def _guarded(run, usage_errors=(CLIError,)) -> tuple:
     """``run()`` under the rendering commands' error policy: (its result, None), or (None, exit
-    status) after one line on stderr: 2 for a usage error, 130 on Ctrl-C, 1 for a failure while
-    rendering (complete frames are kept either way)."""
+    status) after one line on stderr: 2 for a usage error, 130 on Ctrl-C (143 on SIGTERM, 129 on
+    SIGHUP: :class:`Terminated`), 1 for a failure while rendering (complete frames are kept either
+    way)."""
     try:
         return run(), None
     except usage_errors as exc:
         return None, _fail(exc)
-    except KeyboardInterrupt:
-        sys.stderr.write(f"{PROG}: interrupted; complete frames are kept, rerun the same command to resume\n")
-        return None, 130
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signum", 2)  # Ctrl-C: SIGINT
+        how = f"terminated by {exc}" if isinstance(exc, Terminated) else "interrupted"
+        sys.stderr.write(f"{PROG}: {how}; complete frames are kept, rerun the same command to resume\n")
+        return None, 128 + signum
     except Exception as exc:  # noqa: BLE001 - a failure while rendering: one line, frames done are kept
         return None, _render_failed(exc)
 
@@ -2194,4 +2322,5 @@ def main(argv: list[str] | None = None) -> int:
 if __name__ == "__main__":
     # run as the module `cli`, so worker processes (spawned, or dask) find run_frame by name
     import cli
+    cli.install_termination_handlers()
     sys.exit(cli.main())

@@ -28,6 +28,7 @@ import json
 import os
 import re
 import socket
+import stat
 
 import numpy as np
 
@@ -41,6 +42,8 @@ __all__ = [
     "read_frame_record",
     "read_image",
     "read_model_ply",
+    "process_folder",
+    "remove_stale_process_folders",
     "remove_stale_temporaries",
     "sha256_file",
     "write_files_atomically",
@@ -52,6 +55,7 @@ MANIFEST_DIR = ".manifest"
 """Sub-folder of a sequence holding one JSON record per complete frame."""
 
 _HOST = re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname()) or "host"
+_PARTIAL = ".partial-"  # write_files_atomically's temporary folders: .partial-{host}.{pid}-XXXXXXXX
 _TMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<host>[A-Za-z0-9_-]+)\.(?P<pid>\d+)\.tmp(?P<ext>\.[A-Za-z0-9]+)?$")
 
 
@@ -216,6 +220,52 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def _stale_owner(name: str, prefix: str) -> bool:
+    """Whether ``name`` is ``{prefix}{host}.{pid}-…`` of a process on this host that is no
+    longer running."""
+    if not name.startswith(prefix):
+        return False
+    m = re.match(r"(?P<host>[A-Za-z0-9_-]+)\.(?P<pid>\d+)-", name[len(prefix):])
+    return m is not None and m["host"] == _HOST and not _alive(int(m["pid"]))
+
+
+def process_folder(prefix: str, dir: str | None = None) -> str:
+    """A new private folder ``{prefix}{host}.{pid}-XXXXXXXX`` in ``dir`` (default: the
+    temporary directory), named after this host and process so that
+    :func:`remove_stale_process_folders` can tell when its owner is gone (killed before it could
+    remove it)."""
+    import tempfile
+    return tempfile.mkdtemp(prefix=f"{prefix}{_HOST}.{os.getpid()}-", dir=dir)
+
+
+def remove_stale_process_folders(prefix: str, dir: str | None = None) -> int:
+    """Delete this user's folders of :func:`process_folder` in ``dir`` (default: the temporary
+    directory) whose process, on this host, is no longer running; returns how many. Folders of
+    live processes and of other hosts are kept."""
+    import shutil
+    import tempfile
+    parent = tempfile.gettempdir() if dir is None else dir
+    try:
+        names = os.listdir(parent)
+    except OSError:
+        return 0
+    uid = getattr(os, "getuid", lambda: None)()
+    removed = 0
+    for name in names:
+        path = os.path.join(parent, name)
+        if not _stale_owner(name, prefix):
+            continue
+        try:
+            st = os.lstat(path)
+        except OSError:
+            continue
+        if not stat.S_ISDIR(st.st_mode) or (uid is not None and st.st_uid != uid):
+            continue
+        shutil.rmtree(path, ignore_errors=True)
+        removed += not os.path.exists(path)
+    return removed
+
+
 def write_files_atomically(out_dir: str, files: dict, texts: dict) -> None:
     """Write every file into ``out_dir`` or none: all go to a hidden temporary folder first,
     then are moved into place; on any failure the temporary folder is removed.
@@ -235,10 +285,10 @@ def write_files_atomically(out_dir: str, files: dict, texts: dict) -> None:
         With a one-line message naming the folder.
     """
     import shutil
-    import tempfile
     try:
         os.makedirs(out_dir, exist_ok=True)
-        tmp = tempfile.mkdtemp(prefix=".partial-", dir=out_dir)
+        remove_stale_process_folders(_PARTIAL, out_dir)  # left by a writer that was killed
+        tmp = process_folder(_PARTIAL, out_dir)
     except OSError as exc:
         raise OSError(f"cannot create {out_dir} ({exc.strerror})") from None
     try:

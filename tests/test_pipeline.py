@@ -357,6 +357,98 @@ def test_interrupted_pool_removes_its_temporary_scenes(tmp_path):
     assert not list(tmp.glob("orbitsynth-scenes-*"))
 
 
+def _children(pid: int) -> list:
+    """Live (not zombie) child processes of ``pid``, from /proc."""
+    out = []
+    for task in Path(f"/proc/{pid}/task").glob("*/children"):
+        out += [int(c) for c in task.read_text().split()]
+    return out
+
+
+def _running(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    return state != "Z"
+
+
+def _pool_job(tmp_path, tmp, frames=48):
+    """The main job on two workers, started in its own session with the default SIGINT, its
+    temporary folder ``tmp``; returns (process, sequence folder, its workers' pids) once it has
+    written a frame."""
+    seq = tmp_path / "seq"
+    cmd = [sys.executable, str(ROOT / "cli.py"), *SMALL[:4], "--frames", str(frames), *SMALL[6:], "--workers", "2",
+           "--out", str(seq)]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "TMPDIR": str(tmp)}, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not (seq / ".manifest" / "000001.json").exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert proc.poll() is None, proc.communicate()[1]
+    workers = _children(proc.pid)
+    assert len(workers) >= 2  # the two workers (and multiprocessing's resource tracker)
+    return proc, seq, workers
+
+
+def _gone(pids: list, timeout: float = 20.0) -> bool:
+    """Whether the processes have all exited within ``timeout`` seconds (the resource tracker
+    exits a moment after the parent)."""
+    deadline = time.monotonic() + timeout
+    while any(_running(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return not any(_running(p) for p in pids)
+
+
+def _no_temporaries(seq: Path) -> None:
+    hidden = [p for p in seq.rglob(".*") if p.name != ".manifest"]
+    assert hidden == [] or all(p.parent.name == ".manifest" and p.suffix == ".json" for p in hidden), hidden
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs /proc")
+def test_terminated_pool_stops_its_workers_and_removes_its_temporaries(tmp_path):
+    """SIGTERM (a scheduler's time limit, kill) to the parent alone while two workers render:
+    the workers stop at once (they were left running, orphaned, for ever), the parent exits
+    143 with the one-line message, and neither the scenes it pickled for the pool nor any
+    frame's temporary file is left behind. (SIGHUP takes the same path: exit 129.)"""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    proc, seq, workers = _pool_job(tmp_path, tmp)
+    signame, sig = "SIGTERM", signal.SIGTERM
+    proc.send_signal(sig)
+    err = proc.communicate(timeout=60)[1]  # would hang while an orphaned worker holds stderr
+    assert proc.returncode == 128 + sig, err
+    assert err.strip().splitlines() == [f"cli.py: terminated by {signame}; complete frames are kept, rerun the same "
+                                        "command to resume"]
+    assert _gone(workers)
+    assert list(tmp.iterdir()) == []
+    _no_temporaries(seq)
+    assert 1 <= len(list((seq / "rgb").iterdir())) < 48
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs /proc")
+def test_workers_stop_when_the_parent_is_killed_and_the_next_run_removes_its_scenes(tmp_path):
+    """SIGKILL to the parent alone: its workers notice and exit (within the watchdog's poll
+    and one frame's clean-up), leaving no temporary file; the scenes folder the parent could
+    not remove is removed by the next run's pool (it names its owner's host and pid)."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    proc, seq, workers = _pool_job(tmp_path, tmp)
+    [stale] = list(tmp.iterdir())
+    assert stale.name.startswith(f"orbitsynth-scenes-{F._HOST}.{proc.pid}-")
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.communicate(timeout=60)  # returns once the workers, which hold its pipes, are gone
+    assert _gone(workers)
+    _no_temporaries(seq)
+    other = tmp / f"orbitsynth-scenes-{F._HOST}.{os.getpid()}-live"  # a live process's: kept
+    other.mkdir()
+    r = subprocess.run([sys.executable, str(ROOT / "cli.py"), *SMALL[:4], "--frames", "2", *SMALL[6:],
+                        "--workers", "2", "--out", str(tmp_path / "next")], cwd=ROOT, capture_output=True, text=True,
+                       env={**os.environ, "TMPDIR": str(tmp)}, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in tmp.iterdir()) == [other.name]
+
+
 def test_dask_local_cluster_gives_the_same_bytes(ref, tmp_path):
     distributed = pytest.importorskip("distributed")
     import logging
@@ -527,6 +619,25 @@ def test_atomic_writes_leave_no_temporary(tmp_path):
     live.write_bytes(b"x")
     assert F.remove_stale_temporaries(str(tmp_path)) == 1
     assert not stale.exists() and live.exists()
+
+
+def test_stale_process_folders_are_removed_and_others_kept(tmp_path):
+    dead = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                              check=True, capture_output=True, text=True).stdout)
+    host = F._HOST
+    made = F.process_folder("job-", str(tmp_path))
+    assert os.path.basename(made).startswith(f"job-{host}.{os.getpid()}-")
+    names = {"stale": f"job-{host}.{dead}-abc", "other_host": f"job-{host}x.{dead}-abc",
+             "other_prefix": f"run-{host}.{dead}-abc", "no_pid": "job-abc"}
+    for name in names.values():
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "f").write_bytes(b"x")
+    (tmp_path / f"job-{host}.{dead}-file").write_bytes(b"x")  # a file, not a folder: kept
+    assert F.remove_stale_process_folders("job-", str(tmp_path)) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [os.path.basename(made), names["other_host"], names["other_prefix"], names["no_pid"],
+         f"job-{host}.{dead}-file"])
+    assert F.remove_stale_process_folders("job-", str(tmp_path / "missing")) == 0
 
 
 def test_frame_seeds_are_the_spawned_children():
