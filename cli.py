@@ -2314,9 +2314,14 @@ COMMANDS = {"render-scene": render_scene_main, "dataset": dataset_main, "ablatio
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the process exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    if argv and argv[0] in COMMANDS:
-        return COMMANDS[argv[0]](argv[1:])
-    return main_job(argv)
+    try:
+        if argv and argv[0] in COMMANDS:
+            return COMMANDS[argv[0]](argv[1:])
+        return main_job(argv)
+    except KeyboardInterrupt as exc:  # a command without its own message (render-scene, preview, …)
+        how = f"terminated by {exc}" if isinstance(exc, Terminated) else "interrupted"
+        sys.stderr.write(f"{PROG}: {how}; nothing half-written is left\n")
+        return 128 + getattr(exc, "signum", 2)
 
 
 if __name__ == "__main__":
