@@ -1296,10 +1296,12 @@ def _stop_workers(pool) -> None:
     """Stop the pool's workers now (an interrupt): pending frames cancelled,
     each worker sent SIGTERM (it abandons its frame, removes that frame's temporary files and
     exits: :func:`_worker_stop`), and killed if it has not exited within _STOP_GRACE_S."""
-    import multiprocessing
     import signal
+    # the pool's own processes (not multiprocessing.active_children(): cli.main may run inside a
+    # program with children of its own); CPython's ProcessPoolExecutor keeps them in _processes,
+    # and without it the shutdown below still ends the pool, after the frames in flight
+    procs = list((getattr(pool, "_processes", None) or {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
-    procs = multiprocessing.active_children()
     for p in procs:
         try:
             os.kill(p.pid, signal.SIGTERM)

@@ -38,11 +38,12 @@ import json
 import math
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from .files import process_folder, remove_stale_process_folders
 
 __all__ = ["BOP_DEPTH_MAX_CODE", "export_bop", "export_speedplus"]
 
@@ -275,7 +276,9 @@ def _staging(out_dir):
         parent = parent.parent
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+        # named after this host and process: one left by a killed export is removed here
+        remove_stale_process_folders(f".{out.name}.partial-", str(out.parent))
+        tmp = Path(process_folder(f".{out.name}.partial-", str(out.parent)))
     except OSError as exc:
         for d in created:
             with contextlib.suppress(OSError):

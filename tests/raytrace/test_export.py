@@ -315,6 +315,25 @@ def test_broken_sequence_leaves_nothing(sequence, tmp_path, breakage, match):
         assert leftovers(dest) == []  # no partial folder, no created parent
 
 
+def test_a_killed_exports_staging_folder_is_removed_by_the_next(sequence, tmp_path):
+    """An export killed before its clean-up leaves its staging folder beside the output, named
+    after its host and process; the next export into that folder removes it (and keeps one of a
+    live process)."""
+    import subprocess
+    import sys
+
+    from raytrace import files
+    dead = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], check=True,
+                              capture_output=True, text=True).stdout)
+    stale = tmp_path / f".out.partial-{files._HOST}.{dead}-abc"
+    live = tmp_path / f".out.partial-{files._HOST}.{os.getpid()}-abc"
+    for d in (stale, live):
+        d.mkdir()
+        (d / "scene_gt.json").write_text("{")
+    export_speedplus(sequence[0], tmp_path / "out")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, "out"])
+
+
 def test_argument_errors(sequence, tmp_path):
     root = sequence[0]
     with pytest.raises(ValueError, match="sequence_dir must be a sequence folder"):
