@@ -2,6 +2,9 @@
 (regenerate with ``python -m raytrace._precompile --record`` when this fails), the groups merge
 without losing a signature, the shares are balanced, and compiling a share reports stale
 entries instead of failing."""
+import os
+import sys
+from pathlib import Path
 import inspect
 
 import pytest
@@ -87,3 +90,44 @@ def test_kernels_calling_embree_are_left_out_only_where_embree_4_is_missing(monk
     assert not [q for q in without if q.startswith(("raytrace._paths.", "raytrace._embree."))]
     assert "raytrace._shading.gather_sum" in without  # the batched fallback's own gather
     assert set(without) == {q for q in with_embree if not q.startswith(("raytrace._paths.", "raytrace._embree."))}
+
+
+def test_pool_workers_exit_when_their_parent_is_killed(tmp_path):
+    """exit_with_parent (the compile pool's initializer): a worker whose parent is killed with
+    SIGKILL exits instead of waiting for tasks for ever."""
+    import signal
+    import subprocess
+    import time
+    script = tmp_path / "parent.py"
+    script.write_text(
+        "import multiprocessing, os, time\n"
+        "from concurrent.futures import ProcessPoolExecutor\n"
+        "from raytrace._precompile import exit_with_parent\n"
+        "if __name__ == '__main__':\n"
+        "    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context('spawn'),\n"
+        "                               initializer=exit_with_parent, initargs=(os.getpid(), 0.05))\n"
+        "    print(pool.submit(os.getpid).result(), flush=True)\n"
+        "    pool.submit(time.sleep, 120)\n"
+        "    time.sleep(120)\n")
+    root = Path(__file__).resolve().parents[2]
+    proc = subprocess.Popen([sys.executable, str(script)], cwd=root, stdout=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONPATH": str(root)})
+    worker = int(proc.stdout.readline())
+
+    def running(pid):
+        try:
+            return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+        except (OSError, IndexError):
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                return False
+            return True
+
+    assert running(worker)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + 20
+    while running(worker) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert not running(worker)
