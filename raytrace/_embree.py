@@ -12,7 +12,7 @@ cached like any other (an address baked in through ``ctypes`` would not be).
 The scene is built here a second time, from the same float32 vertices and triangles, one
 geometry per component in order (geomID = component index), with the flag ``embreex`` uses
 (``robust``): the hits are the same, bit for bit, as ``Scene.intersect``'s (checked in
-``tests/test_embree_direct.py``; Embree 4.4's API, ``rtcore_ray.h`` /
+``tests/raytrace/test_fused_gather.py``; Embree 4.4's API, ``rtcore_ray.h`` /
 ``rtcore_scene.h``).
 
 Ray layout (``RTCRayHit``, 16-byte aligned, float32 / uint32 words): 0–2 origin, 3 tnear,

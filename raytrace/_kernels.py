@@ -2,9 +2,10 @@
 
 The per-pixel kernels are compiled **without fastmath**: a pixel's result must not depend on
 where it sits in the cast rectangle (vector body vs scalar remainder), so that a culled
-render equals a full-frame render bit for bit. They are serial and release the GIL: the
-caller runs them on row chunks in a thread pool, each chunk followed by its Embree call
-(which releases the GIL too), so both cores stay busy without nested parallelism.
+render equals a full-frame render bit for bit. :func:`cast_and_refine` casts the rays itself
+(Embree 4 called from numba, :mod:`raytrace._embree`) on numba's threads; where the embreex
+wheel has no Embree 4, :func:`make_rays` and :func:`refine_hits`, serial and releasing the
+GIL, run on row chunks in a thread pool around ``embreex``'s call.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import math
 import numba
 import numpy as np
 
+from ._embree import intersect1, ray_buffer
 from ._jit import inline, jit_exact, pjit_exact
 
 
@@ -91,7 +93,8 @@ def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0
 
     For each hit the ray is re-intersected in float64 (Möller–Trumbore) with the triangle
     Embree reported, giving the z-depth, barycentrics, the interpolated shading normal and
-    the geometric normal, both turned to face the camera and rotated into the camera frame.
+    the geometric normal, both turned to face the camera and rotated into the camera frame
+    (:func:`refine_hit`).
     """
     for r in range(h):
         v = v0 + r
@@ -106,46 +109,86 @@ def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0
             dx = R_body_from_cam[0, 0] * x + R_body_from_cam[0, 1] * y + R_body_from_cam[0, 2]
             dy = R_body_from_cam[1, 0] * x + R_body_from_cam[1, 1] * y + R_body_from_cam[1, 2]
             dz = R_body_from_cam[2, 0] * x + R_body_from_cam[2, 1] * y + R_body_from_cam[2, 2]
-            f = face_offset[g] + prim_id[k]
-            t, b1, b2, ok = moller_trumbore(o_body[0], o_body[1], o_body[2], dx, dy, dz, V, F, f)
-            if not ok:  # ray in the triangle's plane: keep Embree's answer
-                t = float(tfar[k]) + z0
-                b1 = 1.0 / 3.0
-                b2 = b1
-            b0 = 1.0 - b1 - b2
-            ngx = face_normal[f, 0]
-            ngy = face_normal[f, 1]
-            ngz = face_normal[f, 2]
-            nsx = b0 * corner_normal[f, 0, 0] + b1 * corner_normal[f, 1, 0] + b2 * corner_normal[f, 2, 0]
-            nsy = b0 * corner_normal[f, 0, 1] + b1 * corner_normal[f, 1, 1] + b2 * corner_normal[f, 2, 1]
-            nsz = b0 * corner_normal[f, 0, 2] + b1 * corner_normal[f, 1, 2] + b2 * corner_normal[f, 2, 2]
-            if ngx * dx + ngy * dy + ngz * dz > 0.0:  # back face seen: turn both towards the camera
-                ngx, ngy, ngz = -ngx, -ngy, -ngz
-                nsx, nsy, nsz = -nsx, -nsy, -nsz
-            dn = math.sqrt(dx * dx + dy * dy + dz * dz)
-            facing = (nsx * dx + nsy * dy + nsz * dz) / dn
-            if facing > -1e-4:  # interpolated normal grazes or turns away: tilt it to the viewer
-                tilt = facing + 1e-4
-                nsx -= tilt * dx / dn
-                nsy -= tilt * dy / dn
-                nsz -= tilt * dz / dn
-            ns = math.sqrt(nsx * nsx + nsy * nsy + nsz * nsz)
-            if ns > 0.0:
-                nsx /= ns
-                nsy /= ns
-                nsz /= ns
-            else:
-                nsx, nsy, nsz = ngx, ngy, ngz
-            depth[v, u] = t
-            if want_dist:
-                ray_dist[v, u] = t * math.sqrt(x * x + y * y + 1.0)
-            for a in range(3):
-                n_shade[v, u, a] = R_cam_from_body[a, 0] * nsx + R_cam_from_body[a, 1] * nsy + R_cam_from_body[a, 2] * nsz
-            if want_geom:
-                for a in range(3):
-                    n_geom[v, u, a] = R_cam_from_body[a, 0] * ngx + R_cam_from_body[a, 1] * ngy + R_cam_from_body[a, 2] * ngz
-            inst[v, u] = g + 1
-            face_idx[v, u] = f
+            refine_hit(o_body, R_cam_from_body, x, y, dx, dy, dz, u, v, z0, g, prim_id[k], tfar[k], V, F,
+                       face_offset, face_normal, corner_normal, depth, ray_dist, n_shade, n_geom, inst, face_idx,
+                       want_dist, want_geom)
+
+
+@pjit_exact
+def cast_and_refine(scene, o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0, w, h, z0, V, F,
+                    face_offset, face_normal, corner_normal, depth, ray_dist, n_shade, n_geom, inst, face_idx,
+                    want_dist, want_geom):
+    """:func:`make_rays`, Embree's closest hit (:func:`raytrace._embree.intersect1`, the same
+    float32 rays) and :func:`refine_hits` for the pixel rectangle in one pass, row by row on
+    numba's threads: no ray or hit arrays, no round of Python per chunk. The same AOVs, bit
+    for bit (Embree's hits are those of ``embreex``, ``tests/raytrace/test_fused_gather.py``;
+    the AOVs, ``tests/raytrace/test_scene.py``)."""
+    for r in numba.prange(h):
+        buf = ray_buffer()
+        v = v0 + r
+        y = (v - cy) / fy
+        for c in range(w):
+            u = u0 + c
+            x = (u - cx) / fx
+            dx = R_body_from_cam[0, 0] * x + R_body_from_cam[0, 1] * y + R_body_from_cam[0, 2]
+            dy = R_body_from_cam[1, 0] * x + R_body_from_cam[1, 1] * y + R_body_from_cam[1, 2]
+            dz = R_body_from_cam[2, 0] * x + R_body_from_cam[2, 1] * y + R_body_from_cam[2, 2]
+            g, pr, _, _, tf = intersect1(scene, buf, o_body[0] + z0 * dx, o_body[1] + z0 * dy, o_body[2] + z0 * dz,
+                                         dx, dy, dz)
+            if g < 0:
+                continue
+            refine_hit(o_body, R_cam_from_body, x, y, dx, dy, dz, u, v, z0, g, pr, tf, V, F, face_offset,
+                       face_normal, corner_normal, depth, ray_dist, n_shade, n_geom, inst, face_idx, want_dist,
+                       want_geom)
+
+
+@inline
+def refine_hit(o_body, R_cam_from_body, x, y, dx, dy, dz, u, v, z0, g, pr, tf, V, F, face_offset, face_normal,
+               corner_normal, depth, ray_dist, n_shade, n_geom, inst, face_idx, want_dist, want_geom):
+    """Pixel (u, v)'s AOVs from Embree's hit (component g, triangle pr, float32 distance tf
+    from the plane z_cam = z0) of the ray o_body + t·d, d = (dx, dy, dz) = R_body_from_cam ·
+    (x, y, 1): the z-depth and barycentrics re-intersected in float64 (Möller–Trumbore), the
+    interpolated shading normal and the geometric normal turned to the camera, in its frame."""
+    f = face_offset[g] + pr
+    t, b1, b2, ok = moller_trumbore(o_body[0], o_body[1], o_body[2], dx, dy, dz, V, F, f)
+    if not ok:  # ray in the triangle's plane: keep Embree's answer
+        t = float(tf) + z0
+        b1 = 1.0 / 3.0
+        b2 = b1
+    b0 = 1.0 - b1 - b2
+    ngx = face_normal[f, 0]
+    ngy = face_normal[f, 1]
+    ngz = face_normal[f, 2]
+    nsx = b0 * corner_normal[f, 0, 0] + b1 * corner_normal[f, 1, 0] + b2 * corner_normal[f, 2, 0]
+    nsy = b0 * corner_normal[f, 0, 1] + b1 * corner_normal[f, 1, 1] + b2 * corner_normal[f, 2, 1]
+    nsz = b0 * corner_normal[f, 0, 2] + b1 * corner_normal[f, 1, 2] + b2 * corner_normal[f, 2, 2]
+    if ngx * dx + ngy * dy + ngz * dz > 0.0:  # back face seen: turn both towards the camera
+        ngx, ngy, ngz = -ngx, -ngy, -ngz
+        nsx, nsy, nsz = -nsx, -nsy, -nsz
+    dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+    facing = (nsx * dx + nsy * dy + nsz * dz) / dn
+    if facing > -1e-4:  # interpolated normal grazes or turns away: tilt it to the viewer
+        tilt = facing + 1e-4
+        nsx -= tilt * dx / dn
+        nsy -= tilt * dy / dn
+        nsz -= tilt * dz / dn
+    ns = math.sqrt(nsx * nsx + nsy * nsy + nsz * nsz)
+    if ns > 0.0:
+        nsx /= ns
+        nsy /= ns
+        nsz /= ns
+    else:
+        nsx, nsy, nsz = ngx, ngy, ngz
+    depth[v, u] = t
+    if want_dist:
+        ray_dist[v, u] = t * math.sqrt(x * x + y * y + 1.0)
+    for a in range(3):
+        n_shade[v, u, a] = R_cam_from_body[a, 0] * nsx + R_cam_from_body[a, 1] * nsy + R_cam_from_body[a, 2] * nsz
+    if want_geom:
+        for a in range(3):
+            n_geom[v, u, a] = R_cam_from_body[a, 0] * ngx + R_cam_from_body[a, 1] * ngy + R_cam_from_body[a, 2] * ngz
+    inst[v, u] = g + 1
+    face_idx[v, u] = f
 
 
 @jit_exact

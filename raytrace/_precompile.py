@@ -12,8 +12,9 @@ on first call, as without this step).
 The groups (``raytrace/_jit_signatures.py``): ``fast``, the kernels one frame of the main job
 calls (:data:`SIGNATURES`); then, each holding only what the one before did not compile,
 ``balanced`` (a ``--quality balanced`` frame), ``batched`` (the same frame through the
-batched fallback, :data:`raytrace.shade._FUSED_GATHER` False: what a machine whose embreex
-wheel has no Embree 4 library runs) and ``reference``. Regenerate them after changing a
+batched fallback, :data:`raytrace.shade._FUSED_GATHER` and
+:data:`raytrace.scene._CAST_IN_ONE_KERNEL` False: what a machine whose embreex wheel has no
+Embree 4 library runs) and ``reference``. Regenerate them after changing a
 kernel's arguments::
 
     python -m raytrace._precompile --record
@@ -201,12 +202,13 @@ def _record_here(out_dir: str) -> dict:
     from numba.core import event
     sys.path.insert(0, str(_ROOT))
     import cli
-    from raytrace import shade
+    from raytrace import scene, shade
     cli._kernels_not_compiled = lambda *a, **k: []  # compile here, where the recorder sees it
     seen: dict = {}
     result = {}
     for group in GROUPS:
         shade._FUSED_GATHER = group != "batched"
+        scene._CAST_IN_ONE_KERNEL = group != "batched"  # the geometry pass's fallback too
         with event.install_recorder("numba:compile") as rec:
             status = cli.main(["--target", "cassini", "--pattern", "spiral", "--frames", "1", "--workers", "1",
                                "--out", str(Path(out_dir) / group), "--quiet", *_RECORD_ARGS[group]])

@@ -22,6 +22,7 @@ import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from . import _kernels
@@ -31,6 +32,8 @@ from .model import TargetModel
 __all__ = ["GeometryFrame", "Scene", "default_threads"]
 
 _RAYS_PER_CHUNK = 1 << 14  # rays per Embree call: small enough to balance threads, large enough to amortise
+_CAST_IN_ONE_KERNEL = True  # the geometry pass through _kernels.cast_and_refine where Embree 4 is callable
+_ROWS_PER_TASK = 4  # image rows per task of cast_and_refine's parallel loop
 _MIN_CHUNK = 2048  # fewest rays per Embree call of a batch on the thread pool
 # Scene.intersect / occluded through raytrace._embree's kernels where Embree 4 is loaded (False:
 # always through embreex; the tests compare the two)
@@ -517,9 +520,12 @@ class Scene:
         geometric_normal : bool, keyword-only
             Also return the flat (triangle) normal.
         threads : int, keyword-only, optional
-            Threads for ray casting (default: every CPU of the process, see
-            :func:`default_threads`); 1 runs in the calling thread. The result does not
-            depend on it.
+            Threads for ray casting. Default: numba's thread count of the calling thread
+            (rays, Embree and refinement in one kernel, :func:`raytrace._kernels.cast_and_refine`),
+            or every CPU of the process (:func:`default_threads`) where the embreex wheel has no
+            Embree 4 to call; given, the rays go through ``embreex`` in row chunks: 1 in the
+            calling thread, more on that many threads of a pool. The result does not depend on
+            it.
         visible_fraction : bool, keyword-only
             Compute :attr:`GeometryFrame.visible_fraction`. Free when the target is wholly in
             frame; when it crosses the border, the part of its silhouette outside the image is
@@ -554,8 +560,21 @@ class Scene:
             o_body = -R_body_from_cam @ t
             # start rays just in front of the target (its nearest hull vertex) unless inside it
             z0 = 0.0 if inside else self._near_plane(p_hull)
-            scene = self.embree
             fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
+            direct = self.direct if _CAST_IN_ONE_KERNEL and threads is None else None
+            if direct is not None:
+                # rays, Embree and refinement in one kernel on numba's threads (the calling
+                # thread's count), rows handed out a few at a time: the hits crowd into part of
+                # the rectangle. The same AOVs as the chunks below, bit for bit.
+                old = numba.set_parallel_chunksize(_ROWS_PER_TASK)
+                try:
+                    _kernels.cast_and_refine(direct.handle, o_body, R_body_from_cam, R, fx, fy, cx, cy, u0, v0, w,
+                                             v1 - v0, z0, self.vertices, self.faces, self.face_offset,
+                                             self.face_normal, self.corner_normal, depth, dist, n_shade, n_geom,
+                                             inst, face, ray_distance, geometric_normal)
+                finally:
+                    numba.set_parallel_chunksize(old)
+            scene = self.embree if direct is None else None
 
             def chunk(va: int, h: int) -> None:  # rows [va, va + h): disjoint outputs per chunk
                 o32 = np.empty((h * w, 3), dtype=np.float32)
@@ -568,7 +587,7 @@ class Scene:
                                      depth, dist, n_shade, n_geom, inst, face, ray_distance, geometric_normal)
 
             rows = max(1, _RAYS_PER_CHUNK // w)
-            starts = range(v0, v1, rows)
+            starts = range(v0, v1, rows) if direct is None else range(0)
             if threads is None:
                 threads = default_threads()
             if threads == 1 or len(starts) == 1:
