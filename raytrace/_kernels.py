@@ -156,15 +156,7 @@ def refine_hit(o_body, R_cam_from_body, x, y, dx, dy, dz, u, v, z0, g, pr, tf, V
         b1 = 1.0 / 3.0
         b2 = b1
     b0 = 1.0 - b1 - b2
-    ngx = face_normal[f, 0]
-    ngy = face_normal[f, 1]
-    ngz = face_normal[f, 2]
-    nsx = b0 * corner_normal[f, 0, 0] + b1 * corner_normal[f, 1, 0] + b2 * corner_normal[f, 2, 0]
-    nsy = b0 * corner_normal[f, 0, 1] + b1 * corner_normal[f, 1, 1] + b2 * corner_normal[f, 2, 1]
-    nsz = b0 * corner_normal[f, 0, 2] + b1 * corner_normal[f, 1, 2] + b2 * corner_normal[f, 2, 2]
-    if ngx * dx + ngy * dy + ngz * dz > 0.0:  # back face seen: turn both towards the camera
-        ngx, ngy, ngz = -ngx, -ngy, -ngz
-        nsx, nsy, nsz = -nsx, -nsy, -nsz
+    ngx, ngy, ngz, nsx, nsy, nsz, _ = normals_facing(face_normal, corner_normal, f, b0, b1, b2, dx, dy, dz)
     dn = math.sqrt(dx * dx + dy * dy + dz * dz)
     facing = (nsx * dx + nsy * dy + nsz * dz) / dn
     if facing > -1e-4:  # interpolated normal grazes or turns away: tilt it to the viewer
@@ -189,6 +181,25 @@ def refine_hit(o_body, R_cam_from_body, x, y, dx, dy, dz, u, v, z0, g, pr, tf, V
             n_geom[v, u, a] = R_cam_from_body[a, 0] * ngx + R_cam_from_body[a, 1] * ngy + R_cam_from_body[a, 2] * ngz
     inst[v, u] = g + 1
     face_idx[v, u] = f
+
+
+@inline
+def normals_facing(face_normal, corner_normal, f, b0, b1, b2, dx, dy, dz):
+    """Triangle f's geometric normal and its shading normal interpolated at barycentrics
+    (b0, b1, b2), both turned against the ray direction d: (ng, ns, side), side 1 where the
+    ray sees the triangle's back, else 0."""
+    ngx = face_normal[f, 0]
+    ngy = face_normal[f, 1]
+    ngz = face_normal[f, 2]
+    nsx = b0 * corner_normal[f, 0, 0] + b1 * corner_normal[f, 1, 0] + b2 * corner_normal[f, 2, 0]
+    nsy = b0 * corner_normal[f, 0, 1] + b1 * corner_normal[f, 1, 1] + b2 * corner_normal[f, 2, 1]
+    nsz = b0 * corner_normal[f, 0, 2] + b1 * corner_normal[f, 1, 2] + b2 * corner_normal[f, 2, 2]
+    side = 0
+    if ngx * dx + ngy * dy + ngz * dz > 0.0:  # back face seen: turn both towards the ray's origin
+        side = 1
+        ngx, ngy, ngz = -ngx, -ngy, -ngz
+        nsx, nsy, nsz = -nsx, -nsy, -nsz
+    return ngx, ngy, ngz, nsx, nsy, nsz, side
 
 
 @jit_exact

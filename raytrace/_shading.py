@@ -14,7 +14,7 @@ import numpy as np
 
 from . import environment as env
 from ._jit import FASTMATH, inline, jit, jit_exact, pjit, pjit_exact
-from ._kernels import moller_trumbore
+from ._kernels import moller_trumbore, normals_facing
 from .brdf import brdf_cos, cosine_direction, onb, sample_brdf, specular_albedo
 from .cache import _hash01, _hash32, glossy_draw, hit_normals, interpolate_rows, lattice_rows
 
@@ -42,17 +42,7 @@ def surfaces(O, D, face, V, F, face_normal, corner_normal, P, NS, NG, WO, B, SID
         b0 = 1.0 - b1 - b2
         for a in range(3):
             P[k, a] = b0 * V[F[f, 0], a] + b1 * V[F[f, 1], a] + b2 * V[F[f, 2], a]
-        ngx = face_normal[f, 0]
-        ngy = face_normal[f, 1]
-        ngz = face_normal[f, 2]
-        nsx = b0 * corner_normal[f, 0, 0] + b1 * corner_normal[f, 1, 0] + b2 * corner_normal[f, 2, 0]
-        nsy = b0 * corner_normal[f, 0, 1] + b1 * corner_normal[f, 1, 1] + b2 * corner_normal[f, 2, 1]
-        nsz = b0 * corner_normal[f, 0, 2] + b1 * corner_normal[f, 1, 2] + b2 * corner_normal[f, 2, 2]
-        side = 0
-        if ngx * dx + ngy * dy + ngz * dz > 0.0:
-            side = 1
-            ngx, ngy, ngz = -ngx, -ngy, -ngz
-            nsx, nsy, nsz = -nsx, -nsy, -nsz
+        ngx, ngy, ngz, nsx, nsy, nsz, side = normals_facing(face_normal, corner_normal, f, b0, b1, b2, dx, dy, dz)
         facing = -(nsx * dx + nsy * dy + nsz * dz)
         if facing < 1e-4:  # interpolated normal turned away from the viewer: tilt it back
             tilt = 1e-4 - facing
