@@ -822,14 +822,14 @@ def _worker_ready(quality: str) -> None:
 
 def _worker_init(threads: int) -> None:
     """Process-pool initializer: share the cores between the workers; stop on SIGINT or
-    SIGTERM (:func:`_worker_stop`) and when the parent is gone (:func:`_watch_parent`)."""
+    SIGTERM (:func:`_worker_stop`) and when the parent is gone (:func:`_abandon_frame`)."""
     import signal
-    import threading
     global _IN_POOL_WORKER
     _IN_POOL_WORKER = True
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _worker_stop)
-    threading.Thread(target=_watch_parent, args=(os.getppid(),), name="watch-parent", daemon=True).start()
+    from raytrace._threads import exit_with_parent
+    exit_with_parent(os.getppid(), _PARENT_POLL_S, _abandon_frame)
     try:
         import numba
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
@@ -838,7 +838,7 @@ def _worker_init(threads: int) -> None:
 
 
 _IN_POOL_WORKER = False  # set in the pool's worker processes
-_IN_FRAME = False  # run_frame is running (in a worker: what _watch_parent waits for)
+_IN_FRAME = False  # run_frame is running (in a worker: what _abandon_frame waits for)
 _WORKER_STOPPING = False
 _PARENT_POLL_S = 0.5
 _STOP_GRACE_S = 30.0  # a worker whose parent died exits by then even if its frame has not let go
@@ -858,19 +858,17 @@ def _worker_stop(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
-def _watch_parent(ppid: int) -> None:
-    """In a pool worker, on a daemon thread: when the parent process is gone (killed with
-    SIGKILL, crashed) the worker stops as on SIGTERM, instead of waiting for its next task
-    forever with the target's scene in memory."""
+def _abandon_frame() -> None:
+    """In a pool worker whose parent is gone (killed with SIGKILL, crashed; run by
+    :func:`raytrace._threads.exit_with_parent` before the worker exits, instead of its waiting
+    for its next task for ever with the target's scene in memory): stop as on SIGTERM and wait
+    until the frame in flight has removed its temporaries."""
     import signal
-    while os.getppid() == ppid:
-        time.sleep(_PARENT_POLL_S)
     os.kill(os.getpid(), signal.SIGTERM)
     deadline = time.monotonic() + _STOP_GRACE_S
     time.sleep(0.05)  # the main thread takes the signal at its next bytecode
     while _IN_FRAME and time.monotonic() < deadline:  # the abandoned frame removes its temporaries
         time.sleep(0.05)
-    os._exit(1)
 
 
 def frame_seeds(seed: int, frame: int) -> tuple:
@@ -1297,10 +1295,10 @@ def _stop_workers(pool) -> None:
     each worker sent SIGTERM (it abandons its frame, removes that frame's temporary files and
     exits: :func:`_worker_stop`), and killed if it has not exited within _STOP_GRACE_S."""
     import signal
-    # the pool's own processes (not multiprocessing.active_children(): cli.main may run inside a
-    # program with children of its own); CPython's ProcessPoolExecutor keeps them in _processes,
-    # and without it the shutdown below still ends the pool, after the frames in flight
-    procs = list((getattr(pool, "_processes", None) or {}).values())
+    from raytrace._threads import pool_processes
+    # the pool's own processes, not multiprocessing.active_children(): cli.main may run inside a
+    # program with children of its own
+    procs = pool_processes(pool)
     pool.shutdown(wait=False, cancel_futures=True)
     for p in procs:
         try:
@@ -1455,6 +1453,13 @@ def install_termination_handlers() -> None:
             signal.signal(sig, _on_termination)
 
 
+def _interrupted(exc: KeyboardInterrupt, after: str) -> int:
+    """One line for Ctrl-C or :class:`Terminated`; the exit status, 128 + the signal."""
+    how = f"terminated by {exc}" if isinstance(exc, Terminated) else "interrupted"
+    sys.stderr.write(f"{PROG}: {how}; {after}\n")
+    return 128 + getattr(exc, "signum", 2)  # Ctrl-C: SIGINT
+
+
 # --------------------------------------------------------------------------- commands
 def _fail(exc: BaseException) -> int:
     sys.stderr.write(f"{PROG}: error: {exc}\n")
@@ -1478,10 +1483,7 @@ def _guarded(run, usage_errors=(CLIError,)) -> tuple:
     except usage_errors as exc:
         return None, _fail(exc)
     except KeyboardInterrupt as exc:
-        signum = getattr(exc, "signum", 2)  # Ctrl-C: SIGINT
-        how = f"terminated by {exc}" if isinstance(exc, Terminated) else "interrupted"
-        sys.stderr.write(f"{PROG}: {how}; complete frames are kept, rerun the same command to resume\n")
-        return None, 128 + signum
+        return None, _interrupted(exc, "complete frames are kept, rerun the same command to resume")
     except Exception as exc:  # noqa: BLE001 - a failure while rendering: one line, frames done are kept
         return None, _render_failed(exc)
 
@@ -2321,9 +2323,7 @@ def main(argv: list[str] | None = None) -> int:
             return COMMANDS[argv[0]](argv[1:])
         return main_job(argv)
     except KeyboardInterrupt as exc:  # a command without its own message (render-scene, preview, …)
-        how = f"terminated by {exc}" if isinstance(exc, Terminated) else "interrupted"
-        sys.stderr.write(f"{PROG}: {how}; nothing half-written is left\n")
-        return 128 + getattr(exc, "signum", 2)
+        return _interrupted(exc, "nothing half-written is left")
 
 
 if __name__ == "__main__":

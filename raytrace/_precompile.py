@@ -141,6 +141,7 @@ def precompile(processes: int, groups=("fast",)) -> list:
     compiled)."""
     from concurrent.futures import ProcessPoolExecutor
     import multiprocessing
+    from ._threads import exit_with_parent, pool_processes
     parts = shares(entries_to_compile(groups), processes)
     pool = ProcessPoolExecutor(max_workers=len(parts), mp_context=multiprocessing.get_context("spawn"),
                                initializer=exit_with_parent, initargs=(os.getpid(),))
@@ -148,26 +149,12 @@ def precompile(processes: int, groups=("fast",)) -> list:
         return [f for failed in pool.map(_compile_share, parts) for f in failed]
     except KeyboardInterrupt:  # Ctrl-C, or the CLI's SIGTERM: stop compiling now, not in a minute
         # numba writes each cache file under a temporary name and renames it: a compiler killed
-        # mid-write leaves no broken entry (CPython's ProcessPoolExecutor keeps its processes in
-        # _processes; without it the shutdown below waits for the compilers instead)
-        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        # mid-write leaves no broken entry
+        for proc in pool_processes(pool):
             proc.kill()
         raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
-
-
-def exit_with_parent(ppid: int, poll_s: float = 0.5) -> None:
-    """Process-pool initializer: a daemon thread ends this worker process when its parent
-    ``ppid`` is gone (killed with SIGKILL, crashed), instead of its waiting for tasks forever."""
-    import threading
-
-    def watch():
-        while os.getppid() == ppid:
-            time.sleep(poll_s)
-        os._exit(1)
-
-    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
 def _dispatchers() -> dict:

@@ -1,5 +1,6 @@
 """Side threads of the renderer: named thread pools whose tasks run with the caller's numba
-thread count."""
+thread count; and for process pools, a worker's watch on its parent and the pool's own
+processes."""
 
 from __future__ import annotations
 
@@ -24,3 +25,27 @@ def submit(name: str, workers: int, fn, *args):
         return fn(*args)
 
     return pool.submit(run)
+
+
+def exit_with_parent(ppid: int, poll_s: float = 0.5, before_exit=None) -> None:
+    """Process-pool initializer (or part of one): a daemon thread ends this worker process when
+    its parent ``ppid`` is gone (killed with SIGKILL, crashed), instead of its waiting for tasks
+    for ever; ``before_exit()`` runs first (on that thread)."""
+    import os
+    import threading
+    import time
+
+    def watch():
+        while os.getppid() == ppid:
+            time.sleep(poll_s)
+        if before_exit is not None:
+            before_exit()
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
+def pool_processes(pool) -> list:
+    """The worker processes of a ``concurrent.futures.ProcessPoolExecutor`` (CPython keeps them
+    in ``_processes``; empty where it does not, and the caller's shutdown then waits for them)."""
+    return list((getattr(pool, "_processes", None) or {}).values())

@@ -574,29 +574,30 @@ class Scene:
                                              inst, face, ray_distance, geometric_normal)
                 finally:
                     numba.set_parallel_chunksize(old)
-            scene = self.embree if direct is None else None
+            else:  # row chunks through embreex, on a thread pool
+                scene = self.embree
 
-            def chunk(va: int, h: int) -> None:  # rows [va, va + h): disjoint outputs per chunk
-                o32 = np.empty((h * w, 3), dtype=np.float32)
-                d32 = np.empty((h * w, 3), dtype=np.float32)
-                _kernels.make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, va, w, h, z0, o32, d32)
-                hits = scene.run(o32, d32, query="INTERSECT", output=1)
-                _kernels.refine_hits(o_body, R_body_from_cam, R, fx, fy, cx, cy, u0, va, w, h, z0,
-                                     hits["geomID"], hits["primID"], hits["tfar"], self.vertices, self.faces,
-                                     self.face_offset, self.face_normal, self.corner_normal,
-                                     depth, dist, n_shade, n_geom, inst, face, ray_distance, geometric_normal)
+                def chunk(va: int, h: int) -> None:  # rows [va, va + h): disjoint outputs per chunk
+                    o32 = np.empty((h * w, 3), dtype=np.float32)
+                    d32 = np.empty((h * w, 3), dtype=np.float32)
+                    _kernels.make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, va, w, h, z0, o32, d32)
+                    hits = scene.run(o32, d32, query="INTERSECT", output=1)
+                    _kernels.refine_hits(o_body, R_body_from_cam, R, fx, fy, cx, cy, u0, va, w, h, z0,
+                                         hits["geomID"], hits["primID"], hits["tfar"], self.vertices, self.faces,
+                                         self.face_offset, self.face_normal, self.corner_normal,
+                                         depth, dist, n_shade, n_geom, inst, face, ray_distance, geometric_normal)
 
-            rows = max(1, _RAYS_PER_CHUNK // w)
-            starts = range(v0, v1, rows) if direct is None else range(0)
-            if threads is None:
-                threads = default_threads()
-            if threads == 1 or len(starts) == 1:
-                for va in starts:
-                    chunk(va, min(rows, v1 - va))
-            else:
-                futures = [_pool().submit(chunk, va, min(rows, v1 - va)) for va in starts]
-                for f in futures:
-                    f.result()
+                rows = max(1, _RAYS_PER_CHUNK // w)
+                starts = range(v0, v1, rows)
+                if threads is None:
+                    threads = default_threads()
+                if threads == 1 or len(starts) == 1:
+                    for va in starts:
+                        chunk(va, min(rows, v1 - va))
+                else:
+                    futures = [_pool().submit(chunk, va, min(rows, v1 - va)) for va in starts]
+                    for f in futures:
+                        f.result()
         fraction = math.nan
         if visible_fraction:
             seen = int(np.count_nonzero(inst))

@@ -93,8 +93,8 @@ def test_kernels_calling_embree_are_left_out_only_where_embree_4_is_missing(monk
 
 
 def test_pool_workers_exit_when_their_parent_is_killed(tmp_path):
-    """exit_with_parent (the compile pool's initializer): a worker whose parent is killed with
-    SIGKILL exits instead of waiting for tasks for ever."""
+    """raytrace._threads.exit_with_parent (in the compile and frame pools' initializers): a
+    worker whose parent is killed with SIGKILL exits instead of waiting for tasks for ever."""
     import signal
     import subprocess
     import time
@@ -102,7 +102,7 @@ def test_pool_workers_exit_when_their_parent_is_killed(tmp_path):
     script.write_text(
         "import multiprocessing, os, time\n"
         "from concurrent.futures import ProcessPoolExecutor\n"
-        "from raytrace._precompile import exit_with_parent\n"
+        "from raytrace._threads import exit_with_parent\n"
         "if __name__ == '__main__':\n"
         "    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context('spawn'),\n"
         "                               initializer=exit_with_parent, initargs=(os.getpid(), 0.05))\n"
