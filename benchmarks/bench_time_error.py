@@ -144,9 +144,9 @@ def read_exr(path: str) -> np.ndarray:
     return np.asarray(buf.get_pixels(oiio.FLOAT))[:, :, :3].astype(np.float64)
 
 
-def cycles(scene_path: Path, spp: int, out_exr: Path, python: str) -> tuple[float, np.ndarray]:
+def cycles(scene_path: Path, spp: int, out_exr: Path, python: str, threads: int = 2) -> tuple[float, np.ndarray]:
     cmd = [python, str(ROOT / "benchmarks" / "cycles_render.py"), str(scene_path), "--spp", str(spp),
-           "--out", str(out_exr), "--threads", "2"]
+           "--out", str(out_exr), "--threads", str(threads)]
     res = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if res.returncode != 0:
         raise RuntimeError(f"cycles_render failed: {res.stderr.strip().splitlines()[-1:]}")
