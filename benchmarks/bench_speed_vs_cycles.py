@@ -30,6 +30,7 @@ equal error with these times; ``--out`` writes ``results.json`` (its rows with t
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import multiprocessing
 import os
@@ -181,7 +182,8 @@ def _concurrent_times(args, presets, names, py):
                 yield target, view, {k: statistics.median(v) for k, v in times.items()}
     finally:
         for c in conns:
-            c.send(("stop",))
+            with contextlib.suppress(OSError):  # a worker that died has closed its end
+                c.send(("stop",))
         for p in procs:
             p.join(timeout=60)
 
