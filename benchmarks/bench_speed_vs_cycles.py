@@ -146,8 +146,9 @@ def _concurrent_times(args, presets, names, py):
     worker processes of one thread rendering the same frame at once: the slowest worker's
     time / K per frame (:func:`_worker`)."""
     K = args.concurrent
-    for target in args.targets:  # the scene files, written once before the workers read them
-        write_scene(target, Path(args.scenes) / target, args.width)
+    # the scene files, written once before the workers read them
+    files = [(target, view, spath) for target in args.targets
+             for view, spath in write_scene(target, Path(args.scenes) / target, args.width) if view in args.views]
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as cli.py: inherited by the workers
     mp = multiprocessing.get_context("spawn")
     barrier = mp.Barrier(K)
@@ -168,18 +169,15 @@ def _concurrent_times(args, presets, names, py):
         return answers
 
     try:
-        for target in args.targets:
-            for view, spath in write_scene(target, Path(args.scenes) / target, args.width):
-                if view not in args.views:
-                    continue
-                ask(("load", str(spath), presets))
-                times = {k: [] for k in names}
-                for r in range(args.repeats):
-                    for k in names:
-                        if k.startswith("cycles-") and r >= _cycles_repeats(args):
-                            continue
-                        times[k].append(max(ask(("run", k, r + 1))) / K)
-                yield target, view, {k: statistics.median(v) for k, v in times.items()}
+        for target, view, spath in files:
+            ask(("load", str(spath), presets))
+            times = {k: [] for k in names}
+            for r in range(args.repeats):
+                for k in names:
+                    if k.startswith("cycles-") and r >= _cycles_repeats(args):
+                        continue
+                    times[k].append(max(ask(("run", k, r + 1))) / K)
+            yield target, view, {k: statistics.median(v) for k, v in times.items()}
     finally:
         for c in conns:
             with contextlib.suppress(OSError):  # a worker that died has closed its end

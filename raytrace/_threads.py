@@ -4,6 +4,8 @@ processes."""
 
 from __future__ import annotations
 
+import contextlib
+
 import numba
 
 _POOLS = {}
@@ -25,6 +27,17 @@ def submit(name: str, workers: int, fn, *args):
         return fn(*args)
 
     return pool.submit(run)
+
+
+@contextlib.contextmanager
+def parallel_chunksize(n: int):
+    """numba's parallel loops launched inside hand out ``n`` iterations at a time (0: numba's
+    static split); the calling thread's previous setting is restored on the way out."""
+    old = numba.set_parallel_chunksize(n)
+    try:
+        yield
+    finally:
+        numba.set_parallel_chunksize(old)
 
 
 def exit_with_parent(ppid: int, poll_s: float = 0.5, before_exit=None) -> None:

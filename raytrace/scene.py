@@ -22,10 +22,10 @@ import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from . import _kernels
+from ._threads import parallel_chunksize
 from .camera import Camera
 from .model import TargetModel
 
@@ -566,14 +566,11 @@ class Scene:
                 # rays, Embree and refinement in one kernel on numba's threads (the calling
                 # thread's count), rows handed out a few at a time: the hits crowd into part of
                 # the rectangle. The same AOVs as the chunks below, bit for bit.
-                old = numba.set_parallel_chunksize(_ROWS_PER_TASK)
-                try:
+                with parallel_chunksize(_ROWS_PER_TASK):
                     _kernels.cast_and_refine(direct.handle, o_body, R_body_from_cam, R, fx, fy, cx, cy, u0, v0, w,
                                              v1 - v0, z0, self.vertices, self.faces, self.face_offset,
                                              self.face_normal, self.corner_normal, depth, dist, n_shade, n_geom,
                                              inst, face, ray_distance, geometric_normal)
-                finally:
-                    numba.set_parallel_chunksize(old)
             else:  # row chunks through embreex, on a thread pool
                 scene = self.embree
 

@@ -56,7 +56,6 @@ Depth, normals and ids are never supersampled: they stay exact at the pixel cent
 
 from __future__ import annotations
 
-import contextlib
 import math
 import time
 from dataclasses import dataclass, field
@@ -66,7 +65,7 @@ import numpy as np
 
 from . import _paths, _shading as K
 from ._kernels import ray_origins32, rows_times_matrix
-from ._threads import submit as _submit
+from ._threads import parallel_chunksize, submit as _submit
 from .brdf import split_sum_table
 from .camera import Camera
 from .lighting import Lighting
@@ -237,16 +236,6 @@ _CHUNK_RAYS = 1 << 18
 # in the second pass; 0, numba's static split, measured 0.95–1.03× on four scenes)
 _FUSED_GATHER = True
 _FUSED_CHUNK = 1
-
-
-@contextlib.contextmanager
-def _fused_schedule():
-    """numba's parallel loops launched inside hand out _FUSED_CHUNK iterations at a time."""
-    old = numba.set_parallel_chunksize(_FUSED_CHUNK)
-    try:
-        yield
-    finally:
-        numba.set_parallel_chunksize(old)
 
 
 def _balanced_aa(samples: int) -> int:
@@ -653,7 +642,7 @@ class _Context:
             v = np.empty(len(idx))
             light = self.lighting
             sx, sy, sz = (float(x) for x in light.sun_dir_body)
-            with _fused_schedule():
+            with parallel_chunksize(_FUSED_CHUNK):
                 _paths.lobe_traced(direct.handle, idx, s["P"], s["NS"], s["NG"], s["WO"], s["comp"], n_rays, seed,
                                    seed ^ _LOBE_STREAM, np.asarray(pix, dtype=np.int64), self.eps, sx, sy, sz,
                                    light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
@@ -746,7 +735,7 @@ class _Context:
         h = np.empty(n, dtype=np.int64)
         light = self.lighting
         sx, sy, sz = (float(x) for x in light.sun_dir_body)
-        with _fused_schedule():
+        with parallel_chunksize(_FUSED_CHUNK):
             _paths.gather_traced(direct.handle, s["P"], s["NS"], s["NG"], start, first, seeds[0], seeds[1],
                                  pix.astype(np.int64), kmul, self.eps, sx, sy, sz,
                                  light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
