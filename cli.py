@@ -579,6 +579,10 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
     r_obs_eci, _ = ref.observer_state_eci(s_lvlh, t_s)
     r_tgt_eci, _ = ref.target_state_eci(t_s)
     unix_s = ref.unix_s(t_s)
+    from orbit.sun import VALID_UTC_RANGE_S
+    if len(unix_s) and float(np.max(unix_s)) > VALID_UTC_RANGE_S[1]:
+        raise CLIError(f"argument --epoch: the sequence ends {float(np.max(t_s)):.0f} s after {orb['epoch']}, past "
+                       "2051-01-01T00:00:00Z (the validity of the solar formulae); choose an earlier --epoch")
     r_sun_eci = sun_position_eci(unix_s)
     vis = visibility.visibility(r_obs_eci, r_tgt_eci, r_sun_eci, sun_margin_rad=math.radians(orb["sun_margin_deg"]))
 
@@ -1666,6 +1670,8 @@ def geometric_shadow_fraction(lighting) -> float | None:
 def check_out_folder(out_dir: str) -> None:
     """Fail before any work when ``--out`` cannot become a writable folder: it exists and is not
     a folder or not writable, or its nearest existing parent is not a writable folder."""
+    if not str(out_dir).strip():
+        raise CLIError("--out must name a folder, got an empty string")
     path = os.path.abspath(out_dir)
     if os.path.exists(path):
         if not os.path.isdir(path):
@@ -1730,6 +1736,11 @@ def render_scene_main(argv: list[str]) -> int:
         return 2
     except FloatingPointError as exc:  # a renderer bug, not the input's: say so in one line
         sys.stderr.write(f"{PROG}: error: {exc}\n")
+        return 1
+    except Exception as exc:  # noqa: BLE001 - any other failure: one line, nothing written (as the main job)
+        msg = " ".join(str(exc).split()) or type(exc).__name__
+        sys.stderr.write(f"{PROG}: error: rendering {args.scene} failed ({type(exc).__name__}: {msg}); "
+                         f"nothing was written to {args.out}\n")
         return 1
     sys.stdout.write(f"rendered {args.scene} ({frame.quality.name}) in {elapsed:.2f} s -> {args.out}\n")
     return 0

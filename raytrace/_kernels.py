@@ -40,6 +40,22 @@ def make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, v0, w, h, z0, out_o, 
 
 
 @pjit_exact
+def centre_rays(pix, W, o_body, R_body_from_cam, fx, fy, cx, cy, out_o, out_d):
+    """Float64 rays through the centres of the flat pixel indices ``pix`` (row-major, width
+    W): origins o_body and body-frame directions R_body_from_cam · ((u − c_x)/f_x,
+    (v − c_y)/f_y, 1), unnormalised as in :func:`make_rays`. The same arithmetic, in the same
+    order, as the NumPy it replaced in ``shade.render`` (so the same bits), in one pass
+    without temporaries (4–7 ms a frame in NumPy for 0.2–0.4 M target pixels)."""
+    for k in numba.prange(pix.shape[0]):
+        q = pix[k]
+        x = (float(q % W) - cx) / fx
+        y = (float(q // W) - cy) / fy
+        for a in range(3):
+            out_d[k, a] = (x * R_body_from_cam[a, 0] + y * R_body_from_cam[a, 1]) + R_body_from_cam[a, 2]
+            out_o[k, a] = o_body[a]
+
+
+@pjit_exact
 def ray_origins32(o_body, z0, D, out_o, out_d):
     """Float32 rays for Embree from float64 directions D: origins advanced to the plane
     z_cam = z0 (as :func:`make_rays`), directions rounded once; one pass instead of NumPy's

@@ -1299,7 +1299,26 @@ def sliver_pixels(V, F, R, t, fx, fy, cx, cy, z_min, max_width, depth, out):
         # edge lines a·u + b·v + c ≥ 0 inside (orientation fixed by the sign of the area)
         sgn = 1.0 if (px[1] - px[0]) * (py[2] - py[0]) - (px[2] - px[0]) * (py[1] - py[0]) > 0.0 else -1.0
         for v in range(v0, v1 + 1):
-            for u in range(u0, u1 + 1):
+            # each edge's test is linear in u along the row: the u where it can pass, widened by
+            # a pixel against rounding, bounds the pixels tested (a long diagonal wire's box is
+            # mostly empty); the test below decides each of them as before
+            ua = float(u0)
+            ub = float(u1)
+            for k in range(3):
+                j = (k + 1) % 3
+                a = -(py[j] - py[k]) * sgn
+                b = (px[j] - px[k]) * sgn
+                c = -(a * px[k] + b * py[k])
+                r = b * v + c + 0.5 * (abs(a) + abs(b))  # the test: a·u + r ≥ 0
+                # (an edge less than 10⁻³ px high bounds nothing: there the rounding of r,
+                # ~10⁻⁸ px·px with coordinates ≲ 10⁴ px, divided by a could pass the widening)
+                if a > 1e-3:
+                    ua = max(ua, -r / a - 1.0)
+                elif a < -1e-3:
+                    ub = min(ub, -r / a + 1.0)
+            if not ua <= ub:
+                continue
+            for u in range(int(math.ceil(ua)), int(math.floor(ub)) + 1):
                 inside = True
                 for k in range(3):
                     j = (k + 1) % 3

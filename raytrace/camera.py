@@ -26,15 +26,18 @@ DEFAULT_HEIGHT = 960
 DEFAULT_FOCAL_LENGTH_M = 4.0e-3
 DEFAULT_PIXEL_PITCH_M = 3.45e-6
 _MAX_SIDE = 65535
+# |f_x|, |f_y|, |c_x|, |c_y| at most 10⁹ px: a 65535-px image then still spans 13 arcsec, and
+# pixel coordinates stay far from where float64 ray directions lose their digits
+_MAX_PX = 1e9
 
 
 def _positive_finite(name: str, value) -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a finite number > 0, got {value!r}") from None
-    if not (math.isfinite(v) and v > 0.0):
-        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+        v = math.nan
+    if not (math.isfinite(v) and 0.0 < v <= _MAX_PX):
+        raise ValueError(f"{name} must be a number in (0, {_MAX_PX:.0e}] px, got {value!r}")
     return v
 
 
@@ -73,8 +76,9 @@ class Camera:
                 v = float(v)
             except (TypeError, ValueError):
                 v = math.nan
-            if not math.isfinite(v):
-                raise ValueError(f"{name} must be a finite number [px], got {getattr(self, name)!r}")
+            if not (math.isfinite(v) and abs(v) <= _MAX_PX):
+                raise ValueError(f"{name} must be a number in [-{_MAX_PX:.0e}, {_MAX_PX:.0e}] px, "
+                                 f"got {getattr(self, name)!r}")
             object.__setattr__(self, name, v)
 
     @classmethod

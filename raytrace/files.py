@@ -298,10 +298,25 @@ def write_files_atomically(out_dir: str, files: dict, texts: dict) -> None:
         for rel, text in texts.items():
             with open(os.path.join(tmp, rel), "w", encoding="utf-8") as fh:
                 fh.write(text)
-        for rel in list(files) + list(texts):
+        # every destination's folder made, and checked, before the first file moves: a file
+        # where a folder must go (or a folder where a file must go) fails here, with nothing
+        # moved into place yet
+        names = list(files) + list(texts)
+        for rel in names:
             dst = os.path.join(out_dir, rel)
-            os.makedirs(os.path.dirname(dst) or out_dir, exist_ok=True)
-            os.replace(os.path.join(tmp, rel), dst)
+            if os.path.isdir(dst):
+                raise OSError(f"{dst} is a folder")
+            folder = os.path.dirname(dst) or out_dir
+            while not os.path.exists(folder):  # to be made: its nearest existing parent must be a folder
+                folder = os.path.dirname(folder)
+            if not os.path.isdir(folder):
+                raise OSError(f"{folder} is in the way of a folder")
+            if not os.access(folder, os.W_OK | os.X_OK):
+                raise OSError(f"{folder} is not writable")
+        for rel in names:
+            os.makedirs(os.path.dirname(os.path.join(out_dir, rel)) or out_dir, exist_ok=True)
+        for rel in names:
+            os.replace(os.path.join(tmp, rel), os.path.join(out_dir, rel))
     except OSError as exc:
         raise OSError(f"cannot write into {out_dir} ({exc})") from None
     finally:

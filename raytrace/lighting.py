@@ -32,7 +32,19 @@ MAX_IRRADIANCE_W_M2 = 1e6
 where float32 radiance would overflow."""
 
 
+def only_numbers(value) -> bool:
+    """Whether ``value`` (a number, a nested list or tuple, or an array) holds numbers only:
+    no text or truth values, which ``np.asarray(..., float)`` would also take ("1361", True)."""
+    if isinstance(value, np.ndarray):
+        return value.dtype.kind in "iuf"
+    if isinstance(value, (list, tuple)):
+        return all(only_numbers(x) for x in value)
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
 def _unit3(name: str, value) -> tuple:
+    if not only_numbers(value):
+        raise ValueError(f"{name} must be a unit 3-vector of numbers, got {value!r}")
     try:
         v = np.asarray(value, dtype=np.float64).ravel()
     except (TypeError, ValueError):

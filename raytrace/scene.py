@@ -303,9 +303,12 @@ class Scene:
 
     @property
     def materials(self) -> tuple:
-        """BRDF of each component (:func:`raytrace.materials.material_of`)."""
-        from .materials import material_of
-        return tuple(material_of(c) for c in self.model.components)
+        """BRDF of each component (:func:`raytrace.materials.material_of`), made once (a
+        frame's shading asks for them; made anew they took 2 ms a frame on ICESat)."""
+        if not hasattr(self, "_materials"):
+            from .materials import material_of
+            self._materials = tuple(material_of(c) for c in self.model.components)
+        return self._materials
 
     @property
     def two_sided(self) -> np.ndarray:

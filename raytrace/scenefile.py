@@ -44,7 +44,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .camera import Camera
-from .lighting import EARTH_RADIUS_M, SOLAR_CONSTANT_W_M2, Earth, Lighting
+from .lighting import EARTH_RADIUS_M, SOLAR_CONSTANT_W_M2, Earth, Lighting, only_numbers
 from .model import MATERIALS, TargetModel
 
 __all__ = ["SceneSpec", "load_scene_file", "scene_to_dict"]
@@ -111,6 +111,8 @@ def _err(msg: str) -> ValueError:
 
 
 def _numbers(name: str, value, n: int) -> np.ndarray:
+    if not only_numbers(value):
+        raise _err(f"{name} must be {n} numbers (JSON numbers, not strings or booleans), got {value!r}")
     try:
         a = np.asarray(value, dtype=np.float64).ravel()
     except (TypeError, ValueError):
@@ -183,6 +185,8 @@ def _model(data: dict, folder: str) -> TargetModel:
             raise _err(f"meshes[{i}].material must be one of {', '.join(MATERIALS)}, got {material!r}")
         albedo = None
         if "albedo" in m:
+            if not only_numbers(m["albedo"]):
+                raise _err(f"meshes[{i}].albedo must be 1 or 3 numbers in [0, 1], got {m['albedo']!r}")
             a = np.ravel(m["albedo"])
             if a.size == 1:
                 a = np.repeat(a, 3)
@@ -314,6 +318,9 @@ def load_scene_file(path) -> SceneSpec:
         raise _err(f"cannot read {path}: {exc.strerror}") from None
     except json.JSONDecodeError as exc:
         raise _err(f"{path} is not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    except UnicodeDecodeError as exc:
+        raise _err(f"{path} is not UTF-8 text, which JSON must be (byte {exc.start}: "
+                   f"{exc.object[exc.start:exc.start + 1]!r})") from None
     if not isinstance(data, dict):
         raise _err("the top level must be an object")
     unknown = set(data) - _TOP_KEYS

@@ -64,7 +64,7 @@ import numba
 import numpy as np
 
 from . import _paths, _shading as K
-from ._kernels import ray_origins32, rows_times_matrix
+from ._kernels import centre_rays, ray_origins32
 from ._threads import parallel_chunksize, submit as _submit
 from .brdf import split_sum_table
 from .camera import Camera
@@ -1090,11 +1090,9 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     # context may still be solving on its side thread)
     t0 = time.perf_counter()
     pix = np.flatnonzero(geo.instance.ravel() > 0)
-    u = (pix % W).astype(np.float64)
-    v = (pix // W).astype(np.float64)
-    D_cam = np.column_stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones(len(pix))])
-    D = rows_times_matrix(D_cam, R_bc.T)
-    O = np.ascontiguousarray(np.broadcast_to(o_body, D.shape))
+    O = np.empty((len(pix), 3))
+    D = np.empty((len(pix), 3))
+    centre_rays(pix, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, O, D)
     face = geo.face_index.ravel()[pix].astype(np.int64)
     s = _surfaces(scene, O, D, face)
     t_centres = time.perf_counter() - t0

@@ -175,6 +175,23 @@ def test_render_scene_writes_a_frame(tmp_path):
     ({"sun": {"sun_dir_body": "up"}}, "sun_dir_body must be a unit 3-vector"),
     ({"ambient_radiance_W_m2_sr": True}, "ambient_radiance_W_m2_sr must be a number"),
     ({"version": 2}, "version must be 1"),
+    # numbers must be JSON numbers: not text or truth values that float() would also take
+    ({"camera": {"K": [["120", 0, 31.5], [0, 120.0, 23.5], [0, 0, 1]], "width": 64, "height": 48,
+                 "R_cam_from_body": np.eye(3).ravel().tolist(), "t_cam_m": [0, 0, 5]}}, "camera.K must be 9 numbers"),
+    ({"camera": {"K": [[120.0, 0, 31.5], [0, 120.0, 23.5], [0, 0, 1]], "width": 64, "height": 48,
+                 "R_cam_from_body": np.eye(3).ravel().tolist(), "t_cam_m": ["0", "0", "5"]}},
+     "camera.t_cam_m must be 3 numbers"),
+    ({"camera": {"K": [[120.0, 0, 31.5], [0, 120.0, 23.5], [0, 0, 1]], "width": 64, "height": 48,
+                 "R_cam_from_body": [True, 0, 0, 0, 1, 0, 0, 0, 1], "t_cam_m": [0, 0, 5]}},
+     "camera.R_cam_from_body must be 9 numbers"),
+    ({"sun": {"sun_dir_body": [False, False, True]}}, "sun_dir_body must be a unit 3-vector of numbers"),
+    ({"meshes": [{"path": "parts/bus.ply", "albedo": True}]}, "meshes[0].albedo must be 1 or 3 numbers"),
+    ({"meshes": [{"path": "parts/bus.ply", "albedo": ["0.5", 0.5, 0.5]}]}, "meshes[0].albedo must be 1 or 3 numbers"),
+    # a focal length no lens has (it overflowed the culling's arithmetic)
+    ({"camera": {"K": [[1e300, 0, 31.5], [0, 1e300, 23.5], [0, 0, 1]], "width": 64, "height": 48,
+                 "R_cam_from_body": np.eye(3).ravel().tolist(), "t_cam_m": [0, 0, 5]}}, "fx must be a number in (0, 1e+09]"),
+    ({"camera": {"K": [[120.0, 0, 1e12], [0, 120.0, 23.5], [0, 0, 1]], "width": 64, "height": 48,
+                 "R_cam_from_body": np.eye(3).ravel().tolist(), "t_cam_m": [0, 0, 5]}}, "cx must be a number in"),
 ])
 def test_render_scene_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, over, match):
     path = _tiny_scene(tmp_path, **over)
@@ -235,6 +252,52 @@ def test_render_scene_checks_out_before_rendering(tmp_path, capsys, monkeypatch)
     assert cli.main(["render-scene", str(path), "--out", str(tmp_path / "taken")]) == 2
     err = capsys.readouterr().err
     assert "--out" in err and "not a folder" in err and err.count("\n") == 1
+
+
+def test_render_scene_file_not_utf8_or_empty_out_is_one_line(tmp_path, capsys):
+    path = tmp_path / "scene.json"
+    path.write_bytes(b"\xff\xfe\x00\x80")
+    assert cli.main(["render-scene", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "scene file:" in err and str(path) in err and "UTF-8" in err and err.count("\n") == 1
+    assert cli.main(["render-scene", str(_tiny_scene(tmp_path)), "--out", ""]) == 2
+    err = capsys.readouterr().err
+    assert "--out must name a folder" in err and err.count("\n") == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_render_scene_moves_nothing_when_one_file_cannot_be_placed(tmp_path, capsys):
+    """A file where an output folder must go (``hdr``): the render fails in one line, and none of
+    the other files has been moved into --out (all or nothing)."""
+    path = _tiny_scene(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "hdr").write_text("in the way")
+    assert cli.main(["render-scene", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--out" in err and err.count("\n") == 1
+    assert sorted(p.name for p in out.iterdir()) == ["hdr"]
+
+
+def test_render_scene_unexpected_failure_is_one_line(tmp_path, capsys, monkeypatch):
+    """Whatever fails inside the renderer: one line naming the scene, exit 1, nothing written."""
+    import raytrace.shade
+
+    def boom(*a, **k):
+        raise RuntimeError("something\nunforeseen")
+    monkeypatch.setattr(raytrace.shade, "render", boom)
+    path = _tiny_scene(tmp_path)
+    assert cli.main(["render-scene", str(path), "--out", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "RuntimeError: something unforeseen" in err and str(path) in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_epoch_whose_sequence_runs_past_the_almanac_names_epoch():
+    r = run("--pattern", "elliptical", "--frames", "2", "--epoch", "2050-12-31T23:59:00Z", "--dry-run")
+    assert r.returncode == 2 and r.stdout == ""
+    err = r.stderr.strip()
+    assert len(err.splitlines()) == 1 and "--epoch" in err and "2051-01-01" in err, err
 
 
 def test_render_scene_mesh_far_from_its_origin_renders_as_if_centred(tmp_path):

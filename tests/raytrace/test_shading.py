@@ -621,6 +621,47 @@ def test_sliver_pixels_marks_exactly_the_pixels_a_thin_triangle_overlaps():
     assert not out.any()
 
 
+def _sat_cover(px, py, W, H):
+    """Pixel squares [k − ½, k + ½]² a triangle (px, py) overlaps, by the separating-axis test
+    over its whole bounding box, in NumPy (the rule ``sliver_pixels`` applies row by row)."""
+    vv, uu = np.mgrid[0:H, 0:W].astype(np.float64)
+    inside = (uu >= np.min(px) - 0.5) & (uu <= np.max(px) + 0.5) & (vv >= np.min(py) - 0.5) & (vv <= np.max(py) + 0.5)
+    sgn = 1.0 if (px[1] - px[0]) * (py[2] - py[0]) - (px[2] - px[0]) * (py[1] - py[0]) > 0 else -1.0
+    for k in range(3):
+        j = (k + 1) % 3
+        a, b = -(py[j] - py[k]) * sgn, (px[j] - px[k]) * sgn
+        inside &= a * (uu - px[k]) + b * (vv - py[k]) + 0.5 * (abs(a) + abs(b)) >= 0.0
+    return inside
+
+
+@pytest.mark.parametrize("angle_deg", [0.0, 0.00001, 3.0, 30.0, 45.0, 60.0, 89.99999, 90.0, 120.0, 177.0])
+def test_sliver_pixels_row_spans_mark_what_the_whole_box_test_marks(angle_deg):
+    """Wires 0.05 px wide and 10–80 px long at every slant, horizontal and vertical ones
+    included (edges less than 10⁻³ px high bound nothing): the pixels marked are those the
+    separating-axis test marks over the triangle's whole bounding box."""
+    from raytrace._shading import sliver_pixels
+    W, H = 120, 90
+    f, c, z = 100.0, 49.5, 10.0
+    rng = np.random.default_rng(int(angle_deg * 1000))
+    out = np.zeros((H, W), dtype=bool)
+    want = np.zeros((H, W), dtype=bool)
+    for _ in range(6):
+        length = rng.uniform(10.0, 80.0)
+        d = np.array([np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))])
+        nrm = np.array([-d[1], d[0]])
+        p0 = np.array([rng.uniform(20, 100), rng.uniform(20, 70)])
+        pts = np.array([p0, p0 + length * d, p0 + length * d + 0.05 * nrm])
+        px, py = pts[:, 0], pts[:, 1]
+        V = np.column_stack([(px - c) * z / f, (py - c) * z / f, np.full(3, z)])
+        out[:] = False
+        sliver_pixels(V, np.array([[0, 1, 2]]), np.eye(3), np.zeros(3), f, f, c, c, 1e-6, 1.0,
+                      np.full((H, W), np.inf, dtype=np.float32), out)
+        P = V[:, :2] * f / z + c  # the projection as the kernel computes it
+        want = _sat_cover(P[:, 0], P[:, 1], W, H)
+        assert want.sum() >= 10
+        assert np.array_equal(out, want)
+
+
 def test_donor_rows_takes_the_centre_else_the_nearest_neighbour_on_the_same_surface():
     """Edge sub-samples take their pixel centre's correction when they lie on its surface;
     otherwise (with borrowing) the nearest neighbouring centre on their own surface, never one
