@@ -1265,8 +1265,11 @@ def _project(V, i, R, t, fx, fy, cx, cy):
 @pjit
 def sliver_pixels(V, F, R, t, fx, fy, cx, cy, z_min, max_width, depth, out):
     """Pixels touched by triangles whose projection is a sliver: narrower than ``max_width``
-    pixels (twice its area over its longest edge) but longer than one pixel — a rod, wire
-    or panel seen edge-on that can fall between pixel centres and corners. Marks ``out``
+    pixels (twice its area over its longest edge) — a rod, wire or panel seen edge-on that
+    can fall between pixel centres and corners, or a part smaller than a pixel (a triangle
+    shorter than a pixel as well: in ``fast``, which casts no corner rays, this is what finds
+    an antenna tip that no pixel centre hits; at 1280×960 the 12 benchmark scenes have none
+    in front of another surface, at 160×120 they do). Marks ``out``
     (H, W) conservatively: every pixel square the projected triangle overlaps (separating
     axes: the square's two and the triangle's three edge normals) where the triangle's
     nearest point is nearer than the pixel centre's surface (``depth``, z-depth, inf on
@@ -1289,7 +1292,7 @@ def sliver_pixels(V, F, R, t, fx, fy, cx, cy, z_min, max_width, depth, out):
         for k in range(3):
             j = (k + 1) % 3
             longest = max(longest, math.hypot(px[j] - px[k], py[j] - py[k]))
-        if longest <= 1.0 or area2 >= max_width * longest or longest > 4.0 * (W + H):
+        if area2 >= max_width * longest or longest > 4.0 * (W + H):
             continue  # (the last: a surface grazing the camera, not a wire)
         # pixel k spans [k − ½, k + ½]: the square's own axes are this bounding box
         u0 = max(math.ceil(min(px[0], px[1], px[2]) - 0.5), 0)
