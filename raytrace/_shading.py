@@ -1030,6 +1030,12 @@ def residual_rows(img, av, au, unit, ridge, beta, out):
 
 
 @inline
+def _three_rows(img, v, vm, vp, lo, hi):
+    """Columns lo:hi of rows v, vm (above) and vp (below) of ``img`` (views)."""
+    return img[v, lo:hi], img[vm, lo:hi], img[vp, lo:hi]
+
+
+@inline
 def _id_or_earth_differs(a, am, ap, e, em, ep, k, left, right):
     """:func:`edge_pixels`' id and Earth test of pixel k of row slice ``a``/``e`` (rows above
     and below ``am``/``ap``, ``em``/``ep``), with or without its left and right neighbours."""
@@ -1075,12 +1081,8 @@ def edge_pixels(inst, lit_img, normal, depth, earth_px, rect, out):
     for v in numba.prange(v0, v1):
         vm = v - 1 if v > 0 else v
         vp = v + 1 if v < H - 1 else v
-        a = inst[v, lo:hi]
-        am = inst[vm, lo:hi]
-        ap = inst[vp, lo:hi]
-        e = earth_px[v, lo:hi]
-        em = earth_px[vm, lo:hi]
-        ep = earth_px[vp, lo:hi]
+        a, am, ap = _three_rows(inst, v, vm, vp, lo, hi)
+        e, em, ep = _three_rows(earth_px, v, vm, vp, lo, hi)
         o = out[v, lo:hi]
         for k in range(1, n - 1):
             x = a[k]
@@ -1100,15 +1102,9 @@ def edge_pixels(inst, lit_img, normal, depth, earth_px, rect, out):
             last -= 1
         if first > last:
             continue
-        li = lit_img[v, lo:hi]
-        lm = lit_img[vm, lo:hi]
-        lp = lit_img[vp, lo:hi]
-        nr = normal[v, lo:hi]
-        nm = normal[vm, lo:hi]
-        npl = normal[vp, lo:hi]
-        dr = depth[v, lo:hi]
-        dm = depth[vm, lo:hi]
-        dp = depth[vp, lo:hi]
+        li, lm, lp = _three_rows(lit_img, v, vm, vp, lo, hi)
+        nr, nm, npl = _three_rows(normal, v, vm, vp, lo, hi)
+        dr, dm, dp = _three_rows(depth, v, vm, vp, lo, hi)
         # pixels with both horizontal neighbours in the slices: shifted views, so that the loop
         # indexes from 0 and vectorises
         ks = max(first, 1)
