@@ -1684,6 +1684,13 @@ def check_out_folder(out_dir: str) -> None:
         parent = os.path.dirname(parent)
     if not os.path.isdir(parent) or not os.access(parent, os.W_OK | os.X_OK):
         raise CLIError(f"--out: cannot create {out_dir} ({parent} is not a writable folder)")
+    # os.access says yes to root everywhere, /proc and /sys included: make (and remove) a
+    # folder there to be sure before the render
+    import tempfile
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".probe-", dir=parent))
+    except OSError as exc:
+        raise CLIError(f"--out: cannot create {out_dir} ({parent}: {exc.strerror})") from None
 
 
 def render_scene_main(argv: list[str]) -> int:

@@ -266,6 +266,17 @@ def test_render_scene_file_not_utf8_or_empty_out_is_one_line(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux's /proc")
+def test_render_scene_refuses_an_out_folder_that_cannot_be_made_before_rendering(tmp_path, capsys, monkeypatch):
+    """/proc takes no new folders, though os.access may say it does (as root): refused in one
+    line before any rendering."""
+    import raytrace.shade
+    monkeypatch.setattr(raytrace.shade, "render", lambda *a, **k: pytest.fail("rendered before checking --out"))
+    assert cli.main(["render-scene", str(_tiny_scene(tmp_path)), "--out", "/proc/orbitsynth-out"]) == 2
+    err = capsys.readouterr().err
+    assert "--out: cannot create /proc/orbitsynth-out" in err and err.count("\n") == 1
+
+
 def test_render_scene_moves_nothing_when_one_file_cannot_be_placed(tmp_path, capsys):
     """A file where an output folder must go (``hdr``): the render fails in one line, and none of
     the other files has been moved into --out (all or nothing)."""
