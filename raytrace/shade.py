@@ -58,7 +58,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numba
 import numpy as np
@@ -431,8 +431,7 @@ def quality_preset(name: str, samples: int | None = None) -> Quality:
     if name == "reference":
         return Quality(name, spp=samples)
     aa = max(1, min(samples, 16))
-    return Quality(name, aa_grid=aa, sun_rays=4, cov_grid=COV_FAST if aa <= COV_FAST else 0, slivers=True,
-                   corner_rays=False)
+    return replace(q, aa_grid=aa, cov_grid=COV_FAST if aa <= COV_FAST else 0)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -1196,8 +1195,9 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
             thin = _thin_shadow_pixels(scene, s, vis, geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx,
                                        lighting.sun_dir_body)
             edges.ravel()[pix[thin]] = True
-        edges |= _corner_edges(scene, geo, corners, lit_img.reshape(H, W) if sun_corners else None,
-                               lighting.sun_dir_body, ctx.eps)
+        if corners is not None:  # (``fast`` casts none)
+            edges |= _corner_edges(scene, geo, corners, lit_img.reshape(H, W) if sun_corners else None,
+                                   lighting.sun_dir_body, ctx.eps)
         if q.slivers:
             K.sliver_pixels(scene.vertices, scene.faces, R, t, camera.fx, camera.fy, camera.cx, camera.cy,
                             1e-6 * scene.scale_m, 1.0, geo.depth_m, edges)
