@@ -810,6 +810,54 @@ def same_part_mean(img, inst, r, out):
             out[v, u] = sv / nv if nv > 0 else img[v, u]
 
 
+@pjit_exact
+def filter_variance(inst, passes, out):
+    """out[v, u] = the variance that ``passes`` à-trous passes (pass k: the 5×5 B3-spline kernel
+    with holes of 2^k pixels, :func:`atrous`) leave of independent unit-variance noise at each
+    pixel of the target (inst > 0), when a neighbour counts only on the pixel's own part (the
+    geometric weights' first factor, the id; normals and depths not looked at): each pass
+    takes v' = Σ w² v / (Σ w)² over the neighbours, the propagation :func:`atrous` applies to
+    its variance channel. 1 inside a part's interior is reached by no pass (passes = 0); a
+    part's border keeps more than its interior, a part one pixel wide the most. 0 off the
+    target. It steers the two-pass final gather (:func:`raytrace.shade._gather_two_pass`)."""
+    H, W = inst.shape
+    h = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
+    cur = np.empty((H, W))
+    nxt = np.empty((H, W))
+    for v in numba.prange(H):
+        for u in range(W):
+            cur[v, u] = 1.0 if inst[v, u] > 0 else 0.0
+    step = 1
+    for _ in range(passes):
+        for v in numba.prange(H):
+            for u in range(W):
+                i0 = inst[v, u]
+                if i0 == 0:
+                    nxt[v, u] = 0.0
+                    continue
+                sw = 0.0
+                sw2v = 0.0
+                for a in range(5):
+                    vv = v + (a - 2) * step
+                    if vv < 0 or vv >= H:
+                        continue
+                    for b in range(5):
+                        uu = u + (b - 2) * step
+                        if uu < 0 or uu >= W or inst[vv, uu] != i0:
+                            continue
+                        w = h[a] * h[b]
+                        sw += w
+                        sw2v += w * w * cur[vv, uu]
+                nxt[v, u] = sw2v / (sw * sw)
+        for v in numba.prange(H):
+            for u in range(W):
+                cur[v, u] = nxt[v, u]
+        step *= 2
+    for v in numba.prange(H):
+        for u in range(W):
+            out[v, u] = cur[v, u]
+
+
 @inline
 def _same_part_sum(img, inst, v, u, r, with_centre):
     """Σ img and the number of pixels over the (2r + 1)² around (v, u) whose id is its own

@@ -4,9 +4,13 @@ kernels, against independent answers:
 * allocate_rays: the continuous Neyman allocation with costs (n ∝ σ/√c at a fixed total cost),
   solved here with scipy's root finder, and the variance it promises against an even split;
 * same_part_mean: a direct loop over the neighbourhood;
+* filter_variance: the closed forms of one pass inside a part and along a strip one pixel
+  wide, the variance channel of the à-trous filter itself (raytrace._shading.atrous on a flat
+  guide), and, for one pass, the spread of the filtered noise over many noise images;
 * the two-pass estimate of the irradiance a dark plate receives from a lit perpendicular
   plate: its mean over seeds against the one-pass gather's mean (both unbiased) and against
-  the analytic form factor, its spread over seeds against the one pass's.
+  the analytic form factor, its spread over seeds against the one pass's; with the filter's
+  passes steering the allocation, the same mean, and more rays on the plate's border.
 """
 from __future__ import annotations
 
@@ -152,6 +156,99 @@ def test_gather_directions_are_uniform_over_seeds():
         assert np.abs(hist / len(u) - 0.1).max() < 0.015
 
 
+B3 = np.array([1.0, 4.0, 6.0, 4.0, 1.0]) / 16.0
+
+
+def _filter_variance_reference(inst, passes):
+    """The variance propagation of id-only à-trous passes, written out with NumPy shifts."""
+    H, W = inst.shape
+    v = (inst > 0).astype(float)
+    step = 1
+    for _ in range(passes):
+        big = 2 * step
+        pad_i = np.pad(inst.astype(np.int64), big, constant_values=-1)
+        pad_v = np.pad(v, big)
+        sw = np.zeros((H, W))
+        sw2v = np.zeros((H, W))
+        for a in range(5):
+            for b in range(5):
+                dv, du = (a - 2) * step, (b - 2) * step
+                same = pad_i[big + dv:big + dv + H, big + du:big + du + W] == inst
+                w = B3[a] * B3[b]
+                sw += w * same
+                sw2v += w * w * same * pad_v[big + dv:big + dv + H, big + du:big + du + W]
+        v = np.where(inst > 0, sw2v / np.where(sw > 0, sw, 1.0) ** 2, 0.0)
+        step *= 2
+    return v
+
+
+def _parts_image(rng, H=40, W=50):
+    inst = np.zeros((H, W), dtype=np.uint16)
+    inst[3:30, 4:30] = 1
+    inst[10:20, 20:45] = 2          # overlaps part 1: a shared border
+    inst[33, 5:45] = 3              # a strip one pixel wide
+    inst[22:38, 40:41] = 4          # and a vertical one
+    inst[rng.random((H, W)) < 0.02] = 5  # speckles
+    return inst
+
+
+@pytest.mark.parametrize("passes", [0, 1, 2, 3])
+def test_filter_variance_is_the_propagated_variance_of_the_id_only_passes(passes):
+    inst = _parts_image(np.random.default_rng(3))
+    out = np.full(inst.shape, -1.0)
+    K.filter_variance(inst, passes, out)
+    np.testing.assert_allclose(out, _filter_variance_reference(inst, passes), rtol=1e-12, atol=0)
+    # and the variance channel of the à-trous filter itself, on a guide whose normals and depths
+    # are all alike (its weights are then the B3 kernel on the pixel's own part)
+    H, W = inst.shape
+    normal = np.zeros((H, W, 3))
+    normal[..., 2] = 1.0
+    depth = np.full((H, W), 5.0)
+    img = np.zeros((H, W, 1))
+    var = (inst > 0).astype(float)
+    tmp, var_tmp = np.zeros_like(img), np.zeros_like(var)
+    for k in range(passes):
+        K.atrous(img, var, var, var, inst, normal, depth, 800.0, 800.0, W / 2, H / 2, 1 << k, 0.0, tmp, var_tmp)
+        img, tmp = tmp, img
+        var, var_tmp = var_tmp, var
+    np.testing.assert_allclose(out[inst > 0], var[inst > 0], rtol=1e-12)
+
+
+def test_filter_variance_closed_forms_and_the_spread_of_filtered_noise():
+    H, W = 30, 60
+    inst = np.zeros((H, W), dtype=np.uint16)
+    inst[2:20, 2:58] = 1
+    inst[25, 2:58] = 2
+    out = np.empty((H, W))
+    K.filter_variance(inst, 1, out)
+    s2 = (B3 ** 2).sum()  # 70/256
+    # inside a part: Σ w² with Σ w = 1, the 2-d kernel's (Σ h²)²
+    assert out[10, 30] == pytest.approx(s2 * s2, rel=1e-12)
+    # on a strip one pixel wide only the kernel's middle row counts: Σ w² / (Σ w)² = Σ h²
+    assert out[25, 30] == pytest.approx(s2, rel=1e-12)
+    # on a part's straight border (rows 2 of 2..19): the rows a = 2..4 of the kernel
+    rows = B3[2:]
+    assert out[2, 30] == pytest.approx((rows ** 2).sum() * s2 / rows.sum() ** 2, rel=1e-12)
+    assert 0.0 == out[0, 0] == out[22, 30]
+    # one pass of the filter over independent unit noise: its spread at each pixel
+    rng = np.random.default_rng(8)
+    n = 600
+    samples = np.empty((n, H, W))
+    normal = np.zeros((H, W, 3))
+    normal[..., 2] = 1.0
+    depth = np.full((H, W), 5.0)
+    res, res_var = np.zeros((H, W, 1)), np.zeros((H, W))
+    ones = np.ones((H, W))
+    for i in range(n):
+        img = rng.standard_normal((H, W, 1))
+        K.atrous(img, ones, ones, ones, inst, normal, depth, 800.0, 800.0, W / 2, H / 2, 1, 0.0, res, res_var)
+        samples[i] = res[..., 0]
+    emp = samples.var(axis=0)
+    on = inst > 0
+    # the sample variance of n draws is within a few × √(2/n) of the truth
+    assert np.all(np.abs(emp[on] / out[on] - 1.0) < 5.0 * np.sqrt(2.0 / n))
+
+
 # ---------------------------------------------------------------- the two passes on two plates
 RHO_A, E_SUN = 0.8, 1000.0
 
@@ -245,3 +342,34 @@ def test_two_passes_are_stratified_as_one(plate_points):
         two.append(shade._gather_two_pass(ctx, sl, 16, 8, pix, seed, np.empty(len(lit)), inst_l, at_l)[:, 0])
     ratio = np.array(two).var(axis=0).sum() / np.array(one).var(axis=0).sum()
     assert ratio < 1.15
+
+
+def test_the_filters_passes_give_a_parts_border_more_rays_and_keep_the_mean(plate_points):
+    """With ``filter_passes`` the allocation weighs each pixel's noise by what the filter keeps
+    of it (raytrace._shading.filter_variance): the lit plate's border pixels, which the filter
+    averages over fewer neighbours, get more rays than without, its inner ones fewer; the
+    estimate stays an unbiased one of the form factor's irradiance."""
+    ctx, s, inst, at, expect = plate_points
+    n = len(expect)
+    lit = expect > 0
+    pix = np.arange(n, dtype=np.int64)
+    q = np.empty(inst.shape)
+    K.filter_variance(inst, 2, q)
+    q_lit = q[at][lit]
+    border = q_lit > np.median(q_lit)
+    assert border.any() and (~border).any()
+    seeds = range(1, 81)
+    rays0, rays2, two = [], [], []
+    for seed in seeds:
+        r0, r2 = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+        shade._gather_two_pass(ctx, s, 16, 8, pix, seed, np.empty(n), inst, at, rays_out=r0)
+        two.append(shade._gather_two_pass(ctx, s, 16, 8, pix, seed, np.empty(n), inst, at, rays_out=r2,
+                                          filter_passes=2)[:, 0])
+        rays0.append(r0)
+        rays2.append(r2)
+    rays0, rays2, two = np.array(rays0)[:, lit], np.array(rays2)[:, lit], np.array(two)
+    gain = rays2.mean(axis=0) / rays0.mean(axis=0)
+    assert gain[border].mean() > 1.1 * gain[~border].mean()
+    se = np.sqrt(two.var(axis=0, ddof=1) / len(seeds))
+    assert np.all(np.abs(two.mean(axis=0) - expect)[lit] < 4.5 * se[lit] + 0.005 * expect[lit])
+    assert np.all(two[:, ~lit] == 0.0)
