@@ -16,9 +16,9 @@ interior: the rest), over the target's pixels, relative to Σ I_ref²:
 
 Prints one row per scene and preset and, per preset, the median error and time over the
 scenes (time: the faster of the two renders, after a warm-up; run nothing else meanwhile), and
-where the time goes: the stages of that render (``RenderFrame.timings_s``: geometry, waiting
-for the lighting context, direct light, indirect light, anti-aliasing), median over the
-scenes. ``--threads 1`` times a frame as one worker of a sequence renders it (numba on one
+where the time goes: the stages of that render (``RenderFrame.timings_s``: geometry, the
+lighting context — built in line on one thread, else waited for from its side thread —, direct
+light, indirect light, anti-aliasing), median over the scenes. ``--threads 1`` times a frame as one worker of a sequence renders it (numba on one
 thread; ``cli.py`` runs one such worker per core).
 """
 
