@@ -336,7 +336,7 @@ def _filter_sigma_l(samples: int) -> float:
     guided; with one ray there is no variance at all), so the filter is geometry-only."""
     if samples < 8:
         return 0.0
-    return 3.0 if 8 < samples <= 16 else FILTER_SIGMA_L
+    return 3.0 if _filter_linear(samples) > 0.0 and samples > 8 else FILTER_SIGMA_L
 
 
 # the local-linear residual filter (_filter_residual): coordinates in units of 8 pixels, and a
