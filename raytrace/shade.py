@@ -456,8 +456,10 @@ class RenderFrame:
     quality : Quality
     timings_s : dict
         Seconds per stage, wall clock. ``cache`` is the wait for the frame's lighting context
-        after the geometry pass: the context is built on a side thread during that pass
-        (``_CONTEXT_ON_SIDE_THREAD``), so its own time is partly inside ``geometry``.
+        after the geometry pass and the work that needs no radiance cache (the pixel centres'
+        sunlight, the pixels to anti-alias and, when they are one chunk, their sub-samples'
+        rays and sunlight): the context is built on a side thread meanwhile
+        (``_CONTEXT_ON_SIDE_THREAD``), so its own time is inside the other stages.
     """
 
     geometry: GeometryFrame
@@ -481,10 +483,13 @@ def _surfaces(scene: Scene, O, D, face) -> dict:
     return out
 
 
-class _Context:
-    """Per-frame constants the kernels need."""
+class _Sunlight:
+    """What the Sun's term and the background need of a frame's lighting: no radiance cache.
+    :func:`render` makes one on its own thread and shades the Sun (shadow rays, soft shadows,
+    the sub-samples' solar-disc rays) and finds the edges to anti-alias with it while the
+    :class:`_Context` (a subclass: these and the cache's solution) is built on a side thread."""
 
-    def __init__(self, scene: Scene, lighting: Lighting, cache_options: dict, prefiltered_glossy: bool = False):
+    def __init__(self, scene: Scene, lighting: Lighting, prefiltered_glossy: bool = False):
         self.scene = scene
         self.lighting = lighting
         mats = scene.materials
@@ -496,42 +501,16 @@ class _Context:
         # expression as raytrace._shading.add_mirror's blend, so t = 1 exactly where False)
         t = np.minimum(np.maximum((self.alpha - K.MIRROR_BLEND_A0) / K.MIRROR_BLEND_WIDTH, 0.0), 1.0)
         self.mirror_weighted = t < 1.0
-        self.table = split_sum_table()
-        self.eps = scene.ray_eps_m
-        self.p, self.tex = lighting.packed()
-        self.p_background = _background_params(lighting)[0]
-        self.cache = scene.radiance_cache(**cache_options)
-        # parts whose specular albedo exceeds their diffuse one (metals, MLI foils): traced
-        # paths continue along their lobe, as the cache's transfer does
-        self.glossy = self.cache.glossy_comp
-        # ``balanced`` samples the lobe of parts whose specular albedo is at least
-        # LOBE_MIN_SPECULAR of their diffuse one (luminance); elsewhere the cheap mirror term
-        # (:meth:`direct`) stands alone
-        lum = np.array([0.2126, 0.7152, 0.0722])
-        spec_albedo = self.cache.bounce_albedo - self.diff
-        self.lobe_sampled = self.specular & (spec_albedo @ lum >= LOBE_MIN_SPECULAR * (self.diff @ lum))
-        # the environment's unoccluded irradiance: the cache's sky term and the final gather's
-        # control variate are both its complement over blocked directions
-        cells = K.env.environment_cells(self.p, self.tex)
-        self.env_irradiance = K.env.irradiance_table(self.p, self.tex, cells=cells)
-        # ``fast``: the environment prefiltered by each glossy part's lobe for the mirror term's
-        # wide lobes, one table per distinct roughness (raytrace._shading.add_mirror)
+        # ``fast`` (no final gather): glossy parts reflect the environment prefiltered by their
+        # lobe, and every specular point casts its mirror ray
         self.prefiltered_glossy = prefiltered_glossy
-        levels = np.unique(self.alpha[self.specular & (self.alpha > K.GLOSSY_A0)]) if prefiltered_glossy else []
-        self.glossy_level = np.searchsorted(levels, self.alpha).clip(0, max(len(levels) - 1, 0))
-        self.glossy_env = K.env.glossy_table(self.p, levels, cells) if len(levels) else np.zeros((1, 2, 2, 3))
-        self.cf = self.cache.solve(lighting, env_irradiance=self.env_irradiance)
-        self.sun = np.array([*lighting.sun_dir_body, lighting.sun_irradiance_at_target_W_m2])
+        self.eps = scene.ray_eps_m
+        self.p_background, self.tex = _background_params(lighting)
 
-    def direct(self, s, E_point, *, disc=None, occluder_t=None, lbar_out=None):
-        """Sunlight (shadowed) and the cheap specular term of everything else
-        (:func:`raytrace._shading.add_mirror`; ``E_point`` the points' cache irradiance):
-        radiance (n, 3) and the Sun's visibility (n,) in {0, 1}. The shadow ray goes towards the
-        Sun's centre, or, with ``disc`` = (pixel, number, n_strata, seed) per point, towards
-        one solar-disc sample per point (:func:`raytrace._shading.sun_disc_dirs`), drawn only
-        for the points facing the Sun; ``occluder_t``,
-        when given, receives the distance to the occluder of every blocked point; ``lbar_out`` the
-        radiance L̄ the specular term reflects (the control variate of :meth:`lobe`)."""
+    def sunlight(self, s, *, disc=None, occluder_t=None):
+        """Sunlight (shadowed) at the points ``s``: radiance (n, 3) and the Sun's visibility
+        (n,) in {0, 1}; :meth:`_Context.direct` without the specular term of everything else
+        (arguments as there)."""
         n = len(s["P"])
         L = np.zeros((n, 3))
         vis = np.zeros(n)
@@ -567,49 +546,51 @@ class _Context:
                     occluder_t[idx[blocked]] = h["tfar"][blocked]
                 vis[idx[~blocked]] = 1.0
             K.shade_sun(s["NS"], s["WO"], s["comp"], self.diff, self.f0, self.alpha, sx, sy, sz, e_sun, vis, L)
-        spec = self.specular[s["comp"]]
-        if spec.any():
-            o = np.empty((n, 3))
-            d = np.empty((n, 3))
-            K.mirror_rays(s["NS"], s["NG"], s["WO"], s["P"], self.eps, spec, o, d)
-            idx = np.flatnonzero(spec)
-            if len(idx):
-                if self.prefiltered_glossy:
-                    h = self.scene.intersect(o[idx], d[idx])
-                else:
-                    # ``balanced`` weights the mirror ray by 1 − t (add_mirror): where t = 1 (wide
-                    # lobes: paint, aluminium) it needs no ray, and a miss stands in for it
-                    h = {"geomID": np.full(len(idx), -1, np.int32), "primID": np.zeros(len(idx), np.int32),
-                         "u": np.zeros(len(idx), np.float32), "v": np.zeros(len(idx), np.float32)}
-                    cast = np.flatnonzero(self.mirror_weighted[s["comp"][idx]])
-                    if len(cast):
-                        hc = self.scene.intersect(o[idx[cast]], d[idx[cast]])
-                        for key in h:
-                            h[key][cast] = hc[key]
-                M = np.zeros((n, 3))
-                lbar = np.zeros((n, 3)) if lbar_out is None else lbar_out
-                K.add_mirror(idx, o[idx], d[idx], h["geomID"], h["primID"], h["u"].astype(np.float64),
-                             h["v"].astype(np.float64), s["NS"], s["WO"], s["comp"], E_point, *self._lookup(),
-                             self.prefiltered_glossy, self.env_irradiance, self.glossy_env, self.glossy_level, M,
-                             lbar)
-                L += M
         return L, vis
 
-    def soft_shadows(self, s, L, vis, occ_t, footprint_m, pix, H, W, n_rays, seed):
+    def mirror_hits(self, s):
+        """The mirror rays of the specular points of ``s`` and their closest hits, as
+        :meth:`_Context.add_mirror` takes them: (rows, origins, directions, hits), or None where
+        no point is specular."""
+        spec = self.specular[s["comp"]]
+        if not spec.any():
+            return None
+        n = len(s["P"])
+        o = np.empty((n, 3))
+        d = np.empty((n, 3))
+        K.mirror_rays(s["NS"], s["NG"], s["WO"], s["P"], self.eps, spec, o, d)
+        idx = np.flatnonzero(spec)
+        if self.prefiltered_glossy:
+            h = self.scene.intersect(o[idx], d[idx])
+        else:
+            # ``balanced`` weights the mirror ray by 1 − t (add_mirror): where t = 1 (wide
+            # lobes: paint, aluminium) it needs no ray, and a miss stands in for it
+            h = {"geomID": np.full(len(idx), -1, np.int32), "primID": np.zeros(len(idx), np.int32),
+                 "u": np.zeros(len(idx), np.float32), "v": np.zeros(len(idx), np.float32)}
+            cast = np.flatnonzero(self.mirror_weighted[s["comp"][idx]])
+            if len(cast):
+                hc = self.scene.intersect(o[idx[cast]], d[idx[cast]])
+                for key in h:
+                    h[key][cast] = hc[key]
+        return idx, o[idx], d[idx], h
+
+    def soft_shadows(self, s, vis, occ_t, footprint_m, pix, H, W, n_rays, seed):
         """Replace the point-Sun visibility by the visible fraction of the solar disc (n_rays
         stratified shadow rays) wherever a penumbra can be wider than a quarter pixel: at
         blocked points whose occluder is far enough (penumbra half-width t·tan(θ☉/2) on the
         receiver) and at lit points within that width of them (a max filter in the image).
-        Elsewhere the point Sun is exact to within a quarter pixel. Updates L and vis."""
+        Elsewhere the point Sun is exact to within a quarter pixel. Updates ``vis`` and returns
+        the rows it changed and what their radiance gains, (rows, ΔL), to add to the points'
+        radiance once it holds the rest of their direct light (None when none changed)."""
         light = self.lighting
         half = 0.5 * light.sun_angular_diameter_rad
         e_sun = light.sun_irradiance_at_target_W_m2
         if half <= 0.0 or e_sun <= 0.0 or n_rays <= 1 or not len(pix):
-            return
+            return None
         blocked = np.isfinite(occ_t)
         w_blocked = np.minimum(occ_t[blocked] * math.tan(half) / footprint_m[blocked], 8.0)
         if not len(w_blocked) or w_blocked.max() <= 0.25:
-            return
+            return None
         from scipy.ndimage import maximum_filter
         # the max filter runs on the target's bounding box only (pixels are row-major in pix)
         v, u = pix // W, pix % W
@@ -624,7 +605,7 @@ class _Context:
                   & (NG[:, 0] * sx + NG[:, 1] * sy + NG[:, 2] * sz > 0.0))
         cand = np.flatnonzero(near & facing)
         if not len(cand):
-            return
+            return None
         d = np.empty((len(cand) * n_rays, 3), np.float32)  # as Embree takes them
         K.sun_disc_dirs(np.repeat(pix[cand].astype(np.int64), n_rays), np.tile(np.arange(n_rays), len(cand)), n_rays,
                         seed, sx, sy, sz, math.cos(half), d)
@@ -633,8 +614,70 @@ class _Context:
         full = np.zeros((len(cand), 3))
         K.shade_sun(s["NS"][cand], s["WO"][cand], s["comp"][cand], self.diff, self.f0, self.alpha, sx, sy, sz,
                     e_sun, np.ones(len(cand)), full)
-        L[cand] += (v - vis[cand])[:, None] * full
+        dL = (v - vis[cand])[:, None] * full
         vis[cand] = v
+        return cand, dL
+
+
+class _Context(_Sunlight):
+    """Per-frame constants the kernels need: :class:`_Sunlight`'s and the radiance cache's
+    solution under the frame's lighting."""
+
+    def __init__(self, scene: Scene, lighting: Lighting, cache_options: dict, prefiltered_glossy: bool = False):
+        super().__init__(scene, lighting, prefiltered_glossy)
+        self.table = split_sum_table()
+        self.p = lighting.packed()[0]
+        self.cache = scene.radiance_cache(**cache_options)
+        # parts whose specular albedo exceeds their diffuse one (metals, MLI foils): traced
+        # paths continue along their lobe, as the cache's transfer does
+        self.glossy = self.cache.glossy_comp
+        # ``balanced`` samples the lobe of parts whose specular albedo is at least
+        # LOBE_MIN_SPECULAR of their diffuse one (luminance); elsewhere the cheap mirror term
+        # (:meth:`direct`) stands alone
+        lum = np.array([0.2126, 0.7152, 0.0722])
+        spec_albedo = self.cache.bounce_albedo - self.diff
+        self.lobe_sampled = self.specular & (spec_albedo @ lum >= LOBE_MIN_SPECULAR * (self.diff @ lum))
+        # the environment's unoccluded irradiance: the cache's sky term and the final gather's
+        # control variate are both its complement over blocked directions
+        cells = K.env.environment_cells(self.p, self.tex)
+        self.env_irradiance = K.env.irradiance_table(self.p, self.tex, cells=cells)
+        # ``fast``: the environment prefiltered by each glossy part's lobe for the mirror term's
+        # wide lobes, one table per distinct roughness (raytrace._shading.add_mirror)
+        levels = np.unique(self.alpha[self.specular & (self.alpha > K.GLOSSY_A0)]) if prefiltered_glossy else []
+        self.glossy_level = np.searchsorted(levels, self.alpha).clip(0, max(len(levels) - 1, 0))
+        self.glossy_env = K.env.glossy_table(self.p, levels, cells) if len(levels) else np.zeros((1, 2, 2, 3))
+        self.cf = self.cache.solve(lighting, env_irradiance=self.env_irradiance)
+        self.sun = np.array([*lighting.sun_dir_body, lighting.sun_irradiance_at_target_W_m2])
+
+    def direct(self, s, E_point, *, disc=None, occluder_t=None, lbar_out=None):
+        """Sunlight (shadowed) and the cheap specular term of everything else
+        (:func:`raytrace._shading.add_mirror`; ``E_point`` the points' cache irradiance):
+        radiance (n, 3) and the Sun's visibility (n,) in {0, 1}. The shadow ray goes towards the
+        Sun's centre, or, with ``disc`` = (pixel, number, n_strata, seed) per point, towards
+        one solar-disc sample per point (:func:`raytrace._shading.sun_disc_dirs`), drawn only
+        for the points facing the Sun; ``occluder_t``,
+        when given, receives the distance to the occluder of every blocked point; ``lbar_out`` the
+        radiance L̄ the specular term reflects (the control variate of :meth:`lobe`).
+        :meth:`sunlight`, :meth:`mirror_hits` and :meth:`add_mirror` in turn."""
+        L, vis = self.sunlight(s, disc=disc, occluder_t=occluder_t)
+        self.add_mirror(s, E_point, L, self.mirror_hits(s), lbar_out)
+        return L, vis
+
+    def add_mirror(self, s, E_point, L, hits, lbar_out=None):
+        """Adds the cheap specular term of everything but the Sun to ``L`` (n, 3): the mirror
+        rays ``hits`` of :meth:`mirror_hits` (None: no specular point) reflecting the cache's
+        light (``E_point`` the points' cache irradiance); ``lbar_out`` as in :meth:`direct`."""
+        if hits is None:
+            return
+        n = len(s["P"])
+        idx, o, d, h = hits
+        M = np.zeros((n, 3))
+        lbar = np.zeros((n, 3)) if lbar_out is None else lbar_out
+        K.add_mirror(idx, o, d, h["geomID"], h["primID"], h["u"].astype(np.float64),
+                     h["v"].astype(np.float64), s["NS"], s["WO"], s["comp"], E_point, *self._lookup(),
+                     self.prefiltered_glossy, self.env_irradiance, self.glossy_env, self.glossy_level, M,
+                     lbar)
+        L += M
 
     def lobe(self, s, n_rays: int, pix: np.ndarray, seed: int, lbar: np.ndarray, var: np.ndarray | None = None):
         """Specular reflection of everything but the Sun, sampled over each glossy point's GGX
@@ -1039,7 +1082,11 @@ def _check_finite(stage: str, a: np.ndarray) -> None:
 # the cache's Gauss–Seidel sweeps run on one core, and the geometry pass's chunks fill the
 # other. The same frames bit for bit (tests/raytrace/test_shading.py); 12 benchmark scenes, median
 # per-scene time ratio to building it in line 0.95–0.97 for ``fast``, 0.98 for ``balanced``-16
-# (BENCHMARKS.md, "The context on a side thread"). False: one after the other.
+# (BENCHMARKS.md, "The context on a side thread"). What needs no cache is done before the frame
+# waits for it (:class:`_Sunlight`: the centres' sunlight and mirror rays, the pixels to
+# anti-alias and their sub-samples' rays, hits and sunlight when they are one chunk): ``fast``
+# then waits ~0 ms instead of 0–33 ms, median per-scene time 0.91× (BENCHMARKS.md, "`fast`
+# waits for nothing"). False: one after the other.
 _CONTEXT_ON_SIDE_THREAD = True
 # The anti-aliasing's chunks (:func:`_supersample`) two at a time: a chunk's Python and NumPy
 # steps run on one core, which the other chunk's kernels then use. Each chunk's samples are
@@ -1123,44 +1170,55 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     rad = np.zeros((H * W, 3), dtype=np.float32)
     lit_img = np.zeros(H * W, dtype=bool)
 
-    # ---- pixel centres on the target (their surfaces need the geometry only: found while the
-    # context may still be solving on its side thread)
+    # ---- what needs the geometry and the lighting but not the radiance cache, found while the
+    # context may still be solving it on its side thread (its Gauss–Seidel sweeps hold one core;
+    # these fill the other): the pixel centres' surfaces and sunlight (shadow rays, soft
+    # shadows) and their mirror rays
     t0 = time.perf_counter()
+    sunl = _Sunlight(scene, lighting, prefiltered_glossy=q.gather_rays == 0)
     pix = np.flatnonzero(geo.instance.ravel() > 0)
     O = np.empty((len(pix), 3))
     D = np.empty((len(pix), 3))
     centre_rays(pix, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, O, D)
     face = geo.face_index.ravel()[pix].astype(np.int64)
     s = _surfaces(scene, O, D, face)
-    t_centres = time.perf_counter() - t0
-    # ---- what anti-aliasing needs that the lighting context does not: Earth behind the target
-    # and the rays through the pixel corners, cast while the context may still be solving on
-    # its side thread (its Gauss–Seidel sweeps hold one core; these fill the other)
+    soft = q.sun_rays > 1 and lighting.sun_angular_diameter_rad > 0.0
+    occ_t = np.full(len(pix), np.inf) if soft else None  # occluder distances cost a closest-hit query
+    L, vis = sunl.sunlight(s, occluder_t=occ_t)
+    penumbra = None
+    if soft:
+        footprint_m = geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx
+        penumbra = sunl.soft_shadows(s, vis, occ_t, footprint_m, pix, H, W, q.sun_rays, int(seed))
+    mirror = sunl.mirror_hits(s)
+    lit_img[pix] = vis >= 0.5
+    t_direct = time.perf_counter() - t0
+    # ---- and for anti-aliasing: Earth behind the target, the pixels to anti-alias and, when
+    # they are one chunk, their sub-samples' rays, surfaces and sunlight
     t0 = time.perf_counter()
     earth_px = np.zeros((H, W), dtype=bool)
     earth_drawn = lighting.earth is not None and _earth_may_be_in_view(camera, R, lighting)
     if earth_drawn:
-        p_background, tex = _background_params(lighting)
         K.earth_background(geo.instance, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy,
-                           p_background, tex, _BACKGROUND_STEP, _BACKGROUND_TOL,
+                           sunl.p_background, sunl.tex, _BACKGROUND_STEP, _BACKGROUND_TOL,
                            _BACKGROUND_CHORD, earth_px, rad.reshape(H, W, 3))
         _check_finite("background", rad)
-    corners = _corner_rays(scene, camera, R, t, o_body, geo) if q.aa_grid > 1 and q.corner_rays else None
+    epix = _aa_pixels(q, scene, camera, R, t, o_body, geo, lighting, sunl, s, vis, pix, lit_img, earth_px,
+                      earth_drawn)
+    traced = None
+    if len(epix) and len(epix) <= _aa_chunk_pixels(q.aa_grid):
+        traced = _trace_chunk(sunl, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), q.cov_grid)
     t_early = time.perf_counter() - t0
     t0 = time.perf_counter()
     ctx = pending.result() if pending is not None else \
         _Context(scene, lighting, cache_options or {}, prefiltered_glossy=q.gather_rays == 0)
     timings["cache"] = time.perf_counter() - t0
-    t0 = time.perf_counter() - t_centres  # the centres count in "direct"
+    t0 = time.perf_counter() - t_direct  # the Sun at the centres counts in "direct"
     lbar = np.zeros((len(pix), 3))
     E = ctx.cache_E(s)
-    soft = q.sun_rays > 1 and lighting.sun_angular_diameter_rad > 0.0
-    occ_t = np.full(len(pix), np.inf) if soft else None  # occluder distances cost a closest-hit query
-    L, vis = ctx.direct(s, E, occluder_t=occ_t, lbar_out=lbar)
-    if soft:
-        footprint_m = geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx
-        ctx.soft_shadows(s, L, vis, occ_t, footprint_m, pix, H, W, q.sun_rays, int(seed))
-    lit_img[pix] = vis >= 0.5
+    ctx.add_mirror(s, E, L, mirror, lbar)
+    if penumbra is not None:
+        cand, dL = penumbra
+        L[cand] += dL
     timings["direct"] = time.perf_counter() - t0
     _check_finite("direct light", L)
     t0 = time.perf_counter()
@@ -1210,53 +1268,67 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     timings["indirect"] = time.perf_counter() - t0
 
     # ---- anti-aliasing where neighbours disagree (Earth behind the target is drawn above)
-    t0 = time.perf_counter() - t_early  # Earth and the corner rays count in "antialias"
+    t0 = time.perf_counter() - t_early  # Earth, the edges and their trace count in "antialias"
+    if len(epix):
+        sub_rays = max(2, q.gather_rays // 4)
+        centre = None
+        if residual is not None:
+            # the centre's surface (point, normal, footprint; row k of s for pixel pix[k]):
+            # a sub-sample shares its pixel's filtered correction only on that same surface
+            row_of_pixel = np.full(H * W, -1, dtype=np.int32)
+            row_of_pixel[pix] = np.arange(len(pix), dtype=np.int32)
+            centre = (row_of_pixel, s["P"], s["NS"], geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx)
+        n_extra = int(q.aa_extra * len(epix))
+        contrast = np.empty(len(epix)) if n_extra else None
+        sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual, sub_rays,
+                           centre, q.cov_grid, q.borrow, q.own_at_boundary, contrast, traced)
+        del traced
+        if n_extra:
+            # the highest contrast first, ties in pixel order; then back in pixel order
+            sel = np.sort(np.argsort(-contrast, kind="stable")[:n_extra])
+            sub2 = _supersample(ctx, scene, camera, R, t, o_body, geo, epix[sel], q.aa_grid,
+                                int(seed) ^ _AA_SECOND_STREAM, residual, sub_rays, centre, q.cov_grid, q.borrow,
+                                q.own_at_boundary)
+            sub[sel] = 0.5 * (sub[sel] + sub2)
+        _check_finite("anti-aliasing", sub)
+        rad[epix] = np.maximum(sub, 0.0)
+    timings["antialias"] = time.perf_counter() - t0
+    rad = rad.reshape(H, W, 3)
+    _stars(rad, scene, camera, R, t, lighting, timings)
+    return RenderFrame(geo, rad, q, timings)
+
+
+def _aa_pixels(q: Quality, scene: Scene, camera: Camera, R, t, o_body, geo, lighting: Lighting, sunl: _Sunlight, s,
+               vis, pix, lit_img, earth_px, earth_drawn: bool) -> np.ndarray:
+    """The pixels :func:`render` anti-aliases (flat indices, ascending): where 4-neighbours
+    disagree (:func:`raytrace._shading.edge_pixels`: id, Earth, lit/shadowed, crease, depth
+    step), and as the preset asks, where a rod's shadow thinner than a pixel may fall
+    (:func:`_thin_shadow_pixels`), where a pixel corner sees another part or Sun than its
+    centre (:func:`_corner_edges`) and where a triangle thinner than a pixel lies
+    (:func:`raytrace._shading.sliver_pixels`). Needs no radiance cache."""
+    H, W = camera.height, camera.width
     if earth_drawn:
         check = np.array([0, 0, W, H])
     else:
         u0, v0, u1, v1 = geo.cast_rect
         check = np.array([max(u0 - 1, 0), max(v0 - 1, 0), min(u1 + 1, W), min(v1 + 1, H)])
-    if q.aa_grid > 1 and check[2] > check[0] and check[3] > check[1]:
-        edges = np.zeros((H, W), dtype=bool)
-        K.edge_pixels(geo.instance, lit_img.reshape(H, W), geo.normal_cam, geo.depth_m, earth_px, check, edges)
-        sun_corners = q.sun_corners and lighting.sun_irradiance_at_target_W_m2 > 0.0
-        if sun_corners and q.thin_shadows and len(pix):
-            thin = _thin_shadow_pixels(scene, s, vis, geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx,
-                                       lighting.sun_dir_body)
-            edges.ravel()[pix[thin]] = True
-        if corners is not None:  # (``fast`` casts none)
-            edges |= _corner_edges(scene, geo, corners, lit_img.reshape(H, W) if sun_corners else None,
-                                   lighting.sun_dir_body, ctx.eps)
-        if q.slivers:
-            K.sliver_pixels(scene.vertices, scene.faces, R, t, camera.fx, camera.fy, camera.cx, camera.cy,
-                            1e-6 * scene.scale_m, 1.0, geo.depth_m, edges)
-        epix = np.flatnonzero(edges.ravel())
-        if len(epix):
-            sub_rays = max(2, q.gather_rays // 4)
-            centre = None
-            if residual is not None:
-                # the centre's surface (point, normal, footprint; row k of s for pixel pix[k]):
-                # a sub-sample shares its pixel's filtered correction only on that same surface
-                row_of_pixel = np.full(H * W, -1, dtype=np.int32)
-                row_of_pixel[pix] = np.arange(len(pix), dtype=np.int32)
-                centre = (row_of_pixel, s["P"], s["NS"], geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx)
-            n_extra = int(q.aa_extra * len(epix))
-            contrast = np.empty(len(epix)) if n_extra else None
-            sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual, sub_rays,
-                               centre, q.cov_grid, q.borrow, q.own_at_boundary, contrast)
-            if n_extra:
-                # the highest contrast first, ties in pixel order; then back in pixel order
-                sel = np.sort(np.argsort(-contrast, kind="stable")[:n_extra])
-                sub2 = _supersample(ctx, scene, camera, R, t, o_body, geo, epix[sel], q.aa_grid,
-                                    int(seed) ^ _AA_SECOND_STREAM, residual, sub_rays, centre, q.cov_grid, q.borrow,
-                                    q.own_at_boundary)
-                sub[sel] = 0.5 * (sub[sel] + sub2)
-            _check_finite("anti-aliasing", sub)
-            rad[epix] = np.maximum(sub, 0.0)
-    timings["antialias"] = time.perf_counter() - t0
-    rad = rad.reshape(H, W, 3)
-    _stars(rad, scene, camera, R, t, lighting, timings)
-    return RenderFrame(geo, rad, q, timings)
+    if not (q.aa_grid > 1 and check[2] > check[0] and check[3] > check[1]):
+        return np.zeros(0, dtype=np.int64)
+    corners = _corner_rays(scene, camera, R, t, o_body, geo) if q.corner_rays else None
+    edges = np.zeros((H, W), dtype=bool)
+    K.edge_pixels(geo.instance, lit_img.reshape(H, W), geo.normal_cam, geo.depth_m, earth_px, check, edges)
+    sun_corners = q.sun_corners and lighting.sun_irradiance_at_target_W_m2 > 0.0
+    if sun_corners and q.thin_shadows and len(pix):
+        thin = _thin_shadow_pixels(scene, s, vis, geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx,
+                                   lighting.sun_dir_body)
+        edges.ravel()[pix[thin]] = True
+    if corners is not None:  # (``fast`` casts none)
+        edges |= _corner_edges(scene, geo, corners, lit_img.reshape(H, W) if sun_corners else None,
+                               lighting.sun_dir_body, sunl.eps)
+    if q.slivers:
+        K.sliver_pixels(scene.vertices, scene.faces, R, t, camera.fx, camera.fy, camera.cx, camera.cy,
+                        1e-6 * scene.scale_m, 1.0, geo.depth_m, edges)
+    return np.flatnonzero(edges.ravel())
 
 
 def _stars(rad, scene: Scene, camera: Camera, R, t, lighting: Lighting, timings: dict) -> None:
@@ -1377,7 +1449,7 @@ def _corner_edges(scene: Scene, geo, corners, lit=None, sun_dir=None, eps: float
 
 def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,
                  residual=None, gather_rays: int = 0, centre_surface=None, cov_grid: int = 0, borrow: bool = False,
-                 own_at_boundary: bool = False, contrast_out=None):
+                 own_at_boundary: bool = False, contrast_out=None, traced=None):
     """Box-filtered radiance of the listed pixels from n_grid² correlated multi-jittered
     sub-pixel rays (:func:`raytrace._shading.subpixel_rays`). Each sub-sample is shaded like a
     ``fast`` pixel (exact Sun, cache, mirror term); with ``residual`` (the filtered
@@ -1407,15 +1479,20 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     The pixels go through in chunks of about _CHUNK_RAYS sub-samples (every sample is keyed
     by its pixel and number, so the result does not depend on the chunking): the arrays of
     all of them at once (~600 k rows on Tiangong at 1280×960) were mapped fresh on every
-    frame, and their page faults cost more than the shading."""
-    per = max(1, _CHUNK_RAYS // (n_grid * n_grid))
+    frame, and their page faults cost more than the shading. Each chunk is traced
+    (:func:`_trace_chunk`: rays, hits, the Sun; no radiance cache) and then shaded
+    (:func:`_shade_chunk`); ``traced``, if given, is the trace of ``epix`` as one chunk
+    (:func:`render` traces it while the context is solved on its side thread)."""
+    per = _aa_chunk_pixels(n_grid)
     if len(epix) <= per:
-        return _supersample_chunk(ctx, scene, camera, R, t, o_body, geo, epix, n_grid, seed, residual, gather_rays,
-                                  centre_surface, cov_grid, borrow, own_at_boundary, contrast_out)
+        if traced is None:
+            traced = _trace_chunk(ctx, scene, camera, R, t, o_body, geo, epix, n_grid, seed, cov_grid)
+        return _shade_chunk(ctx, camera, geo, traced, seed, residual, gather_rays, centre_surface, borrow,
+                            own_at_boundary, contrast_out)
     def chunk(i):
-        return _supersample_chunk(ctx, scene, camera, R, t, o_body, geo, epix[i:i + per], n_grid, seed, residual,
-                                  gather_rays, centre_surface, cov_grid, borrow, own_at_boundary,
-                                  None if contrast_out is None else contrast_out[i:i + per])
+        tr = _trace_chunk(ctx, scene, camera, R, t, o_body, geo, epix[i:i + per], n_grid, seed, cov_grid)
+        return _shade_chunk(ctx, camera, geo, tr, seed, residual, gather_rays, centre_surface, borrow,
+                            own_at_boundary, None if contrast_out is None else contrast_out[i:i + per])
 
     starts = range(0, len(epix), per)
     if _AA_CHUNKS_ON_TWO_THREADS and numba.get_num_threads() > 1:
@@ -1423,10 +1500,18 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     return np.concatenate([chunk(i) for i in starts])
 
 
-def _supersample_chunk(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,
-                       residual, gather_rays: int, centre_surface, cov_grid: int, borrow: bool,
-                       own_at_boundary: bool, contrast_out=None):
-    """:func:`_supersample` of one chunk of pixels (``contrast_out``: a view of its rows)."""
+def _aa_chunk_pixels(n_grid: int) -> int:
+    """Pixels per chunk of :func:`_supersample` (about _CHUNK_RAYS sub-samples)."""
+    return max(1, _CHUNK_RAYS // (n_grid * n_grid))
+
+
+def _trace_chunk(sunl: _Sunlight, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,
+                 cov_grid: int) -> dict:
+    """What :func:`_supersample` finds of one chunk of pixels without the radiance cache: the
+    sub-pixel rays and their hits, and at the hits the surfaces, the Sun (solar-disc shadow
+    rays) and the mirror rays (:func:`_trace_subsamples`); with ``cov_grid`` ≥ 2 the coverage
+    rays of the pixels whose sub-samples saw more than one part and the first coverage ray of
+    each part no sub-sample saw, traced the same way. :func:`_shade_chunk` finishes it."""
     S = n_grid * n_grid
     W = camera.width
     R_bc = np.ascontiguousarray(R.T)
@@ -1436,15 +1521,10 @@ def _supersample_chunk(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body
     h = _intersect_from(scene, o_body, z0, D)
     centre = np.repeat(epix, S)
     number = np.tile(np.arange(S), len(epix))
-    R_cam = np.ascontiguousarray(R, dtype=np.float64)
-    L = _shade_subsamples(ctx, scene, o_body, geo, camera, R_cam, D, h, centre, number, S, seed, residual,
-                          gather_rays, centre_surface, borrow, own_at_boundary)
-    out = np.empty((len(epix), 3))
-    K.group_means(L, S, out)
-    if contrast_out is not None:
-        K.subsample_contrast(L, S, contrast_out)
+    tr = {"epix": epix, "S": S, "R_cam": np.ascontiguousarray(R, dtype=np.float64), "mixed": None,
+          "sub": _trace_subsamples(sunl, scene, o_body, D, h, centre, number, S, seed)}
     if cov_grid < 2:
-        return out
+        return tr
 
     def groups(hh):
         g = np.empty(len(hh["geomID"]), dtype=np.int64)
@@ -1456,7 +1536,7 @@ def _supersample_chunk(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body
     g_s = groups(h).reshape(len(epix), S)
     mixed = np.flatnonzero((g_s != g_s[:, :1]).any(axis=1))
     if not len(mixed):
-        return out
+        return tr
     mpix = epix[mixed]
     C = cov_grid * cov_grid
     Dc = np.empty((len(mpix) * C, 3))
@@ -1468,16 +1548,37 @@ def _supersample_chunk(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body
     # parts seen only by coverage rays: shade the first such ray of each
     first_of = np.zeros((len(mpix), C), dtype=bool)
     K.coverage_unshaded_first(g_m, g_c, first_of)
-    L_c = np.zeros((len(mpix) * C, 3))
     first = np.flatnonzero(first_of.ravel())
+    tr.update(mixed=mixed, C=C, g_m=g_m, g_c=g_c, first_of=first_of, first=first)
     if len(first):
         hx = {k: v[first] for k, v in hc.items()}
-        L_c[first] = _shade_subsamples(ctx, scene, o_body, geo, camera, R_cam, Dc[first], hx,
-                                       np.repeat(mpix, C)[first], S + first % C, S + C, seed, residual, gather_rays,
+        tr["cov"] = _trace_subsamples(sunl, scene, o_body, Dc[first], hx, np.repeat(mpix, C)[first], S + first % C,
+                                      S + C, seed)
+    return tr
+
+
+def _shade_chunk(ctx: _Context, camera: Camera, geo, tr: dict, seed: int, residual, gather_rays: int,
+                 centre_surface, borrow: bool, own_at_boundary: bool, contrast_out=None):
+    """:func:`_supersample` of one chunk of pixels traced by :func:`_trace_chunk`
+    (``contrast_out``: a view of its rows)."""
+    epix, S, R_cam = tr["epix"], tr["S"], tr["R_cam"]
+    L = _shade_subsamples(ctx, geo, camera, R_cam, tr["sub"], S, seed, residual, gather_rays, centre_surface, borrow,
+                          own_at_boundary)
+    out = np.empty((len(epix), 3))
+    K.group_means(L, S, out)
+    if contrast_out is not None:
+        K.subsample_contrast(L, S, contrast_out)
+    mixed = tr["mixed"]
+    if mixed is None:
+        return out
+    C, first = tr["C"], tr["first"]
+    L_c = np.zeros((len(mixed) * C, 3))
+    if len(first):
+        L_c[first] = _shade_subsamples(ctx, geo, camera, R_cam, tr["cov"], S + C, seed, residual, gather_rays,
                                        centre_surface, borrow, own_at_boundary)
-    res = np.empty((len(mpix), 3))
-    K.coverage_combine(g_m, np.ascontiguousarray(L.reshape(len(epix), S, 3)[mixed]), g_c, first_of,
-                       L_c.reshape(len(mpix), C, 3), res)
+    res = np.empty((len(mixed), 3))
+    K.coverage_combine(tr["g_m"], np.ascontiguousarray(L.reshape(len(epix), S, 3)[mixed]), tr["g_c"], tr["first_of"],
+                       L_c.reshape(len(mixed), C, 3), res)
     out[mixed] = res
     return out
 
@@ -1491,14 +1592,15 @@ def _intersect_from(scene: Scene, o_body, z0: float, D):
     return scene.intersect(o32, d32)
 
 
-def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, camera: Camera, R_cam, D, h, centre, number, S, seed,
-                      residual, gather_rays, centre_surface, borrow, own_at_boundary=False):
-    """Radiance along sub-pixel rays D (hits h) of pixels ``centre`` of ``camera`` (pose
-    R_cam = R_cam_from_body); ``number`` (< S) is each ray's index within its pixel (it keys the
-    solar-disc and gather samples)."""
+def _trace_subsamples(sunl: _Sunlight, scene: Scene, o_body, D, h, centre, number, S, seed) -> dict:
+    """What the shading of sub-pixel rays D (hits h) of pixels ``centre`` needs that is not the
+    radiance cache (:func:`_shade_subsamples` finishes it): at the hits the surfaces, the Sun
+    (one solar-disc shadow ray each) and the mirror rays; along the misses Earth or black space.
+    ``number`` (< S) is each ray's index within its pixel (it keys the solar-disc and gather
+    samples)."""
     hit = h["geomID"] >= 0
-    L = np.zeros((len(D), 3))
     idx = np.flatnonzero(hit)
+    tr = {"n": len(D), "idx": idx, "miss": None}
     if len(idx):
         face = np.empty(len(idx), np.int64)
         Dh = np.empty((len(idx), 3))
@@ -1507,14 +1609,35 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, camera: Camera, 
         K.subsample_hits(idx, h["geomID"], h["primID"], scene.face_offset, D, np.asarray(centre, np.int64),
                          np.asarray(number, np.int64), face, Dh, c_idx, n_idx)
         s = _surfaces(scene, np.ascontiguousarray(np.broadcast_to(o_body, Dh.shape)), Dh, face)
-        E = ctx.cache_E(s)
         disc = None
-        if ctx.lighting.sun_angular_diameter_rad > 0.0 and S > 1:
+        if sunl.lighting.sun_angular_diameter_rad > 0.0 and S > 1:
             # one solar-disc sample per sub-sample, stratified over the pixel's S sub-samples in
             # strata permuted per pixel, independent of the sub-samples' cells
             disc = (c_idx, n_idx, S, seed)
+        Ls, _ = sunl.sunlight(s, disc=disc)
+        tr.update(s=s, Dh=Dh, c_idx=c_idx, n_idx=n_idx, Ls=Ls, mirror=sunl.mirror_hits(s))
+    miss = np.flatnonzero(~hit)
+    if len(miss) and sunl.lighting.earth is not None:
+        Dm = D[miss] / np.linalg.norm(D[miss], axis=1, keepdims=True)
+        out = np.empty((len(miss), 3))
+        K.env_along(o_body, np.ascontiguousarray(Dm), sunl.p_background, sunl.tex, out)
+        tr["miss"] = (miss, out)
+    return tr
+
+
+def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, seed, residual, gather_rays,
+                      centre_surface, borrow, own_at_boundary=False):
+    """Radiance along the sub-pixel rays traced by :func:`_trace_subsamples` (of a camera with
+    pose R_cam = R_cam_from_body): the cache's light and the mirror term added to the Sun's,
+    and with ``residual`` the filtered final-gather corrections (or the sub-sample's own
+    gather)."""
+    L = np.zeros((tr["n"], 3))
+    idx = tr["idx"]
+    if len(idx):
+        s, Dh, c_idx, n_idx, Ls = tr["s"], tr["Dh"], tr["c_idx"], tr["n_idx"], tr["Ls"]
+        E = ctx.cache_E(s)
         lbar = np.zeros((len(idx), 3))
-        Ls, _ = ctx.direct(s, E, disc=disc, lbar_out=lbar)
+        ctx.add_mirror(s, E, Ls, tr["mirror"], lbar)
         if residual is not None:
             row_of_pixel, P_c, N_c, foot = centre_surface
             k = np.empty(len(idx), dtype=np.int64)
@@ -1542,10 +1665,7 @@ def _shade_subsamples(ctx: _Context, scene: Scene, o_body, geo, camera: Camera, 
                 E[j] = ctx.gather_E(sj, gather_rays, keys, seed)
         ctx.add_diffuse(s, E, Ls)
         K.put_rows(idx, Ls, L)
-    miss = np.flatnonzero(~hit)
-    if len(miss) and ctx.lighting.earth is not None:
-        Dm = D[miss] / np.linalg.norm(D[miss], axis=1, keepdims=True)
-        out = np.empty((len(miss), 3))
-        K.env_along(o_body, np.ascontiguousarray(Dm), ctx.p_background, ctx.tex, out)
+    if tr["miss"] is not None:
+        miss, out = tr["miss"]
         L[miss] = out
     return L

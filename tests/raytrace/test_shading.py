@@ -310,13 +310,13 @@ def test_anti_aliasing_chunks_on_two_threads_give_the_same_bytes(monkeypatch, sp
                      earth=Earth((0, 0, -1), 6.778e6))
     monkeypatch.setattr(shade, "_CHUNK_RAYS", 16 * 90)  # 90 edge pixels per chunk (a 4 × 4 grid at 8 rays)
     ran_on = []
-    chunk = shade._supersample_chunk
+    chunk = shade._shade_chunk
 
     def spy(*a, **k):
         ran_on.append(threading.current_thread().name)
         return chunk(*a, **k)
 
-    monkeypatch.setattr(shade, "_supersample_chunk", spy)
+    monkeypatch.setattr(shade, "_shade_chunk", spy)
     monkeypatch.setattr(shade, "_AA_CHUNKS_ON_TWO_THREADS", False)
     a = render(sphere, CAM, R, t, light, quality="balanced", samples=8, seed=2).radiance
     serial = len(ran_on)
@@ -699,3 +699,37 @@ def test_donor_rows_takes_the_centre_else_the_nearest_neighbour_on_the_same_surf
     assert want == [6, 1, 4, 2]  # the cases meant
     donor_rows(centre, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c, foot, False, out)
     assert list(out) == [-1, -1, 4, -1]
+
+
+@pytest.mark.parametrize("quality, samples", [("fast", None), ("balanced", 8)])
+def test_one_chunk_traced_before_the_cache_gives_the_chunked_bytes(monkeypatch, sphere, quality, samples):
+    """When the pixels to anti-alias are one chunk, :func:`render` traces them (rays, hits,
+    the Sun, mirror rays) before it waits for the radiance cache, and shades them after: the
+    same bytes as several chunks each traced and shaded in turn, and the trace comes before the
+    first look-up in the cache."""
+    from raytrace import shade
+    R, t = _pose([1.0, -5.0, 2.0])
+    light = Lighting(sun_dir_body=(0.6, -0.48, 0.64), ambient_radiance_W_m2_sr=2.0,
+                     earth=Earth((0, 0, -1), 6.778e6))
+    events = []
+    trace, cache_E = shade._trace_chunk, shade._Context.cache_E
+
+    def spy_trace(*a, **k):
+        events.append("trace")
+        return trace(*a, **k)
+
+    def spy_cache(self, s):
+        events.append("cache")
+        return cache_E(self, s)
+
+    monkeypatch.setattr(shade, "_trace_chunk", spy_trace)
+    monkeypatch.setattr(shade._Context, "cache_E", spy_cache)
+    one = render(sphere, CAM, R, t, light, quality=quality, samples=samples, seed=4).radiance
+    assert events[0] == "trace" and events.count("trace") >= 1
+    events.clear()
+    monkeypatch.setattr(shade, "_AA_CHUNKS_ON_TWO_THREADS", False)
+    monkeypatch.setattr(shade, "_CHUNK_RAYS", 16 * 40)  # 40 to 71 edge pixels per chunk
+    several = render(sphere, CAM, R, t, light, quality=quality, samples=samples, seed=4).radiance
+    assert events[0] == "cache" and events.count("trace") > 3
+    assert one.tobytes() == several.tobytes()
+    assert (one > 0).mean() > 0.05
