@@ -432,6 +432,17 @@ def _jacobi_step(indptr, indices, data, Y, g_ptr, g_idx, g_data, Yb, X, X0, out)
     return dmax.max() if n else 0.0
 
 
+@pjit_exact
+def _zero_rows(A, rows):
+    """A[rows] = 0 for the rows of a 2-D array: what NumPy's masked assignment did in 1–4 ms per
+    frame on the cache's unsolved rows (most of them: back sides, buried and passive rows; 141 k
+    of Crew Dragon's 155 k contact rows), here ~0.1 ms."""
+    for k in numba.prange(rows.shape[0]):
+        r = rows[k]
+        for c in range(A.shape[1]):
+            A[r, c] = 0.0
+
+
 @jit_exact
 def _gauss_seidel_sweep(indptr, indices, data, g_ptr, g_idx, g_data, rho, rho_b, X0, X, Y, Yb):
     """One Gauss–Seidel sweep of X = X0 + W_ss (ρ ⊙ X) + W_g (ρ_bounce ⊙ X), in place: the rows
@@ -643,6 +654,7 @@ class RadianceCache:
         ok = self._unburied(valid, raw)
         self._c_alias = self._aliases(pos, nrm, self._c_comp_rows, valid & ~ok, ok)
         self._c_solved = ok
+        self._c_unsolved_rows = np.flatnonzero(~ok)
         self._c_valid = valid & (ok | (self._c_alias != np.arange(self.n_coarse_rows)))
         self._c = self._matrices(raw, ok, 0, self.n_coarse_rows)
         # contact rows: the lattice near contacts between parts, refined (see module notes)
@@ -720,6 +732,7 @@ class RadianceCache:
         self._f["P"] = sp.csr_matrix((w.ravel(), (np.repeat(np.arange(2 * n_f), 3), cols.ravel())),
                                      shape=(2 * n_f, 2 * n_c))
         self._f["P_passive"] = self._f["P"][self._f["passive"]]
+        self._f["unsolved_rows"] = np.flatnonzero(~self._f["solved"])
         return (look_s, look_start, look_ids, pos_all, nrm_all, np.concatenate([valid, valid_f]), ok_all, alias,
                 comp_rows)
 
@@ -981,11 +994,11 @@ class RadianceCache:
                                         E0, E, Y, Yb)
             if delta <= tolerance * scale:
                 break
-        unsolved = ~self._c_solved
-        E[unsolved] = 0.0
-        Y[unsolved] = 0.0  # ρ ⊙ E still, exactly
+        unsolved = self._c_unsolved_rows
+        _zero_rows(E, unsolved)
+        _zero_rows(Y, unsolved)  # ρ ⊙ E still, exactly
         if glossy:
-            Yb[unsolved] = 0.0
+            _zero_rows(Yb, unsolved)
         f = self._f
         E_f = E_sun_f = np.empty((0, 3))
         if f is not None:
@@ -999,7 +1012,7 @@ class RadianceCache:
             E_f = np.empty_like(E0_f)
             _jacobi_step(W_f.indptr, W_f.indices, W_f.data, Y,
                          *(f["W_g"] if f["W_g"] is not None else _EMPTY_CSR3(len(E0_f))), Yb, E0_f, E0_f, E_f)
-            E_f[~f["solved"]] = 0.0
+            _zero_rows(E_f, f["unsolved_rows"])
             E_f[f["passive"]] = f["P_passive"] @ E[self._c_alias]
         n = len(self._alias)
         E_out, sun_out = np.empty((n, 3)), np.empty(n)
