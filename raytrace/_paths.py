@@ -282,7 +282,7 @@ def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, e
 @pjit
 def sun_visibility(scene, idx, P, NG, sx, sy, sz, eps, pixel, number, n_strata, seed, cos_half, out):
     """out[k] = 1 where the shadow ray of listed point k = idx[j] reaches the Sun, else 0 (the
-    rest untouched), as :meth:`raytrace.shade._Context.direct` casts it: from P + ε·NG
+    rest untouched), as :meth:`raytrace.shade._Sunlight.sunlight` casts it: from P + ε·NG
     (float32, as Embree takes it) towards the Sun's centre, or with ``n_strata`` > 0 towards
     the solar-disc sample :func:`raytrace._shading.sun_disc_dirs` draws for (pixel[k],
     number[k]) — the same directions, without their array."""

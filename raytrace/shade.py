@@ -509,8 +509,11 @@ class _Sunlight:
 
     def sunlight(self, s, *, disc=None, occluder_t=None):
         """Sunlight (shadowed) at the points ``s``: radiance (n, 3) and the Sun's visibility
-        (n,) in {0, 1}; :meth:`_Context.direct` without the specular term of everything else
-        (arguments as there)."""
+        (n,) in {0, 1}. The shadow ray goes towards the Sun's centre, or, with ``disc`` =
+        (pixel, number, n_strata, seed) per point, towards one solar-disc sample per point
+        (:func:`raytrace._shading.sun_disc_dirs`), drawn only for the points facing the Sun;
+        ``occluder_t``, when given, receives the distance to the occluder of every blocked
+        point. The cheap specular term of everything else is :meth:`_Context.add_mirror`'s."""
         n = len(s["P"])
         L = np.zeros((n, 3))
         vis = np.zeros(n)
@@ -633,7 +636,7 @@ class _Context(_Sunlight):
         self.glossy = self.cache.glossy_comp
         # ``balanced`` samples the lobe of parts whose specular albedo is at least
         # LOBE_MIN_SPECULAR of their diffuse one (luminance); elsewhere the cheap mirror term
-        # (:meth:`direct`) stands alone
+        # (:meth:`add_mirror`) stands alone
         lum = np.array([0.2126, 0.7152, 0.0722])
         spec_albedo = self.cache.bounce_albedo - self.diff
         self.lobe_sampled = self.specular & (spec_albedo @ lum >= LOBE_MIN_SPECULAR * (self.diff @ lum))
@@ -649,24 +652,12 @@ class _Context(_Sunlight):
         self.cf = self.cache.solve(lighting, env_irradiance=self.env_irradiance)
         self.sun = np.array([*lighting.sun_dir_body, lighting.sun_irradiance_at_target_W_m2])
 
-    def direct(self, s, E_point, *, disc=None, occluder_t=None, lbar_out=None):
-        """Sunlight (shadowed) and the cheap specular term of everything else
-        (:func:`raytrace._shading.add_mirror`; ``E_point`` the points' cache irradiance):
-        radiance (n, 3) and the Sun's visibility (n,) in {0, 1}. The shadow ray goes towards the
-        Sun's centre, or, with ``disc`` = (pixel, number, n_strata, seed) per point, towards
-        one solar-disc sample per point (:func:`raytrace._shading.sun_disc_dirs`), drawn only
-        for the points facing the Sun; ``occluder_t``,
-        when given, receives the distance to the occluder of every blocked point; ``lbar_out`` the
-        radiance L̄ the specular term reflects (the control variate of :meth:`lobe`).
-        :meth:`sunlight`, :meth:`mirror_hits` and :meth:`add_mirror` in turn."""
-        L, vis = self.sunlight(s, disc=disc, occluder_t=occluder_t)
-        self.add_mirror(s, E_point, L, self.mirror_hits(s), lbar_out)
-        return L, vis
-
     def add_mirror(self, s, E_point, L, hits, lbar_out=None):
-        """Adds the cheap specular term of everything but the Sun to ``L`` (n, 3): the mirror
-        rays ``hits`` of :meth:`mirror_hits` (None: no specular point) reflecting the cache's
-        light (``E_point`` the points' cache irradiance); ``lbar_out`` as in :meth:`direct`."""
+        """Adds the cheap specular term of everything but the Sun
+        (:func:`raytrace._shading.add_mirror`) to ``L`` (n, 3): the mirror rays ``hits`` of
+        :meth:`mirror_hits` (None: no specular point) reflecting the cache's light (``E_point``
+        the points' cache irradiance); ``lbar_out`` (n, 3), if given, receives the radiance L̄
+        the specular term reflects (the control variate of :meth:`lobe`)."""
         if hits is None:
             return
         n = len(s["P"])
@@ -681,7 +672,7 @@ class _Context(_Sunlight):
 
     def lobe(self, s, n_rays: int, pix: np.ndarray, seed: int, lbar: np.ndarray, var: np.ndarray | None = None):
         """Specular reflection of everything but the Sun, sampled over each glossy point's GGX
-        lobe with n_rays rays, minus its cheap counterpart (the mirror term of :meth:`direct`,
+        lobe with n_rays rays, minus its cheap counterpart (the mirror term of :meth:`add_mirror`,
         which reflected ``lbar``): radiance (n, 3) (0 at points whose part's lobe is not sampled,
         :attr:`lobe_sampled`, where the mirror term is the answer). A lobe ray that
         hits a part sees it as a final-gather ray does: the Sun exact there (a shadow ray) and
