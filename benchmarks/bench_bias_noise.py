@@ -37,10 +37,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_time_error import viewpoints, write_scene  # noqa: E402
+from bench_time_error import scene_frames, viewpoints  # noqa: E402
 
-from raytrace.scene import Scene  # noqa: E402
-from raytrace.scenefile import load_scene_file  # noqa: E402
 from raytrace.shade import render  # noqa: E402
 from raytrace.targets import BUILTIN_TARGETS  # noqa: E402
 
@@ -61,56 +59,47 @@ def main() -> None:
     folder = Path(args.ref_dir) / f"w{args.width}"
     rows = {p: [] for p in args.presets}
     stages = {p: [] for p in args.presets}
-    for tg in args.targets:
-        scene = None
-        for view, path in write_scene(tg, folder / tg, args.width):
-            if view not in args.views:
-                continue
-            spec = load_scene_file(str(path))
-            if scene is None:
-                scene = Scene(spec.model)
-                scene.radiance_cache()
-            pose = (scene, spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting)
-            ref_file = folder / f"ref_{tg}_{view}_{args.ref_spp}.npz"
-            if not ref_file.exists():
-                rs = [render(*pose, quality="reference", samples=args.ref_spp, seed=s) for s in (1, 2)]
-                np.savez(ref_file, a=rs[0].radiance, b=rs[1].radiance, mask=rs[0].geometry.mask,
-                         inst=rs[0].geometry.instance)
-            z = np.load(ref_file)
-            a, b, m, inst = z["a"].astype(float), z["b"].astype(float), z["mask"], z["inst"].astype(np.int64)
-            ref = (a + b) / 2
-            edge = (maximum_filter(inst, 3) != minimum_filter(inst, 3)) & m
-            silhouette = (minimum_filter(inst, 3) == 0) & m
-            den = (ref[m] ** 2).sum()
-            for p in args.presets:
-                name, _, n = p.partition(":")
-                n = int(n) if n else None
-                render(*pose, quality=name, samples=n, seed=7)
-                xs, ts, tms = [], [], []
-                for s in (11, 12):
-                    t0 = time.perf_counter()
-                    frame = render(*pose, quality=name, samples=n, seed=s)
-                    ts.append(time.perf_counter() - t0)
-                    xs.append(frame.radiance.astype(float))
-                    tms.append(frame.timings_s)
-                stages[p].append(tms[int(np.argmin(ts))])
-                split = {}
-                for cls, mk in (("all", m), ("edge", edge), ("interior", m & ~edge), ("silhouette", silhouette),
-                                ("boundary", edge & ~silhouette)):
-                    n2 = ((xs[0] - xs[1])[mk] ** 2).sum() / 2 / den
-                    d2 = (((xs[0] + xs[1]) / 2 - ref)[mk] ** 2).sum() / den
-                    b2 = d2 - n2 / 2 - ((a - b)[mk] ** 2).sum() / 4 / den
-                    split[cls] = (b2, n2)
-                b2, n2 = split["all"]
-                err = float(np.sqrt(max(b2 + n2, 0.0)))
-                rows[p].append((min(ts), err))
-                print(f"{tg:11s} {view:7s} {p:12s} {min(ts):6.3f} s  error {100 * err:5.2f} %  "
-                      f"bias {100 * np.sqrt(max(b2, 0)):5.2f} %  noise {100 * np.sqrt(n2):5.2f} %  | edge bias² "
-                      f"{1e4 * split['edge'][0]:6.2f} noise² {1e4 * split['edge'][1]:6.2f}  interior bias² "
-                      f"{1e4 * split['interior'][0]:6.2f} noise² {1e4 * split['interior'][1]:6.2f} (×1e-4; edge = "
-                      f"silhouette {1e4 * split['silhouette'][0]:.2f} / {1e4 * split['silhouette'][1]:.2f} + part "
-                      f"boundary {1e4 * split['boundary'][0]:.2f} / {1e4 * split['boundary'][1]:.2f})  stages "
-                      + " ".join(f"{k} {v:.3f}" for k, v in stages[p][-1].items()), flush=True)
+    for tg, view, _path, pose in scene_frames(folder, args.width, args.targets, args.views, per_target=True):
+        ref_file = folder / f"ref_{tg}_{view}_{args.ref_spp}.npz"
+        if not ref_file.exists():
+            rs = [render(*pose, quality="reference", samples=args.ref_spp, seed=s) for s in (1, 2)]
+            np.savez(ref_file, a=rs[0].radiance, b=rs[1].radiance, mask=rs[0].geometry.mask,
+                     inst=rs[0].geometry.instance)
+        z = np.load(ref_file)
+        a, b, m, inst = z["a"].astype(float), z["b"].astype(float), z["mask"], z["inst"].astype(np.int64)
+        ref = (a + b) / 2
+        edge = (maximum_filter(inst, 3) != minimum_filter(inst, 3)) & m
+        silhouette = (minimum_filter(inst, 3) == 0) & m
+        den = (ref[m] ** 2).sum()
+        for p in args.presets:
+            name, _, n = p.partition(":")
+            n = int(n) if n else None
+            render(*pose, quality=name, samples=n, seed=7)
+            xs, ts, tms = [], [], []
+            for s in (11, 12):
+                t0 = time.perf_counter()
+                frame = render(*pose, quality=name, samples=n, seed=s)
+                ts.append(time.perf_counter() - t0)
+                xs.append(frame.radiance.astype(float))
+                tms.append(frame.timings_s)
+            stages[p].append(tms[int(np.argmin(ts))])
+            split = {}
+            for cls, mk in (("all", m), ("edge", edge), ("interior", m & ~edge), ("silhouette", silhouette),
+                            ("boundary", edge & ~silhouette)):
+                n2 = ((xs[0] - xs[1])[mk] ** 2).sum() / 2 / den
+                d2 = (((xs[0] + xs[1]) / 2 - ref)[mk] ** 2).sum() / den
+                b2 = d2 - n2 / 2 - ((a - b)[mk] ** 2).sum() / 4 / den
+                split[cls] = (b2, n2)
+            b2, n2 = split["all"]
+            err = float(np.sqrt(max(b2 + n2, 0.0)))
+            rows[p].append((min(ts), err))
+            print(f"{tg:11s} {view:7s} {p:12s} {min(ts):6.3f} s  error {100 * err:5.2f} %  "
+                  f"bias {100 * np.sqrt(max(b2, 0)):5.2f} %  noise {100 * np.sqrt(n2):5.2f} %  | edge bias² "
+                  f"{1e4 * split['edge'][0]:6.2f} noise² {1e4 * split['edge'][1]:6.2f}  interior bias² "
+                  f"{1e4 * split['interior'][0]:6.2f} noise² {1e4 * split['interior'][1]:6.2f} (×1e-4; edge = "
+                  f"silhouette {1e4 * split['silhouette'][0]:.2f} / {1e4 * split['silhouette'][1]:.2f} + part "
+                  f"boundary {1e4 * split['boundary'][0]:.2f} / {1e4 * split['boundary'][1]:.2f})  stages "
+                  + " ".join(f"{k} {v:.3f}" for k, v in stages[p][-1].items()), flush=True)
     for p, r in rows.items():
         print(f"== {p}: median {statistics.median(t for t, _ in r):.3f} s, median error "
               f"{100 * statistics.median(e for _, e in r):.2f} %; stages (median s): "

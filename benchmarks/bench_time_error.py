@@ -103,17 +103,20 @@ def write_scene(target: str, folder: Path, width: int) -> list[tuple[str, Path]]
     return out
 
 
-def scene_frames(folder: Path, width: int, targets, views):
+def scene_frames(folder: Path, width: int, targets, views, per_target: bool = False):
     """The benchmark scenes (written into ``folder`` if missing), one at a time with its
     radiance cache built: (target, view, scene file, the first five arguments of
-    :func:`raytrace.shade.render`)."""
+    :func:`raytrace.shade.render`). ``per_target``: one scene (and cache) per target, shared by
+    its views, instead of one per view."""
     for target in targets:
+        scene = None
         for view, spath in write_scene(target, Path(folder) / target, width):
             if view not in views:
                 continue
             spec = load_scene_file(str(spath))
-            scene = Scene(spec.model)
-            scene.radiance_cache()
+            if scene is None or not per_target:
+                scene = Scene(spec.model)
+                scene.radiance_cache()
             yield target, view, spath, (scene, spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting)
 
 

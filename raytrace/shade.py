@@ -1076,9 +1076,10 @@ def _check_finite(stage: str, a: np.ndarray) -> None:
 # (BENCHMARKS.md, "The context on a side thread"). What needs no cache is done before the frame
 # waits for it (:class:`_Sunlight`: the centres' sunlight and mirror rays, the pixels to
 # anti-alias and their sub-samples' rays, hits and sunlight when they are one chunk): ``fast``
-# then waits ~0 ms instead of 0–33 ms; one frame on both cores 0.96× the time (median per scene,
-# 0.84–1.01; ``balanced``-8 0.97×), the two versions' renders interleaved (BENCHMARKS.md,
-# "`fast` waits for nothing"). False: one after the other.
+# then waits ~0 ms instead of 0–33 ms; one frame on both cores 0.91–0.96× the time (median per
+# scene; ``balanced``-8 0.97–1.01×), the two versions' renders interleaved
+# (benchmarks/bench_interleaved.py; BENCHMARKS.md, "`fast` waits for nothing"). False: one after
+# the other.
 _CONTEXT_ON_SIDE_THREAD = True
 # The anti-aliasing's chunks (:func:`_supersample`) two at a time: a chunk's Python and NumPy
 # steps run on one core, which the other chunk's kernels then use. Each chunk's samples are
