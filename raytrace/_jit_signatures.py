@@ -4,376 +4,380 @@
 ``python -m raytrace._precompile --record`` (see raytrace._precompile)."""
 
 SIGNATURES = {
-    'degrade.convolve._convolve_interleaved': (1.86, [
+    'degrade.convolve._convolve_interleaved': (1.53, [
         "(Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'degrade.encode._encode': (1.98, [
+    'degrade.encode._encode': (2.14, [
         "(Array(float32, 3, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
         "(Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True))",
     ]),
-    'degrade.encode._encode8': (1.57, [
+    'degrade.encode._encode8': (1.19, [
         "(Array(float32, 3, 'C', False, aligned=True), Array(int16, 1, 'C', True, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
     ]),
-    'degrade.sensor._adc': (0.36, [
+    'degrade.sensor._adc': (0.29, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, bool, Array(float32, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._embree.intersect_batch': (2.86, [
+    'raytrace._embree.intersect_batch': (2.41, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._embree.occluded_batch': (1.32, [
+    'raytrace._embree.occluded_batch': (1.3, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.cast_and_refine': (5.68, [
+    'raytrace._kernels.cast_and_refine': (5.07, [
         "(int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(int32, 2, 'C', False, aligned=True), bool, bool)",
     ]),
-    'raytrace._kernels.centre_rays': (1.24, [
+    'raytrace._kernels.centre_rays': (1.07, [
         "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
     'raytrace._kernels.corner_normals': (0.84, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.ray_origins32': (0.63, [
+    'raytrace._kernels.ray_origins32': (0.46, [
         "(Array(float64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._paths.sun_visibility': (2.9, [
+    'raytrace._paths.sun_visibility': (2.3, [
         "(int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, float64, Array(float64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading._earth_albedo_along': (0.99, [
+    'raytrace._shading._earth_albedo_along': (1.01, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64, float64, float64, float64)",
     ]),
-    'raytrace._shading._strata': (0.12, [
+    'raytrace._shading._strata': (0.1, [
         '(int64,)',
     ]),
-    'raytrace._shading.add_diffuse': (0.64, [
+    'raytrace._shading.add_diffuse': (0.65, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.add_mirror': (12.96, [
+    'raytrace._shading.add_mirror': (11.11, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), bool, Array(float64, 3, 'C', False, aligned=True), Array(float64, 4, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.cache_irradiance': (2.25, [
+    'raytrace._shading.cache_irradiance': (1.27, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.coverage_combine': (2.01, [
+    'raytrace._shading.coverage_combine': (1.08, [
         "(Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.coverage_unshaded_first': (0.69, [
+    'raytrace._shading.coverage_unshaded_first': (0.46, [
         "(Array(int64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.earth_background': (10.82, [
+    'raytrace._shading.earth_background': (10.33, [
         "(Array(uint16, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, float64, float64, Array(bool, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.edge_pixels': (10.64, [
+    'raytrace._shading.edge_pixels': (9.09, [
         "(Array(uint16, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.env_along': (3.55, [
+    'raytrace._shading.env_along': (2.66, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.group_means': (0.74, [
+    'raytrace._shading.group_means': (0.64, [
         "(Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.incoming': (3.23, [
+    'raytrace._shading.incoming': (2.6, [
         "(int32, int32, float64, float64, float64, float64, float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64)",
     ]),
-    'raytrace._shading.mirror_rays': (1.09, [
+    'raytrace._shading.mirror_rays': (0.81, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.permute': (0.25, [
+    'raytrace._shading.permute': (0.15, [
         '(int64, int64, int64)',
     ]),
-    'raytrace._shading.put_rows': (0.56, [
+    'raytrace._shading.put_rows': (0.53, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.ray_groups': (0.77, [
+    'raytrace._shading.put_rows_nonnegative': (0.51, [
+        "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
+    ]),
+    'raytrace._shading.ray_groups': (0.49, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.shade_sun': (1.2, [
+    'raytrace._shading.shade_sun': (1.23, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.sliver_pixels': (5.07, [
+    'raytrace._shading.sliver_pixels': (4.48, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.subpixel_rays': (1.99, [
+    'raytrace._shading.subpixel_rays': (2.01, [
         "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.subsample_hits': (0.97, [
+    'raytrace._shading.subsample_hits': (0.8, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.sun_disc_dirs': (1.59, [
+    'raytrace._shading.sun_disc_dirs': (1.27, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.sun_rays': (0.98, [
+    'raytrace._shading.sun_rays': (0.61, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(bool, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.surfaces': (3.54, [
+    'raytrace._shading.surfaces': (5.49, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
+        "(Array(float64, 2, 'A', True, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace.brdf._ggx_d': (0.08, [
+    'raytrace.brdf._ggx_d': (0.07, [
         '(float64, float64)',
     ]),
-    'raytrace.brdf._lambda': (0.25, [
+    'raytrace.brdf._lambda': (0.2, [
         '(float64, float64)',
         '(float32, float64)',
     ]),
-    'raytrace.brdf._radical_inverse2': (0.11, [
+    'raytrace.brdf._radical_inverse2': (0.07, [
         '(int64,)',
     ]),
-    'raytrace.brdf._spec_prob': (0.16, [
+    'raytrace.brdf._spec_prob': (0.13, [
         '(float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf._split_sum': (2.97, [
+    'raytrace.brdf._split_sum': (2.27, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.brdf.brdf_cos': (1.03, [
+    'raytrace.brdf.brdf_cos': (1.16, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
         '(float32, float32, float32, float32, float32, float32, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.cosine_direction': (0.19, [
+    'raytrace.brdf.cosine_direction': (0.14, [
         '(float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.onb': (0.15, [
+    'raytrace.brdf.onb': (0.13, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.brdf.pdf_brdf': (0.36, [
+    'raytrace.brdf.pdf_brdf': (0.3, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.sample_brdf': (1.93, [
+    'raytrace.brdf.sample_brdf': (1.5, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.specular_albedo': (0.7, [
+    'raytrace.brdf.specular_albedo': (0.45, [
         "(Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64, float64)",
     ]),
-    'raytrace.cache._bin_hits': (1.37, [
+    'raytrace.cache._bin_hits': (1.65, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
         "(int64, Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._cache_rays': (1.68, [
+    'raytrace.cache._cache_rays': (1.31, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, int64, int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._gauss_seidel_sweep': (0.78, [
+    'raytrace.cache._gauss_seidel_sweep': (0.75, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._glints': (2.83, [
+    'raytrace.cache._glints': (2.49, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._glossy_bounce': (3.61, [
+    'raytrace.cache._glossy_bounce': (3.52, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._hash01': (0.62, [
+    'raytrace.cache._hash01': (0.59, [
         '(int64, int64)',
     ]),
-    'raytrace.cache._hash32': (0.33, [
+    'raytrace.cache._hash32': (0.34, [
         '(int64, int64)',
     ]),
-    'raytrace.cache._interp_rows': (0.46, [
+    'raytrace.cache._interp_rows': (0.42, [
         "(Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._jacobi_step': (4.85, [
+    'raytrace.cache._jacobi_step': (3.83, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._lattice_local': (0.07, [
+    'raytrace.cache._lattice_local': (0.08, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.cache._lattice_points': (0.57, [
+    'raytrace.cache._lattice_points': (0.74, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._lookup_rows': (1.83, [
+    'raytrace.cache._lookup_rows': (1.26, [
         "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._oct_cells': (0.99, [
+    'raytrace.cache._oct_cells': (0.91, [
         "(Array(float64, 2, 'C', False, aligned=True), int64)",
     ]),
-    'raytrace.cache._ray_cells': (1.53, [
+    'raytrace.cache._ray_cells': (1.48, [
         "(Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, Array(int64, 1, 'C', False, aligned=True))",
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._rows_irradiance': (2.15, [
+    'raytrace.cache._rows_irradiance': (1.71, [
         "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._sun_rays': (1.28, [
+    'raytrace.cache._sun_rays': (0.71, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._zero_rows': (0.41, [
+    'raytrace.cache._zero_rows': (0.42, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache.glossy_draw': (0.26, [
+    'raytrace.cache.glossy_draw': (0.24, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.cache.lattice_weights': (0.26, [
+    'raytrace.cache.lattice_weights': (0.25, [
         '(int64, float64, float64)',
     ]),
-    'raytrace.environment._direction_cells': (3.41, [
+    'raytrace.environment._direction_cells': (2.93, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._glossy_nodes': (1.23, [
+    'raytrace.environment._glossy_nodes': (0.89, [
         "(int64, int64, float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._hash3': (0.1, [
+    'raytrace.environment._hash3': (0.08, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.environment._irradiance_nodes': (1.34, [
+    'raytrace.environment._irradiance_nodes': (1.05, [
         "(int64, int64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._lobe_kernel': (0.13, [
+    'raytrace.environment._lobe_kernel': (0.08, [
         '(float64, float64)',
     ]),
-    'raytrace.environment._node_direction': (0.25, [
+    'raytrace.environment._node_direction': (0.22, [
         '(int64, int64, int64)',
         '(uint64, int64, int64)',
     ]),
     'raytrace.environment._smoothstep': (0.11, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.environment._value_noise': (0.83, [
+    'raytrace.environment._value_noise': (0.82, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.environment.env_cells': (5.56, [
+    'raytrace.environment.env_cells': (4.0, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, int64)",
     ]),
-    'raytrace.environment.oct_cell': (0.45, [
+    'raytrace.environment.oct_cell': (0.37, [
         '(float64, float64, float64, int64)',
         '(float32, float32, float32, int64)',
     ]),
-    'raytrace.environment.oct_direction': (0.17, [
+    'raytrace.environment.oct_direction': (0.13, [
         '(float64, float64)',
     ]),
-    'raytrace.environment.procedural_albedo': (1.51, [
+    'raytrace.environment.procedural_albedo': (1.42, [
         '(float64, float64, float64)',
     ]),
 }
 
 EXTRA_SIGNATURES = {
     'balanced': {
-        'raytrace._kernels.make_rays': (0.29, [
+        'raytrace._kernels.make_rays': (0.25, [
             "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._paths.gather_traced': (43.22, [
+        'raytrace._paths.gather_traced': (35.55, [
             "(int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(int64, 1, 'C', False, aligned=True), int64, float64, float64, float64, float64, bool, int64, float32, float32, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._paths.lobe_traced': (38.81, [
+        'raytrace._paths.lobe_traced': (37.66, [
             "(int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, float64, float64, float64, bool, int64, float32, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading._allotted': (0.27, [
+        'raytrace._shading._allotted': (0.21, [
             "(float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64)",
         ]),
-        'raytrace._shading._edge_top': (0.16, [
+        'raytrace._shading._edge_top': (0.1, [
             '(float64, float64, float64, float64, float64, float64)',
         ]),
-        'raytrace._shading._laine_karras32': (0.08, [
+        'raytrace._shading._laine_karras32': (0.11, [
             '(int64, int64)',
         ]),
-        'raytrace._shading._owen_scramble32': (0.27, [
+        'raytrace._shading._owen_scramble32': (0.33, [
             '(int64, int64)',
         ]),
-        'raytrace._shading._owen_sobol2_keyed': (0.52, [
+        'raytrace._shading._owen_sobol2_keyed': (0.59, [
             '(int64, int64, int64, int64)',
         ]),
-        'raytrace._shading._reverse_bits32': (0.09, [
+        'raytrace._shading._reverse_bits32': (0.12, [
             '(int64,)',
         ]),
-        'raytrace._shading._sobol2_y': (0.12, [
+        'raytrace._shading._sobol2_y': (0.13, [
             '(int64,)',
         ]),
-        'raytrace._shading.add_interpolated_rows': (2.5, [
+        'raytrace._shading.add_interpolated_rows': (5.08, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(uint16, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.add_rows': (0.81, [
+        'raytrace._shading.add_rows': (0.85, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.allocate_rays': (1.09, [
+        'raytrace._shading.allocate_rays': (0.8, [
             "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64, float64, Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.atrous': (2.16, [
+        'raytrace._shading.atrous': (3.31, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, float64, Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.bounce_sun_rays': (1.07, [
+        'raytrace._shading.bounce_sun_rays': (1.03, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.donor_rows': (1.98, [
+        'raytrace._shading.donor_rows': (2.68, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(uint16, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), bool, Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.filter_variance': (5.6, [
+        'raytrace._shading.filter_variance': (4.29, [
             "(Array(uint16, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.guide_images': (2.32, [
+        'raytrace._shading.guide_images': (1.83, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.incoming': (2.39, [
+        'raytrace._shading.incoming': (2.65, [
             "(int64, int64, float64, float64, float64, float64, float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64)",
         ]),
-        'raytrace._shading.near_shadow_slivers': (2.06, [
+        'raytrace._shading.near_shadow_slivers': (1.61, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.residual_image': (0.85, [
+        'raytrace._shading.residual_image': (1.12, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.residual_rows': (0.92, [
+        'raytrace._shading.residual_rows': (1.34, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.same_part_mean': (1.9, [
+        'raytrace._shading.same_part_mean': (1.56, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.shadow_map_of_slivers': (1.83, [
+        'raytrace._shading.shadow_map_of_slivers': (1.59, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.subsample_contrast': (1.67, [
+        'raytrace._shading.subsample_contrast': (0.87, [
             "(Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True))",
         ]),
     },
     'batched': {
-        'raytrace._embree.occluded_batch': (2.18, [
+        'raytrace._embree.occluded_batch': (2.64, [
             "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', True, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._kernels.refine_hits': (1.65, [
+        'raytrace._kernels.refine_hits': (2.09, [
             "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(int32, 2, 'C', False, aligned=True), bool, bool)",
         ]),
-        'raytrace._shading.bounce2_rays': (3.32, [
+        'raytrace._shading.bounce2_rays': (4.61, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.gather_rays': (1.33, [
+        'raytrace._shading.gather_rays': (1.35, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.gather_sum': (11.31, [
+        'raytrace._shading.gather_sum': (12.61, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.hit_or_miss': (0.52, [
+        'raytrace._shading.hit_or_miss': (0.55, [
             "(Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.hit_or_miss_rows': (0.53, [
+        'raytrace._shading.hit_or_miss_rows': (0.61, [
             "(Array(int32, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.incoming_rays': (6.84, [
+        'raytrace._shading.incoming_rays': (6.32, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.lobe_rays': (4.73, [
+        'raytrace._shading.lobe_rays': (3.01, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.lobe_sum': (5.72, [
+        'raytrace._shading.lobe_sum': (5.57, [
             "(int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.put_weighted_rows': (0.79, [
+        'raytrace._shading.put_weighted_rows': (0.78, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.take_rows': (0.62, [
+        'raytrace._shading.take_rows': (0.63, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
     },
     'reference': {
-        'raytrace._shading.background': (3.8, [
+        'raytrace._shading.background': (2.91, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._add_shadowed': (0.65, [
+        'raytrace.pathtrace._add_shadowed': (0.63, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
         'raytrace.pathtrace._escape': (2.28, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._primary': (1.09, [
+        'raytrace.pathtrace._primary': (1.36, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._rand': (0.21, [
+        'raytrace.pathtrace._rand': (0.26, [
             '(int64, int64, int64, int64)',
         ]),
-        'raytrace.pathtrace._vertex': (4.41, [
+        'raytrace.pathtrace._vertex': (3.77, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
     },

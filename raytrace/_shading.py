@@ -207,6 +207,18 @@ def put_rows(idx, src, out):
 
 
 @pjit_exact
+def put_rows_nonnegative(idx, src, out):
+    """out[idx[j]] = max(src[j], 0) (rows of 3; ``out`` float32): NumPy's
+    ``out[idx] = np.maximum(src, 0.0)``, the same bits (−0 becomes +0, as np.maximum returns its
+    second argument when they compare equal), without the temporary and on both cores."""
+    for j in numba.prange(idx.shape[0]):
+        i = idx[j]
+        for a in range(3):
+            v = src[j, a]
+            out[i, a] = np.float32(v if v > 0.0 else 0.0)
+
+
+@pjit_exact
 def group_means(L, S, out):
     """out[p] = mean of rows p·S … p·S + S − 1 of L (rows of 3), summed in order: the box
     filter of a pixel's S sub-samples."""

@@ -1257,7 +1257,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     _check_finite("indirect light", L)
     # the control-variate corrections (gather − cache) may overshoot below zero where the
     # cache is brighter than the truth; radiance is never negative
-    rad[pix] = np.maximum(L, 0.0)
+    K.put_rows_nonnegative(pix, L, rad)
     timings["indirect"] = time.perf_counter() - t0
 
     # ---- anti-aliasing where neighbours disagree (Earth behind the target is drawn above)
@@ -1284,7 +1284,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
                                 q.own_at_boundary)
             sub[sel] = 0.5 * (sub[sel] + sub2)
         _check_finite("anti-aliasing", sub)
-        rad[epix] = np.maximum(sub, 0.0)
+        K.put_rows_nonnegative(epix, sub, rad)
     timings["antialias"] = time.perf_counter() - t0
     rad = rad.reshape(H, W, 3)
     _stars(rad, scene, camera, R, t, lighting, timings)
@@ -1601,7 +1601,7 @@ def _trace_subsamples(sunl: _Sunlight, scene: Scene, o_body, D, h, centre, numbe
         n_idx = np.empty(len(idx), np.int64)  # and its number there
         K.subsample_hits(idx, h["geomID"], h["primID"], scene.face_offset, D, np.asarray(centre, np.int64),
                          np.asarray(number, np.int64), face, Dh, c_idx, n_idx)
-        s = _surfaces(scene, np.ascontiguousarray(np.broadcast_to(o_body, Dh.shape)), Dh, face)
+        s = _surfaces(scene, np.broadcast_to(o_body, Dh.shape), Dh, face)  # (one origin: no copy per row)
         disc = None
         if sunl.lighting.sun_angular_diameter_rad > 0.0 and S > 1:
             # one solar-disc sample per sub-sample, stratified over the pixel's S sub-samples in

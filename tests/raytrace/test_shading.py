@@ -733,3 +733,22 @@ def test_one_chunk_traced_before_the_cache_gives_the_chunked_bytes(monkeypatch, 
     assert events[0] == "cache" and events.count("trace") > 3
     assert one.tobytes() == several.tobytes()
     assert (one > 0).mean() > 0.05
+
+
+def test_put_rows_nonnegative_is_numpys_clamped_assignment():
+    """The kernel that writes the shaded rows into the float32 image is NumPy's
+    ``out[idx] = np.maximum(src, 0.0)``, bit for bit: negatives and −0 to +0, rounding to
+    float32 the same, other rows untouched."""
+    from raytrace import _shading as K
+    rng = np.random.default_rng(3)
+    src = rng.standard_normal((500, 3)) * 10.0 ** rng.integers(-40, 40, (500, 1))
+    src[:7] = [[-0.0, 0.0, -1e-300], [1e-46, -1e-46, 3.4e38], [0.1, 0.2, 0.3], [-5, 5, -0.0],
+               [1e39, 2.0, 1.0], [np.nextafter(1.0, 2.0), 1.0 + 2.0 ** -24, 1.0 + 3 * 2.0 ** -24], [7, -7, 0]]
+    idx = np.sort(rng.choice(2000, 500, replace=False)).astype(np.int64)
+    a = rng.random((2000, 3)).astype(np.float32)
+    b = a.copy()
+    with np.errstate(over="ignore"):
+        a[idx] = np.maximum(src, 0.0)
+    K.put_rows_nonnegative(idx, src, b)
+    assert a.tobytes() == b.tobytes()
+    assert not np.signbit(b[idx]).any() and (b[idx] >= 0).all()
