@@ -4,380 +4,386 @@
 ``python -m raytrace._precompile --record`` (see raytrace._precompile)."""
 
 SIGNATURES = {
-    'degrade.convolve._convolve_interleaved': (1.53, [
+    'degrade.convolve._convolve_interleaved': (1.96, [
         "(Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'degrade.encode._encode': (2.14, [
+    'degrade.encode._encode': (2.04, [
         "(Array(float32, 3, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
         "(Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True))",
     ]),
-    'degrade.encode._encode8': (1.19, [
+    'degrade.encode._encode8': (1.85, [
         "(Array(float32, 3, 'C', False, aligned=True), Array(int16, 1, 'C', True, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
     ]),
     'degrade.sensor._adc': (0.29, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, bool, Array(float32, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._embree.intersect_batch': (2.41, [
+    'raytrace._embree.intersect_batch': (2.56, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._embree.occluded_batch': (1.3, [
+    'raytrace._embree.occluded_batch': (1.55, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.cast_and_refine': (5.07, [
-        "(int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(int32, 2, 'C', False, aligned=True), bool, bool)",
+    'raytrace._kernels.cast_and_refine': (5.66, [
+        "(int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(int32, 2, 'C', False, aligned=True), bool, bool, Array(uint8, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.centre_rays': (1.07, [
+    'raytrace._kernels.centre_rays': (0.84, [
         "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.corner_normals': (0.84, [
+    'raytrace._kernels.corner_normals': (0.82, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.ray_origins32': (0.46, [
+    'raytrace._kernels.cull_mask': (5.22, [
+        "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(uint8, 2, 'C', False, aligned=True))",
+    ]),
+    'raytrace._kernels.ray_origins32': (0.65, [
         "(Array(float64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._paths.sun_visibility': (2.3, [
+    'raytrace._paths.sun_visibility': (3.3, [
         "(int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, float64, Array(float64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading._earth_albedo_along': (1.01, [
+    'raytrace._shading._earth_albedo_along': (0.95, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64, float64, float64, float64)",
     ]),
-    'raytrace._shading._strata': (0.1, [
+    'raytrace._shading._strata': (0.09, [
         '(int64,)',
     ]),
-    'raytrace._shading.add_diffuse': (0.65, [
+    'raytrace._shading.add_diffuse': (0.6, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.add_mirror': (11.11, [
+    'raytrace._shading.add_mirror': (13.04, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), bool, Array(float64, 3, 'C', False, aligned=True), Array(float64, 4, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.cache_irradiance': (1.27, [
+    'raytrace._shading.cache_irradiance': (2.1, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
     'raytrace._shading.coverage_combine': (1.08, [
         "(Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.coverage_unshaded_first': (0.46, [
+    'raytrace._shading.coverage_unshaded_first': (0.56, [
         "(Array(int64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.earth_background': (10.33, [
+    'raytrace._shading.earth_background': (10.92, [
         "(Array(uint16, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, float64, float64, Array(bool, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.edge_pixels': (9.09, [
+    'raytrace._shading.edge_pixels': (11.09, [
         "(Array(uint16, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.env_along': (2.66, [
+    'raytrace._shading.env_along': (2.96, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.group_means': (0.64, [
+    'raytrace._shading.group_means': (0.77, [
         "(Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.incoming': (2.6, [
+    'raytrace._shading.incoming': (3.23, [
         "(int32, int32, float64, float64, float64, float64, float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64)",
     ]),
-    'raytrace._shading.mirror_rays': (0.81, [
+    'raytrace._shading.mirror_rays': (1.05, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.permute': (0.15, [
+    'raytrace._shading.permute': (0.19, [
         '(int64, int64, int64)',
     ]),
-    'raytrace._shading.put_rows': (0.53, [
+    'raytrace._shading.put_rows': (1.17, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.put_rows_nonnegative': (0.51, [
+    'raytrace._shading.put_rows_nonnegative': (0.52, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.ray_groups': (0.49, [
+    'raytrace._shading.ray_groups': (0.63, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.shade_sun': (1.23, [
+    'raytrace._shading.shade_sun': (1.21, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.sliver_pixels': (4.48, [
+    'raytrace._shading.sliver_pixels': (4.91, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.subpixel_rays': (2.01, [
+    'raytrace._shading.subpixel_rays': (1.87, [
         "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.subsample_hits': (0.8, [
+    'raytrace._shading.subsample_hits': (1.54, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.sun_disc_dirs': (1.27, [
+    'raytrace._shading.sun_disc_dirs': (1.63, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.sun_rays': (0.61, [
+    'raytrace._shading.sun_rays': (1.12, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(bool, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._shading.surfaces': (5.49, [
+    'raytrace._shading.surfaces': (6.92, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
         "(Array(float64, 2, 'A', True, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace.brdf._ggx_d': (0.07, [
+    'raytrace.brdf._ggx_d': (0.11, [
         '(float64, float64)',
     ]),
-    'raytrace.brdf._lambda': (0.2, [
+    'raytrace.brdf._lambda': (0.3, [
         '(float64, float64)',
         '(float32, float64)',
     ]),
-    'raytrace.brdf._radical_inverse2': (0.07, [
+    'raytrace.brdf._radical_inverse2': (0.08, [
         '(int64,)',
     ]),
-    'raytrace.brdf._spec_prob': (0.13, [
+    'raytrace.brdf._spec_prob': (0.15, [
         '(float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf._split_sum': (2.27, [
+    'raytrace.brdf._split_sum': (3.06, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.brdf.brdf_cos': (1.16, [
+    'raytrace.brdf.brdf_cos': (1.11, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
         '(float32, float32, float32, float32, float32, float32, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.cosine_direction': (0.14, [
+    'raytrace.brdf.cosine_direction': (0.12, [
         '(float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.onb': (0.13, [
+    'raytrace.brdf.onb': (0.16, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.brdf.pdf_brdf': (0.3, [
+    'raytrace.brdf.pdf_brdf': (0.42, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.sample_brdf': (1.5, [
+    'raytrace.brdf.sample_brdf': (2.0, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.specular_albedo': (0.45, [
+    'raytrace.brdf.specular_albedo': (0.53, [
         "(Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64, float64)",
     ]),
-    'raytrace.cache._bin_hits': (1.65, [
+    'raytrace.cache._bin_hits': (1.54, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
         "(int64, Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._cache_rays': (1.31, [
+    'raytrace.cache._cache_rays': (1.23, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, int64, int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._gauss_seidel_sweep': (0.75, [
+    'raytrace.cache._csr_sum': (2.63, [
+        "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), int64, int64)",
+    ]),
+    'raytrace.cache._gauss_seidel_sweep': (1.12, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._glints': (2.49, [
+    'raytrace.cache._glints': (3.66, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._glossy_bounce': (3.52, [
+    'raytrace.cache._glossy_bounce': (3.78, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._hash01': (0.59, [
+    'raytrace.cache._hash01': (0.69, [
         '(int64, int64)',
     ]),
-    'raytrace.cache._hash32': (0.34, [
+    'raytrace.cache._hash32': (0.38, [
         '(int64, int64)',
     ]),
-    'raytrace.cache._interp_rows': (0.42, [
+    'raytrace.cache._interp_rows': (0.51, [
         "(Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._jacobi_step': (3.83, [
+    'raytrace.cache._jacobi_step': (4.03, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
     'raytrace.cache._lattice_local': (0.08, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.cache._lattice_points': (0.74, [
+    'raytrace.cache._lattice_points': (0.62, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._lookup_rows': (1.26, [
+    'raytrace.cache._lookup_rows': (1.21, [
         "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._oct_cells': (0.91, [
+    'raytrace.cache._oct_cells': (1.13, [
         "(Array(float64, 2, 'C', False, aligned=True), int64)",
     ]),
-    'raytrace.cache._ray_cells': (1.48, [
+    'raytrace.cache._ray_cells': (1.59, [
         "(Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, Array(int64, 1, 'C', False, aligned=True))",
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._rows_irradiance': (1.71, [
+    'raytrace.cache._rows_irradiance': (1.64, [
         "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._sun_rays': (0.71, [
+    'raytrace.cache._sun_rays': (0.85, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache._zero_rows': (0.42, [
+    'raytrace.cache._zero_rows': (0.54, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace.cache.glossy_draw': (0.24, [
+    'raytrace.cache.glossy_draw': (0.23, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.cache.lattice_weights': (0.25, [
+    'raytrace.cache.lattice_weights': (0.26, [
         '(int64, float64, float64)',
     ]),
-    'raytrace.environment._direction_cells': (2.93, [
+    'raytrace.environment._direction_cells': (4.09, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._glossy_nodes': (0.89, [
+    'raytrace.environment._glossy_nodes': (1.37, [
         "(int64, int64, float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._hash3': (0.08, [
+    'raytrace.environment._hash3': (0.09, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.environment._irradiance_nodes': (1.05, [
+    'raytrace.environment._irradiance_nodes': (1.35, [
         "(int64, int64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._lobe_kernel': (0.08, [
+    'raytrace.environment._lobe_kernel': (0.15, [
         '(float64, float64)',
     ]),
-    'raytrace.environment._node_direction': (0.22, [
+    'raytrace.environment._node_direction': (0.25, [
         '(int64, int64, int64)',
         '(uint64, int64, int64)',
     ]),
-    'raytrace.environment._smoothstep': (0.11, [
+    'raytrace.environment._smoothstep': (0.09, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.environment._value_noise': (0.82, [
+    'raytrace.environment._value_noise': (0.45, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.environment.env_cells': (4.0, [
+    'raytrace.environment.env_cells': (4.76, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, int64)",
     ]),
-    'raytrace.environment.oct_cell': (0.37, [
+    'raytrace.environment.oct_cell': (0.49, [
         '(float64, float64, float64, int64)',
         '(float32, float32, float32, int64)',
     ]),
-    'raytrace.environment.oct_direction': (0.13, [
+    'raytrace.environment.oct_direction': (0.12, [
         '(float64, float64)',
     ]),
-    'raytrace.environment.procedural_albedo': (1.42, [
+    'raytrace.environment.procedural_albedo': (1.29, [
         '(float64, float64, float64)',
     ]),
 }
 
 EXTRA_SIGNATURES = {
     'balanced': {
-        'raytrace._kernels.make_rays': (0.25, [
+        'raytrace._kernels.make_rays': (0.23, [
             "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._paths.gather_traced': (35.55, [
+        'raytrace._paths.gather_traced': (38.85, [
             "(int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(int64, 1, 'C', False, aligned=True), int64, float64, float64, float64, float64, bool, int64, float32, float32, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._paths.lobe_traced': (37.66, [
+        'raytrace._paths.lobe_traced': (39.88, [
             "(int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, float64, float64, float64, bool, int64, float32, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading._allotted': (0.21, [
+        'raytrace._shading._allotted': (0.23, [
             "(float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64)",
         ]),
-        'raytrace._shading._edge_top': (0.1, [
+        'raytrace._shading._edge_top': (0.13, [
             '(float64, float64, float64, float64, float64, float64)',
         ]),
-        'raytrace._shading._laine_karras32': (0.11, [
+        'raytrace._shading._laine_karras32': (0.1, [
             '(int64, int64)',
         ]),
-        'raytrace._shading._owen_scramble32': (0.33, [
+        'raytrace._shading._owen_scramble32': (0.3, [
             '(int64, int64)',
         ]),
-        'raytrace._shading._owen_sobol2_keyed': (0.59, [
+        'raytrace._shading._owen_sobol2_keyed': (0.53, [
             '(int64, int64, int64, int64)',
         ]),
-        'raytrace._shading._reverse_bits32': (0.12, [
+        'raytrace._shading._reverse_bits32': (0.1, [
             '(int64,)',
         ]),
         'raytrace._shading._sobol2_y': (0.13, [
             '(int64,)',
         ]),
-        'raytrace._shading.add_interpolated_rows': (5.08, [
+        'raytrace._shading.add_interpolated_rows': (4.53, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(uint16, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.add_rows': (0.85, [
+        'raytrace._shading.add_rows': (0.88, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
         'raytrace._shading.allocate_rays': (0.8, [
             "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64, float64, Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.atrous': (3.31, [
+        'raytrace._shading.atrous': (2.95, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, float64, Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.bounce_sun_rays': (1.03, [
+        'raytrace._shading.bounce_sun_rays': (1.05, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.donor_rows': (2.68, [
+        'raytrace._shading.donor_rows': (3.13, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(uint16, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), bool, Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.filter_variance': (4.29, [
+        'raytrace._shading.filter_variance': (4.46, [
             "(Array(uint16, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.guide_images': (1.83, [
+        'raytrace._shading.guide_images': (1.5, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.incoming': (2.65, [
+        'raytrace._shading.incoming': (2.11, [
             "(int64, int64, float64, float64, float64, float64, float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64)",
         ]),
-        'raytrace._shading.near_shadow_slivers': (1.61, [
+        'raytrace._shading.near_shadow_slivers': (2.08, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.residual_image': (1.12, [
+        'raytrace._shading.residual_image': (0.96, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.residual_rows': (1.34, [
+        'raytrace._shading.residual_rows': (0.91, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.same_part_mean': (1.56, [
+        'raytrace._shading.same_part_mean': (1.4, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.shadow_map_of_slivers': (1.59, [
+        'raytrace._shading.shadow_map_of_slivers': (1.78, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.subsample_contrast': (0.87, [
+        'raytrace._shading.subsample_contrast': (0.86, [
             "(Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True))",
         ]),
     },
     'batched': {
-        'raytrace._embree.occluded_batch': (2.64, [
+        'raytrace._embree.occluded_batch': (1.41, [
             "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', True, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._kernels.refine_hits': (2.09, [
+        'raytrace._kernels.refine_hits': (1.86, [
             "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(int32, 2, 'C', False, aligned=True), bool, bool)",
         ]),
-        'raytrace._shading.bounce2_rays': (4.61, [
+        'raytrace._shading.bounce2_rays': (3.37, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.gather_rays': (1.35, [
+        'raytrace._shading.gather_rays': (0.91, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.gather_sum': (12.61, [
+        'raytrace._shading.gather_sum': (11.93, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.hit_or_miss': (0.55, [
+        'raytrace._shading.hit_or_miss': (0.35, [
             "(Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.hit_or_miss_rows': (0.61, [
+        'raytrace._shading.hit_or_miss_rows': (0.46, [
             "(Array(int32, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.incoming_rays': (6.32, [
+        'raytrace._shading.incoming_rays': (5.31, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.lobe_rays': (3.01, [
+        'raytrace._shading.lobe_rays': (3.41, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.lobe_sum': (5.57, [
+        'raytrace._shading.lobe_sum': (6.84, [
             "(int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.put_weighted_rows': (0.78, [
+        'raytrace._shading.put_weighted_rows': (1.59, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.take_rows': (0.63, [
+        'raytrace._shading.take_rows': (0.5, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
     },
     'reference': {
-        'raytrace._shading.background': (2.91, [
+        'raytrace._shading.background': (2.81, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._add_shadowed': (0.63, [
+        'raytrace.pathtrace._add_shadowed': (0.61, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._escape': (2.28, [
+        'raytrace.pathtrace._escape': (4.05, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._primary': (1.36, [
+        'raytrace.pathtrace._primary': (1.02, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._rand': (0.26, [
+        'raytrace.pathtrace._rand': (0.27, [
             '(int64, int64, int64, int64)',
         ]),
-        'raytrace.pathtrace._vertex': (3.77, [
+        'raytrace.pathtrace._vertex': (3.7, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
     },

@@ -133,17 +133,21 @@ def refine_hits(o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0
 @pjit_exact
 def cast_and_refine(scene, o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx, cy, u0, v0, w, h, z0, V, F,
                     face_offset, face_normal, corner_normal, depth, ray_dist, n_shade, n_geom, inst, face_idx,
-                    want_dist, want_geom):
+                    want_dist, want_geom, cast):
     """:func:`make_rays`, Embree's closest hit (:func:`raytrace._embree.intersect1`, the same
     float32 rays) and :func:`refine_hits` for the pixel rectangle in one pass, row by row on
     numba's threads: no ray or hit arrays, no round of Python per chunk. The same AOVs, bit
     for bit (Embree's hits are those of ``embreex``, ``tests/raytrace/test_fused_gather.py``;
-    the AOVs, ``tests/raytrace/test_scene.py``)."""
+    the AOVs, ``tests/raytrace/test_scene.py``). ``cast`` (h, w) uint8, if not empty: only
+    the pixels where it is non-zero are cast (the others cannot hit, :func:`cull_mask`)."""
+    masked = cast.shape[0] > 0
     for r in numba.prange(h):
         buf = ray_buffer()
         v = v0 + r
         y = (v - cy) / fy
         for c in range(w):
+            if masked and cast[r, c] == 0:
+                continue
             u = u0 + c
             x = (u - cx) / fx
             dx = R_body_from_cam[0, 0] * x + R_body_from_cam[0, 1] * y + R_body_from_cam[0, 2]
@@ -156,6 +160,105 @@ def cast_and_refine(scene, o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx,
             refine_hit(o_body, R_cam_from_body, x, y, dx, dy, dz, u, v, z0, g, pr, tf, V, F, face_offset,
                        face_normal, corner_normal, depth, ray_dist, n_shade, n_geom, inst, face_idx, want_dist,
                        want_geom)
+
+
+@inline
+def _cross(xs, ys, o, a, b):
+    """z of (a − o) × (b − o) for points o, a, b of (xs, ys): > 0 where o → a → b turns left."""
+    return (xs[a] - xs[o]) * (ys[b] - ys[o]) - (ys[a] - ys[o]) * (xs[b] - xs[o])
+
+
+@jit_exact
+def cull_mask(P_cam, ptr, fx, fy, cx, cy, u0, v0, w, h, z_min, cast):
+    """The pixels of the rectangle (u0, v0, w, h) whose rays may hit a part: ``cast[r, c]`` = 1
+    where pixel (u0 + c, v0 + r) lies, with a pixel's margin around, in the image of one of
+    the convex polytopes whose vertices (camera frame) are rows ``ptr[g]:ptr[g + 1]`` of
+    ``P_cam``, one per group of parts (:attr:`raytrace.scene.Scene.part_hulls`); else 0.
+
+    The image of a convex polytope in front of the camera is the convex polygon of its
+    vertices' images (Andrew's monotone chain here), and a pixel's ray (through its centre
+    (u, v), :func:`make_rays`) can meet a triangle only where the triangle's image, inside
+    its part's polygon, covers (u, v). Each row's span is the polygon's chord at y = v, widened
+    by the endpoints of the edges that end within a row of it and by a pixel either side (so
+    a marked pixel centre lies within √2 px of the polygon):
+    Embree's float32 hits lie within ~1e-5 px of the float64 projection, so the margin keeps
+    every hit (a culled frame equals the full frame bit for bit, tests/raytrace/test_scene.py).
+    A polytope with a vertex at ``z ≤ z_min`` (at or behind the camera) marks every pixel."""
+    for r in range(h):
+        for c in range(w):
+            cast[r, c] = 0
+    lo = np.empty(h)
+    hi = np.empty(h)
+    for g in range(ptr.shape[0] - 1):
+        a = ptr[g]
+        n = ptr[g + 1] - a
+        if n == 0:
+            continue
+        xs = np.empty(n)
+        ys = np.empty(n)
+        for i in range(n):
+            z = P_cam[a + i, 2]
+            if not z > z_min:
+                for r in range(h):
+                    for c in range(w):
+                        cast[r, c] = 1
+                return
+            xs[i] = fx * P_cam[a + i, 0] / z + cx
+            ys[i] = fy * P_cam[a + i, 1] / z + cy
+        # lexicographic order (x, then y), then the lower and upper chains
+        order = np.argsort(ys, kind="mergesort")
+        order = order[np.argsort(xs[order], kind="mergesort")]
+        hull = np.empty(2 * n + 1, np.int64)
+        k = 0
+        for j in range(n):  # lower chain
+            i = order[j]
+            while k >= 2 and _cross(xs, ys, hull[k - 2], hull[k - 1], i) <= 0.0:
+                k -= 1
+            hull[k] = i
+            k += 1
+        start = k + 1
+        for j in range(n - 2, -1, -1):  # upper chain
+            i = order[j]
+            while k >= start and _cross(xs, ys, hull[k - 2], hull[k - 1], i) <= 0.0:
+                k -= 1
+            hull[k] = i
+            k += 1
+        k -= 1  # the last point is the first
+        k = max(k, 1)
+        for r in range(h):
+            lo[r] = np.inf
+            hi[r] = -np.inf
+        for j in range(k):
+            xa = xs[hull[j]]
+            ya = ys[hull[j]]
+            xb = xs[hull[(j + 1) % k]]
+            yb = ys[hull[(j + 1) % k]]
+            if ya > yb:
+                xa, ya, xb, yb = xb, yb, xa, ya
+            # rows within one of the edge's y-range (clamped before conversion: a vertex near
+            # the camera plane projects far away)
+            f0 = math.ceil(ya) - 1.0 - v0
+            f1 = math.floor(yb) + 1.0 - v0
+            if f1 < 0.0 or f0 > h - 1.0:
+                continue
+            for r in range(int(max(f0, 0.0)), int(min(f1, h - 1.0)) + 1):
+                y = float(v0 + r)
+                if y <= ya:
+                    x = xa
+                elif y >= yb:
+                    x = xb
+                else:
+                    x = xa + (y - ya) * ((xb - xa) / (yb - ya))
+                if x < lo[r]:
+                    lo[r] = x
+                if x > hi[r]:
+                    hi[r] = x
+        for r in range(h):
+            if lo[r] <= hi[r]:
+                c0 = min(max(math.ceil(lo[r]) - 1.0 - u0, 0.0), float(w))
+                c1 = min(max(math.floor(hi[r]) + 1.0 - u0, -1.0), w - 1.0)
+                for c in range(int(c0), int(c1) + 1):
+                    cast[r, c] = 1
 
 
 @inline

@@ -152,3 +152,57 @@ def test_cache_rays_in_chunks_on_two_threads_build_the_same_cache(monkeypatch):
     for other in built[1:]:
         for k in members:
             _same(getattr(first, k), getattr(other, k), k)
+
+
+def test_csr_assembly_against_scipy():
+    """raytrace.cache._csr_sum (the transfer matrices' assembly) against scipy's COO to CSR
+    with duplicates summed: the same pattern (columns ascending per row) and values to the
+    last bits' order of summation, on rows in input order and shuffled, with dropped entries,
+    one and three channels, a column range not a multiple of 64 and an empty matrix."""
+    from raytrace.cache import _csr_sum
+    rng = np.random.default_rng(4)
+    for trial in range(12):
+        m, n_rows = int(rng.integers(0, 4000)), int(rng.integers(1, 400))
+        n_cols = int(rng.integers(1, 70)) if trial % 3 == 0 else int(rng.integers(1, 20000))
+        rows = rng.integers(0, n_rows, m)
+        if trial % 2:
+            rows = np.sort(rows)
+        cols = rng.integers(0, n_cols, (m, 3))
+        nch = 1 if trial % 4 else 3
+        vals = rng.random((m, 3, nch))
+        keep = rng.random(m) < 0.7
+        indptr, indices, data = _csr_sum(rows, cols, vals, keep, n_rows, n_cols)
+        assert indptr.shape == (n_rows + 1,) and indices.dtype == np.int32 and data.shape == (len(indices), nch)
+        for ch in range(nch):
+            ref = sp.csr_matrix((vals[keep][:, :, ch].ravel(), (np.repeat(rows[keep], 3), cols[keep].ravel())),
+                                shape=(n_rows, n_cols))
+            ref.sum_duplicates()
+            assert np.array_equal(ref.indptr, indptr) and np.array_equal(ref.indices, indices), trial
+            np.testing.assert_allclose(data[:, ch], ref.data, rtol=1e-13, atol=0.0)
+
+
+def test_contact_rows_summed_per_chunk_give_the_listed_matrices(monkeypatch):
+    """The contact rows' W_ss and W_sb summed by each chunk of rays as it is cast
+    (``_ASSEMBLE_CONTACT_PER_CHUNK``) are the same bits as those assembled from the lists of
+    every hit, with chunks of 16 rows (dozens of them) on one thread and two."""
+    from raytrace import cache as cache_mod
+    monkeypatch.setattr(cache_mod, "_CAST_CHUNK_RAYS", 16 * 128)
+    built = []
+    for per_chunk, threads in ((False, 1), (True, 1), (True, max(2, numba.get_num_threads()))):
+        monkeypatch.setattr(cache_mod, "_ASSEMBLE_CONTACT_PER_CHUNK", per_chunk)
+        old = numba.get_num_threads()
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+        try:
+            built.append(_open_box().radiance_cache(spacing_m=0.4))
+        finally:
+            numba.set_num_threads(old)
+    first = built[0]
+    assert first._f is not None and len(first.contact_rows) > 4 * 16
+    assert first._f["W_ss"].nnz > 0 and first._f["W_sb"].nnz > 0
+    for other in built[1:]:
+        for k in ("W_ss", "W_sb"):
+            a, b = first._f[k], other._f[k]
+            assert a.shape == b.shape and a.has_sorted_indices and b.has_sorted_indices
+            for part in ("indptr", "indices", "data"):
+                x, y = getattr(a, part), getattr(b, part)
+                assert x.dtype == y.dtype and np.array_equal(x.view(np.uint8), y.view(np.uint8)), (k, part)

@@ -271,6 +271,111 @@ def test_culled_render_equals_full_frame_bit_for_bit():
             assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), name
 
 
+def spread_parts():
+    """Parts far apart with empty space between them, some flat (a single triangle, a panel
+    of zero thickness), thin (a rod) or tiny: what the per-part culling polytopes
+    (:func:`raytrace.scene._part_hulls`) must bound each, degenerate hulls included."""
+    rod = trimesh.creation.cylinder(radius=0.01, height=6.0, sections=6)
+    rod.apply_transform(trimesh.transformations.rotation_matrix(0.7, [1.0, 1.0, 0.0]))
+    rod.apply_translation([3.0, 0.0, 0.0])
+    tri = trimesh.Trimesh([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], [[0, 1, 2]])
+    tri.apply_translation([-3.0, 2.0, 1.0])
+    flat = trimesh.Trimesh([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]])
+    flat.apply_translation([-2.0, -3.0, -1.0])
+    speck = trimesh.creation.icosphere(subdivisions=0, radius=0.004)
+    speck.apply_translation([0.5, 2.5, -2.0])
+    return model_of(trimesh.creation.box((1.0, 0.6, 0.4)), rod, tri, flat, speck)
+
+
+def test_part_culling_casts_a_fraction_and_loses_no_hit(monkeypatch):
+    """The geometry pass casts only inside the images of the parts' bounding polytopes
+    (raytrace._kernels.cull_mask): the same AOVs bit for bit as every pixel of the frame, on
+    parts far apart (flat, thin, tiny), from near (polytopes straddling the camera's plane)
+    to far, the target crossing the image's border; and the mask holds every hit of the full
+    frame and far fewer pixels than the rectangle."""
+    import raytrace._kernels as kernels
+    import raytrace.scene as scene_module
+    scene = Scene(spread_parts())
+    if scene.direct is None:
+        pytest.skip("no Embree 4 in the embreex wheel: the chunks cast the whole rectangle")
+    masks = []
+    real = kernels.cull_mask
+
+    def spy(*args):
+        real(*args)
+        masks.append((args[6], args[7], args[-1].copy()))
+
+    monkeypatch.setattr(kernels, "cull_mask", spy)
+    cam = Camera(width=160, height=120, fx=150.0, fy=150.0, cx=79.5, cy=59.5)
+    rng = np.random.default_rng(3)
+    fractions = []
+    for k in range(40):
+        pos = rng.normal(size=3)
+        pos *= rng.uniform(2.0, 60.0) / np.linalg.norm(pos)
+        R, t = pose_looking_at_origin(pos)
+        R = axis_angle(rng.normal(size=3), rng.uniform(0.0, 0.5)) @ R  # off-centre, across the border
+        masks.clear()
+        a = scene.render_geometry(cam, R, t, ray_distance=True, geometric_normal=True)
+        b = scene.render_geometry(cam, R, t, cull=False, ray_distance=True, geometric_normal=True)
+        for name in ("depth_m", "normal_cam", "normal_geom_cam", "instance", "face_index", "ray_distance_m"):
+            assert np.array_equal(getattr(a, name).view(np.uint8), getattr(b, name).view(np.uint8)), (k, name)
+        if masks:
+            u0, v0, cast = masks[0]
+            hit = b.mask[v0:v0 + cast.shape[0], u0:u0 + cast.shape[1]]
+            assert b.mask.sum() == hit.sum() and np.all(cast[hit] == 1), k
+            fractions.append(cast.mean())
+    assert len(fractions) >= 20
+    assert np.median(fractions) < 0.5  # parts far apart: most of the rectangle is empty space
+
+
+def test_cull_mask_covers_the_projected_polygon():
+    """raytrace._kernels.cull_mask against point-in-polygon of the projected hull (scipy's
+    Delaunay): every pixel centre inside a polytope's image is marked, none farther than
+    two pixels from it; one polytope at or behind the camera's plane marks everything."""
+    from scipy.spatial import Delaunay, cKDTree
+
+    from raytrace._kernels import cull_mask
+    rng = np.random.default_rng(8)
+    fx = fy = 40.0
+    cx, cy = 31.5, 22.5
+    u0, v0, w, h = 2, 1, 60, 44
+    vv, uu = np.mgrid[v0:v0 + h, u0:u0 + w]
+    centres = np.column_stack([uu.ravel(), vv.ravel()]).astype(float)
+    for trial in range(30):
+        groups = [rng.normal(size=(rng.integers(1, 12), 3)) * rng.uniform(0.05, 1.0) + [*rng.normal(size=2), 4.0]
+                  for _ in range(rng.integers(1, 4))]
+        if trial % 5 == 0:  # collinear points: a segment's image
+            groups.append(np.outer(rng.uniform(-1, 1, 4), rng.normal(size=3)) + [0.0, 0.0, 3.0])
+        P = np.concatenate(groups)
+        ptr = np.cumsum([0] + [len(g) for g in groups]).astype(np.int64)
+        cast = np.full((h, w), 7, np.uint8)
+        cull_mask(P, ptr, fx, fy, cx, cy, u0, v0, w, h, 1e-9, cast)
+        assert set(np.unique(cast)) <= {0, 1}
+        uv_all = []
+        for g in groups:
+            uv = np.column_stack([fx * g[:, 0] / g[:, 2] + cx, fy * g[:, 1] / g[:, 2] + cy])
+            uv_all.append(uv)
+            if len(uv) >= 3 and np.linalg.matrix_rank(uv[1:] - uv[0], tol=1e-9) == 2:
+                inside = Delaunay(uv).find_simplex(centres) >= 0
+                assert np.all(cast.ravel()[inside] == 1), trial
+        # nothing marked far from every polygon: at most a row above or below it and a pixel
+        # beside it, √2 px
+        marked = centres[cast.ravel() == 1]
+        far = np.ones(len(marked), dtype=bool)
+        for uv in uv_all:
+            if len(uv) >= 3 and np.linalg.matrix_rank(uv[1:] - uv[0], tol=1e-9) == 2:
+                far &= Delaunay(uv).find_simplex(marked) < 0
+        edges = np.concatenate([np.concatenate([a + (b - a) * s for s in np.linspace(0, 1, 200)[:, None, None]])
+                                for uv in uv_all for a, b in [(uv[i], uv[j]) for i in range(len(uv))
+                                                                 for j in range(len(uv))]])
+        d, _ = cKDTree(edges).query(marked[far])
+        assert d.size == 0 or d.max() <= math.sqrt(2.0) + 0.02, trial
+    P = np.array([[0.0, 0.0, 5.0], [1.0, 0.0, 5.0], [0.0, 1.0, -0.1]])
+    cast = np.zeros((h, w), np.uint8)
+    cull_mask(P, np.array([0, 3], np.int64), fx, fy, cx, cy, u0, v0, w, h, 1e-9, cast)
+    assert cast.all()
+
+
 def test_one_kernel_geometry_pass_equals_the_embreex_chunks_bit_for_bit(monkeypatch):
     """render_geometry casts, intersects and refines in one numba kernel that calls Embree
     (raytrace._kernels.cast_and_refine); the row chunks through embreex (the fallback, and an
