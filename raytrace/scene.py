@@ -91,7 +91,7 @@ def _part_hulls(V: np.ndarray, vertex_offset, max_groups: int = _CULL_GROUPS) ->
     target's one hull leaves most of a rectangle around rods and panels empty: on the 12 scenes
     of ``benchmarks/bench_time_error.py`` at 1280 × 960 the rays cast are 0.11–0.60 of the
     rectangle's pixels, whose hits are 0.09–0.59 of them (Cassini's boom and antennas: 0.11–0.14
-    cast); its geometry pass took 0.6–0.7× the time (BENCHMARKS.md, "Rays only where a part
+    cast); its geometry pass took 0.63–0.77× the time (BENCHMARKS.md, "Rays only where a part
     may be")."""
     n_parts = len(vertex_offset) - 1
     bounds = np.unique(np.round(np.linspace(0, n_parts, min(n_parts, max_groups) + 1)).astype(np.int64))
