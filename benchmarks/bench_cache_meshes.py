@@ -80,14 +80,16 @@ def _diff(a, b) -> tuple[int, float]:
     elif isinstance(a, np.ndarray):
         if not isinstance(b, np.ndarray) or a.dtype != b.dtype or a.shape != b.shape:
             return -1, np.inf
-        bad = a != b if a.dtype.kind in "fiub" else ~np.equal(a, b)
-        if a.dtype.kind == "f":
-            bad = bad & ~(np.isnan(a) & np.isnan(b))
+        if a.size == 0:
+            return 0, 0.0
+        # value by value, bit for bit (NaN equals NaN, −0 differs from +0)
+        bad = (a.reshape(a.size, -1).view(np.uint8) != b.reshape(b.size, -1).view(np.uint8)).any(axis=1)
+        bad = bad.reshape(a.shape)
         n = int(np.count_nonzero(bad))
         if n == 0:
             return 0, 0.0
         x, y = a[bad].astype(np.float64), b[bad].astype(np.float64)
-        return n, float(np.max(np.abs(x - y) / np.maximum(np.abs(x), 1e-300)))
+        return n, float(np.max(np.abs(x - y) / np.maximum(np.maximum(np.abs(x), np.abs(y)), 1e-300)))
     else:
         return (0, 0.0) if a == b else (-1, np.inf)
     if any(n < 0 for n, _ in parts):

@@ -530,17 +530,10 @@ def _csr_sum(rows, cols, vals, keep, n_rows, n_cols):
     return indptr, indices[:nnz].copy(), data[:nnz].copy()
 
 
-def _csr_matrix(rows, cols, vals, keep, n_rows: int, n_cols: int):
-    """:func:`_csr_sum` of one channel as a scipy CSR matrix (canonical: sorted, no duplicates)."""
-    indptr, indices, data = _csr_sum(rows, cols, vals, keep, n_rows, n_cols)
-    W = sp.csr_matrix((data[:, 0], indices, indptr), shape=(n_rows, n_cols))
-    W.has_sorted_indices = True
-    return W
-
-
 def _stack_rows(pieces, rows, n_rows: int, n_cols: int):
-    """One scipy CSR matrix (n_rows, n_cols) from :func:`_csr_sum`'s pieces of consecutive runs
-    of ``rows`` (ascending; the other rows empty), in order."""
+    """One scipy CSR matrix (n_rows, n_cols), canonical (columns sorted, no duplicates), of one
+    channel, from :func:`_csr_sum`'s pieces of consecutive runs of ``rows`` (ascending; the
+    other rows empty), in order."""
     counts = np.zeros(n_rows, np.int64)
     counts[rows] = np.concatenate([np.diff(p[0]) for p in pieces])
     indptr = np.concatenate([[0], np.cumsum(counts)])
@@ -947,12 +940,9 @@ class RadianceCache:
             else:
                 valid, row0 = assemble
                 ok = valid[rows - row0] & ~(buried[a:a + len(rows)] > _BURIED_FRACTION * G)  # as _unburied
-                loc = hr[:nh] // G
-                part["ss"].append(_csr_sum(loc, self._c_alias[hc[:nh]], (hw[:nh] / G)[:, :, None], ok[loc],
-                                           len(rows), len(self._c_alias)))
-                loc = blocked // G
-                part["sb"].append(_csr_sum(loc, cells[:, None], np.full((len(loc), 1, 1), 1.0 / G), ok[loc],
-                                           len(rows), self.n_cells ** 2))
+                ss, sb = self._summed(hr[:nh] // G, self._c_alias[hc[:nh]], hw[:nh], blocked // G, cells, ok)
+                part["ss"].append(ss)
+                part["sb"].append(sb)
             if any_glossy:
                 self._glossy_chunk(rows, o, d, h, glossy_face, corner_normal, key_base + a, part, part_rec)
             return part, part_rec
@@ -985,18 +975,13 @@ class RadianceCache:
             return np.concatenate(raw[k]) if raw[k] else np.empty(shape, np.int64)
 
         if raw["ss"]:  # summed per chunk by _cast: stacked in row order
-            rows = raw["rows"] - row0
-            out = {"W_ss": _stack_rows(raw["ss"], rows, n_rows, n_c),
-                   "W_sb": _stack_rows(raw["sb"], rows, n_rows, self.n_cells ** 2)}
-        else:
-            hr = cat("hit_rows", 0) - row0
-            hc = alias[cat("hit_cols", (0, 3))]
-            hw = (np.concatenate(raw["hit_w"]) if raw["hit_w"] else np.empty((0, 3))) / G
-            out = {"W_ss": _csr_matrix(hr, hc, hw[:, :, None], ok[hr], n_rows, n_c)}
-            br = cat("blk_rows", 0) - row0
-            bc = cat("blk_cells", 0)
-            out["W_sb"] = _csr_matrix(br, bc[:, None], np.full((len(br), 1, 1), 1.0 / G), ok[br], n_rows,
-                                      self.n_cells ** 2)
+            ss, sb, rows = raw["ss"], raw["sb"], raw["rows"] - row0
+        else:  # from the lists of every hit
+            hw = np.concatenate(raw["hit_w"]) if raw["hit_w"] else np.empty((0, 3))
+            pieces = self._summed(cat("hit_rows", 0) - row0, alias[cat("hit_cols", (0, 3))], hw,
+                                  cat("blk_rows", 0) - row0, cat("blk_cells", 0), ok)
+            ss, sb, rows = [pieces[0]], [pieces[1]], np.arange(n_rows)
+        out = {"W_ss": _stack_rows(ss, rows, n_rows, n_c), "W_sb": _stack_rows(sb, rows, n_rows, self.n_cells ** 2)}
         out["W_g"], out["W_gb"], out["glint"] = None, None, None
         if raw["g_rows"]:  # _glossy_chunk appends to all its lists or to none
             gr = np.concatenate(raw["g_rows"]) - row0
@@ -1028,6 +1013,16 @@ class RadianceCache:
             glint["ptr"] = np.searchsorted(glint["row"], np.arange(n_rows + 1)).astype(np.int64)
             out["glint"] = glint
         return out
+
+    def _summed(self, hit_rows, hit_cols, hit_w, blk_rows, blk_cells, ok):
+        """:func:`_csr_sum`'s W_ss and W_sb of ``len(ok)`` rows (those not ``ok`` left empty) from
+        their cache rays' hits (rows, aliased lattice columns (n, 3), interpolation weights
+        (n, 3)) and their blocked rays (rows, sky cells): each ray counts 1/G."""
+        G = self.G
+        ss = _csr_sum(hit_rows, hit_cols, (hit_w / G)[:, :, None], ok[hit_rows], len(ok), len(self._c_alias))
+        sb = _csr_sum(blk_rows, blk_cells[:, None], np.full((len(blk_rows), 1, 1), 1.0 / G), ok[blk_rows], len(ok),
+                      self.n_cells ** 2)
+        return ss, sb
 
     def _glossy_chunk(self, rows, o, d, h, glossy_face, corner_normal, key0, raw, rec):
         """The cache rays of one chunk that hit a glossy part (on a side that has a row): one
