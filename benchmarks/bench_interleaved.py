@@ -3,6 +3,7 @@
     git worktree add /tmp/old <rev>
     python benchmarks/bench_interleaved.py /tmp/old . [--preset fast] [--samples N]
         [--threads N] [--repeats 7] [--targets ...] [--views ...] [--width 1280]
+    python benchmarks/bench_interleaved.py . . --env-b NUMBA_THREADING_LAYER=tbb  (a setting, not a checkout)
 
 One worker process per checkout (this interpreter, with that checkout's ``raytrace`` first on
 ``sys.path``) loads the 12 scenes of ``benchmarks/bench_time_error.py`` (this script's, written
@@ -27,7 +28,7 @@ from pathlib import Path
 
 
 def _worker(args) -> None:
-    """Load the scenes, say ``ready`` and where ``raytrace`` comes from, then render
+    """Load the scenes, say ``ready``, where ``raytrace`` comes from and numba's threading layer, then render
     ``target view`` per line of stdin and print the seconds."""
     import numba
 
@@ -41,7 +42,7 @@ def _worker(args) -> None:
         poses[target, view] = pose
         render(*pose, quality=args.preset, samples=args.samples, seed=1)  # warm-up
     import raytrace
-    print(f"ready {Path(raytrace.__file__).parent}", flush=True)
+    print(f"ready {Path(raytrace.__file__).parent} (numba's {numba.threading_layer()} threading layer)", flush=True)
     for line in sys.stdin:
         target, view = line.split()
         t0 = time.perf_counter()
@@ -60,6 +61,9 @@ def main() -> None:
     ap.add_argument("--targets", nargs="*", default=None, help="default: the four built-in targets")
     ap.add_argument("--views", nargs="*", default=None, help="default: the three views of bench_time_error.py")
     ap.add_argument("--scenes", default=None, help="folder for the scene files (default: a temporary one)")
+    ap.add_argument("--env-a", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="environment variables of A's worker (e.g. NUMBA_THREADING_LAYER=omp)")
+    ap.add_argument("--env-b", nargs="*", default=[], metavar="KEY=VALUE", help="and of B's")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     # before anything of raytrace is imported: a worker's working directory is its checkout,
@@ -85,10 +89,20 @@ def main() -> None:
         opts += ["--samples", str(args.samples)]
     # each worker writes its checkout's scenes into a folder of its own (write_scene rewrites
     # the files: two workers on one folder would read each other's half-written meshes)
+    def env(pairs):
+        e = dict(os.environ)
+        for kv in pairs:
+            key, sep, value = kv.partition("=")
+            if not sep or not key:
+                ap.error(f"--env-a/--env-b take KEY=VALUE, got {kv!r}")
+            e[key] = value
+        return e
+
     procs = [subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--worker", *opts, "--scenes",
                                str(Path(scenes).resolve() / name)],
-                              cwd=str(Path(tree).resolve()), stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-             for name, tree in zip("AB", args.trees)]
+                              cwd=str(Path(tree).resolve()), stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                              env=env(pairs))
+             for name, tree, pairs in zip("AB", args.trees, (args.env_a, args.env_b))]
     for p, name, tree in zip(procs, "AB", args.trees):
         said = p.stdout.readline().split()
         if not said or said[0] != "ready":

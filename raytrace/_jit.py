@@ -24,8 +24,9 @@ from __future__ import annotations
 
 import os
 
-# OpenMP threads that finish a kernel sleep instead of spinning, so the next Embree call or
-# NumPy step gets both cores (set before numba loads libgomp; a value the user set wins):
+# where numba runs on OpenMP (see prefer_tbb below), its threads that finish a kernel sleep
+# instead of spinning, so the next Embree call or NumPy step gets both cores (set before numba
+# loads libgomp; a value the user set wins):
 # 12 scenes at 1280×960, median s / frame, ``fast`` 0.125 → 0.117 and ``balanced``-8 0.265
 # → 0.243 (two interleaved runs each, benchmarks/bench_time_error.py scenes)
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
@@ -34,6 +35,61 @@ import ctypes
 import sys
 
 import numba
+
+
+def prefer_tbb() -> bool:
+    """Make Intel TBB numba's threading layer where the ``tbb`` wheel is installed (a
+    dependency on x86-64) and the user has not chosen one (``NUMBA_THREADING_LAYER``);
+    True if numba will use it. Call before the first parallel kernel runs.
+
+    Why: ``render`` runs the frame's lighting context on a side thread while the main
+    thread's parallel kernels run, so on two cores a kernel's threads share them with a third.
+    OpenMP hands each thread a fixed half of the loop, and the half whose thread waits for a
+    core holds the whole kernel back; TBB's idle threads take over waiting work. Measured
+    (``benchmarks/bench_interleaved.py . . --env-a NUMBA_THREADING_LAYER=omp --env-b
+    NUMBA_THREADING_LAYER=tbb``, BENCHMARKS.md "numba on TBB"): one frame on both cores
+    ``fast`` 0.908–0.949×, ``balanced``-8 0.955× and -16 0.940× the time (median per-scene
+    ratio), one thread (a worker of a sequence) 1.006×; the same bits (each kernel's loop is
+    split into numba's per-thread ranges under either layer, and none sums across them).
+    Where numba's threads already run (a parallel kernel ran before ``raytrace`` was
+    imported), their layer stays; the result says whether it is TBB.
+
+    The wheel puts ``libtbb`` in ``sys.prefix/lib``, where the loader does not look; it is
+    loaded here by path (RTLD_GLOBAL) so numba's ``tbbpool`` finds it by name, also when the
+    user asks for ``tbb`` by name. Where it cannot be loaded, numba keeps its own choice
+    (OpenMP, else its workqueue)."""
+    name = {"linux": "libtbb.so.12", "darwin": "libtbb.12.dylib", "win32": "tbb12.dll"}.get(sys.platform)
+    if name is None:
+        return False
+    # loaded even where the user chose a layer: "tbb" (or numba's "safe") then finds it too
+    for folder in (os.path.join(sys.prefix, "lib"), os.path.join(sys.base_prefix, "lib")):
+        path = os.path.join(folder, name)
+        if sys.platform != "win32" and os.path.exists(path):
+            try:
+                ctypes.CDLL(path, mode=ctypes.RTLD_GLOBAL)
+                break
+            except OSError:
+                pass
+    try:
+        return numba.threading_layer() == "tbb"  # launched already
+    except ValueError:
+        pass  # not yet
+    if os.environ.get("NUMBA_THREADING_LAYER"):
+        return False
+    try:
+        from numba.np.ufunc import tbbpool  # noqa: F401 (loads only if libtbb is found)
+        # numba's own requirement (TBB 2021.6 or later); below it numba would refuse the layer
+        version = ctypes.CDLL(name).TBB_runtime_interface_version
+        version.restype = ctypes.c_int
+        if version() < 12060:
+            return False
+    except (ImportError, OSError, AttributeError):
+        return False
+    numba.config.THREADING_LAYER = "tbb"
+    return True
+
+
+TBB = prefer_tbb()
 
 # glibc's malloc serves blocks above its mmap threshold (128 KiB, raised dynamically up to
 # 32 MiB as such blocks are freed) by fresh mappings, and returns heap top beyond its trim
