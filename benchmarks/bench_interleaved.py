@@ -3,7 +3,8 @@
     git worktree add /tmp/old <rev>
     python benchmarks/bench_interleaved.py /tmp/old . [--preset fast] [--samples N]
         [--threads N] [--repeats 7] [--targets ...] [--views ...] [--width 1280]
-    python benchmarks/bench_interleaved.py . . --env-b NUMBA_THREADING_LAYER=tbb  (a setting, not a checkout)
+    python benchmarks/bench_interleaved.py . . --env-a NUMBA_THREADING_LAYER=omp
+        --env-b NUMBA_THREADING_LAYER=tbb      (two settings of one checkout)
 
 One worker process per checkout (this interpreter, with that checkout's ``raytrace`` first on
 ``sys.path``) loads the 12 scenes of ``benchmarks/bench_time_error.py`` (this script's, written
@@ -28,8 +29,8 @@ from pathlib import Path
 
 
 def _worker(args) -> None:
-    """Load the scenes, say ``ready``, where ``raytrace`` comes from and numba's threading layer, then render
-    ``target view`` per line of stdin and print the seconds."""
+    """Load the scenes, say ``ready``, where ``raytrace`` comes from and numba's threading
+    layer, then render ``target view`` per line of stdin and print the seconds."""
     import numba
 
     from bench_time_error import scene_frames
@@ -42,7 +43,8 @@ def _worker(args) -> None:
         poses[target, view] = pose
         render(*pose, quality=args.preset, samples=args.samples, seed=1)  # warm-up
     import raytrace
-    print(f"ready {Path(raytrace.__file__).parent} (numba's {numba.threading_layer()} threading layer)", flush=True)
+    layer = numba.threading_layer()
+    print(f"ready {Path(raytrace.__file__).parent} (numba's {layer} threading layer)", flush=True)
     for line in sys.stdin:
         target, view = line.split()
         t0 = time.perf_counter()

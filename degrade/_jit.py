@@ -3,9 +3,10 @@
 Mirrors ``raytrace/_jit.py`` without importing it (``degrade`` knows nothing of the other
 packages), but leaves numba's threading layer alone: ``raytrace`` prefers TBB for its side
 threads (``prefer_tbb``), which ``degrade`` has none of; in a process that imports ``raytrace``
-first (``cli.py``) these kernels run on TBB too, with the same output. ``cache=True`` so CI and later runs skip compilation; ``nogil`` so kernels can
-overlap NumPy random sampling running in another thread; ``prange`` only on outer loops,
-each iteration writing only its own rows.
+first (``cli.py``) these kernels run on TBB too, with the same output. ``cache=True`` so CI
+and later runs skip compilation; ``nogil`` so kernels can overlap NumPy random sampling
+running in another thread; ``prange`` only on outer loops, each iteration writing only its
+own rows.
 
 * ``pjit_exact`` / ``jit_exact``: no fastmath. Every sum runs in a fixed order and a pixel's
   value never depends on whether it fell in a SIMD body or a scalar remainder, so outputs are
