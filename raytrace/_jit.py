@@ -39,8 +39,9 @@ import numba
 
 def prefer_tbb() -> bool:
     """Make Intel TBB numba's threading layer where the ``tbb`` wheel is installed (a
-    dependency on x86-64) and the user has not chosen one (``NUMBA_THREADING_LAYER``);
-    True if numba will use it. Call before the first parallel kernel runs.
+    dependency on x86-64) and the user has not chosen one (``NUMBA_THREADING_LAYER``). True
+    if it made TBB the layer or numba's threads already run on TBB; False where the user chose
+    a layer (whichever) or TBB cannot be loaded. Call before the first parallel kernel runs.
 
     Why: ``render`` runs the frame's lighting context on a side thread while the main
     thread's parallel kernels run, so on two cores a kernel's threads share them with a third.
