@@ -17,13 +17,14 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 
-PROBE = ("import raytrace._jit as j, numba, numpy as np\n"
-         "@numba.njit(parallel=True)\n"
-         "def f(a):\n"
-         "    for i in numba.prange(a.size):\n"
-         "        a[i] += 1.0\n"
-         "f(np.zeros(8))\n"
-         "print(j.TBB, numba.threading_layer())\n")
+# one parallel kernel run: numba picks (and launches) its threading layer here
+KERNEL = ("import numba, numpy as np\n"
+          "@numba.njit(parallel=True)\n"
+          "def f(a):\n"
+          "    for i in numba.prange(a.size):\n"
+          "        a[i] += 1.0\n"
+          "f(np.zeros(8))\n")
+PROBE = "import raytrace._jit as j\n" + KERNEL + "print(j.TBB, numba.threading_layer())\n"
 
 
 def _env(**extra):
@@ -66,15 +67,9 @@ def test_user_choice_wins():
 def test_layer_already_running_stays():
     """A program that ran a parallel kernel before importing ``raytrace`` keeps its layer, and
     ``TBB`` says which it is."""
-    late = ("import numba, numpy as np\n"
-            "@numba.njit(parallel=True)\n"
-            "def f(a):\n"
-            "    for i in numba.prange(a.size):\n"
-            "        a[i] += 1.0\n"
-            "f(np.zeros(8))\n"
-            "before = numba.threading_layer()\n"
-            "import raytrace._jit as j\n"
-            "print(before, numba.threading_layer(), j.TBB)\n")
+    late = KERNEL + ("before = numba.threading_layer()\n"
+                     "import raytrace._jit as j\n"
+                     "print(before, numba.threading_layer(), j.TBB)\n")
     r = subprocess.run([sys.executable, "-c", late], cwd=ROOT, env=_env(), capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0, r.stderr
