@@ -105,3 +105,34 @@ def test_target_pixels_are_left_alone():
     off = inst == 0
     lit = off & (exact.sum(-1) > 0)
     assert np.all(np.abs(fast[lit].astype(float) - exact[lit]) <= 2e-3 * exact[lit])
+
+
+@pytest.mark.parametrize("tilt", [0.2, "limb"])
+def test_earth_mask_and_radiance_match_the_closed_form_at_every_pixel(tilt):
+    """Every pixel against the closed form in NumPy (unit rays, float64): the ray through the
+    pixel centre meets the sphere where its distance from Earth's centre is below the radius,
+    in front of the camera, and the radiance there is albedo · E · max(0, m·s) / π (uniform
+    texture). The mask may differ only at rays tangent to the sphere to 1e-9."""
+    tilt_rad = _limb_tilt() if tilt == "limb" else tilt
+    fast, earth = _background("uniform", tilt_rad, shade._BACKGROUND_STEP)
+    R = _rotation_about_x(tilt_rad)
+    sun = np.array([0.3, -0.4, -0.6])
+    sun /= np.linalg.norm(sun)
+    c = np.array([0.0, 0.0, EARTH_RADIUS_M + ALT_M])
+    v, u = np.mgrid[0:CAM.height, 0:CAM.width]
+    d = np.stack([(u - CAM.cx) / CAM.fx, (v - CAM.cy) / CAM.fy, np.ones(u.shape)], -1) @ R.T
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    b = d @ c
+    q2 = c @ c - b * b  # squared distance of Earth's centre from the ray
+    want_hit = (b > 0) & (q2 < EARTH_RADIUS_M ** 2)
+    grazing = np.abs(q2 / EARTH_RADIUS_M ** 2 - 1.0) < 1e-9
+    assert np.array_equal(earth[~grazing], want_hit[~grazing])
+    if tilt == "limb":
+        assert 0.2 < want_hit.mean() < 0.8  # the limb crosses the image
+    hit = want_hit & ~grazing
+    t = b[hit] - np.sqrt(EARTH_RADIUS_M ** 2 - q2[hit])
+    m = (t[:, None] * d[hit] - c) / EARTH_RADIUS_M
+    want = 0.3 * SOLAR_CONSTANT_W_M2 * np.maximum(0.0, m @ sun) / math.pi
+    got = fast[hit].astype(float)
+    assert np.all(np.abs(got - want[:, None]) <= 1e-5 * want[:, None] + 1e-4)
+    assert np.all(fast[~earth] == 0.0)  # space stays black
