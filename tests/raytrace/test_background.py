@@ -75,24 +75,12 @@ def test_limb_pixels_are_evaluated_per_pixel():
     assert np.array_equal(fast[near_limb], exact[near_limb])
 
 
-def test_uniform_texture_is_per_pixel_and_the_closed_form():
+def test_uniform_texture_is_per_pixel():
+    """The uniform texture is never interpolated: the same bytes at every step (its closed form
+    at every pixel: test_earth_mask_and_radiance_match_the_closed_form_at_every_pixel)."""
     exact, _ = _background("uniform", 0.2, 1)
     fast, _ = _background("uniform", 0.2, shade._BACKGROUND_STEP)
     assert np.array_equal(fast, exact)
-    # against the closed form at a few pixels: where the ray from the camera meets the sphere,
-    # albedo · E · max(0, m·s) / π
-    R = _rotation_about_x(0.2)
-    sun = np.array([0.3, -0.4, -0.6])
-    sun /= np.linalg.norm(sun)
-    c = np.array([0.0, 0.0, EARTH_RADIUS_M + ALT_M])
-    for v, u in [(0, 0), (480, 640), (959, 1279), (100, 1200)]:
-        d = R @ np.array([(u - CAM.cx) / CAM.fx, (v - CAM.cy) / CAM.fy, 1.0])
-        d /= np.linalg.norm(d)
-        b = d @ c
-        t = b - math.sqrt(b * b - (c @ c - EARTH_RADIUS_M ** 2))
-        m = (t * d - c) / EARTH_RADIUS_M
-        want = 0.3 * SOLAR_CONSTANT_W_M2 * max(0.0, m @ sun) / math.pi
-        assert fast[v, u] == pytest.approx([want] * 3, rel=1e-5, abs=1e-6)
 
 
 def test_target_pixels_are_left_alone():
@@ -134,5 +122,5 @@ def test_earth_mask_and_radiance_match_the_closed_form_at_every_pixel(tilt):
     m = (t[:, None] * d[hit] - c) / EARTH_RADIUS_M
     want = 0.3 * SOLAR_CONSTANT_W_M2 * np.maximum(0.0, m @ sun) / math.pi
     got = fast[hit].astype(float)
-    assert np.all(np.abs(got - want[:, None]) <= 1e-5 * want[:, None] + 1e-4)
+    assert np.all(np.abs(got - want[:, None]) <= 1e-5 * want[:, None] + 1e-6)
     assert np.all(fast[~earth] == 0.0)  # space stays black
