@@ -1,7 +1,7 @@
 """Time against error: our quality presets and Blender Cycles on the same scenes.
 
     python benchmarks/bench_time_error.py --out bench_out/time_error [--width 1280]
-        [--targets tiangong spacedragon icesat cassini] [--ref-spp 512] [--cycles-spp 1 4 16 64 256]
+        [--targets tiangong spacedragon icesat cassini | issue-satellite] [--ref-spp 512] [--cycles-spp 1 4 16 64 256]
         [--no-cycles] [--repeats 3]
 
 Scenes: each built-in target with a Lambertian stand-in albedo per part (diffuse + F0 of its
@@ -17,6 +17,11 @@ distance at which the target fills a 40° field:
 
 Lighting: Sun 1361 W/m² (0.533° disc), Earth (uniform albedo 0.3, true size at 400 km) and a
 1 W/(m²·sr) ambient sky (lights the target, not drawn).
+
+``--targets issue-satellite`` renders instead a satellite built to the issue's description of
+the scene it timed Cycles on ("bus + panels + dish at 25 m", :func:`issue_satellite`), from
+three views of its own (``oblique``, ``side``, ``backlit``; Sun and sky, no Earth): Cycles'
+seconds there against the issue's table tell how fast this machine is against the issue's.
 
 Reference: our path tracer (``quality="reference"``), ``--ref-spp`` samples per pixel, twice
 with two seeds. Their mean is the yardstick; half their difference estimates its own noise,
@@ -103,6 +108,89 @@ def write_scene(target: str, folder: Path, width: int) -> list[tuple[str, Path]]
     return out
 
 
+# the issue's own scene (issue 4: "a satellite of bus + panels + dish at 25 m, sun 1361 W/m² plus a
+# constant ambient sky"), on which it timed Cycles 5.0 at 1 / 16 / 64 / 256 spp in 0.24 / 2.0 /
+# 7.5 / 29.7 s on its 2-core machine: rendered here it tells how fast this machine is against
+# that one, and how our presets do on a scene with fewer parts and edges than the four targets
+ISSUE_SCENE = "issue-satellite"
+ISSUE_DISTANCE_M = 25.0
+
+
+def issue_satellite() -> list[tuple[str, "trimesh.Trimesh", tuple]]:
+    """(name, mesh [m], Lambertian albedo) of the issue's satellite, body frame (z up): a bus
+    1.8 × 1.8 × 2.4 m (gold-MLI-like albedo), two solar wings 5.0 × 1.8 m, 4 cm thick, on yokes
+    0.6 m from the bus (solar-cell blue-grey), and a parabolic dish 2.2 m across on a strut
+    above the bus (white paint; an open mesh, both sides visible)."""
+    import trimesh
+
+    parts = [("bus", trimesh.creation.box((1.8, 1.8, 2.4)), (0.65, 0.5, 0.25))]
+    for sx, nm in ((1.0, "wing_px"), (-1.0, "wing_mx")):
+        wing = trimesh.creation.box((5.0, 1.8, 0.04))
+        wing.apply_translation((sx * 4.0, 0.0, 0.0))
+        parts.append((nm, wing, (0.2, 0.22, 0.35)))
+        yoke = trimesh.creation.cylinder(radius=0.04, height=0.62, sections=12)
+        yoke.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, (0.0, 1.0, 0.0)))
+        yoke.apply_translation((sx * 1.2, 0.0, 0.0))
+        parts.append((nm.replace("wing", "yoke"), yoke, (0.7, 0.7, 0.7)))
+    strut = trimesh.creation.cylinder(radius=0.06, height=0.5, sections=16)
+    strut.apply_translation((0.0, 0.0, 1.2 + 0.25))
+    parts.append(("strut", strut, (0.7, 0.7, 0.7)))
+    # the dish z = r² / (4 f), f = 0.8 m, r ≤ 1.1 m: 24 rings × 48 sectors
+    nr, ns, focal = 24, 48, 0.8
+    r = np.linspace(0.0, 1.1, nr + 1)[1:]
+    a = np.linspace(0.0, 2 * math.pi, ns, endpoint=False)
+    rr, aa = np.meshgrid(r, a, indexing="ij")
+    ring = np.stack([rr * np.cos(aa), rr * np.sin(aa), rr ** 2 / (4 * focal)], axis=-1).reshape(-1, 3)
+    verts = np.vstack([[0.0, 0.0, 0.0], ring]) + (0.0, 0.0, 1.7)
+    faces = [(0, 1 + j, 1 + (j + 1) % ns) for j in range(ns)]
+    for i in range(nr - 1):
+        for j in range(ns):
+            p, q = 1 + i * ns + j, 1 + i * ns + (j + 1) % ns
+            faces += [(p, p + ns, q + ns), (p, q + ns, q)]
+    parts.append(("dish", trimesh.Trimesh(verts, np.array(faces), process=False), (0.85, 0.85, 0.85)))
+    return parts
+
+
+def issue_viewpoints():
+    """(name, direction from the satellite to the camera, Sun direction) of the issue's scene."""
+    return [
+        ("oblique", np.array([0.5, -1.0, 0.45]), np.array([0.6, -0.45, 0.66])),
+        ("side", np.array([0.05, -1.0, 0.1]), np.array([-0.7, -0.35, 0.62])),
+        ("backlit", np.array([-0.45, -1.0, -0.25]), np.array([0.3, 0.85, 0.43])),
+    ]
+
+
+def write_issue_scene(folder: Path, width: int) -> list[tuple[str, Path]]:
+    """The issue's satellite as per-part PLYs and one SCENE.json per viewpoint (camera 25 m from
+    its centre, the lens of the other scenes; Sun 1361 W/m², ambient sky 1 W/(m²·sr), no Earth);
+    returns [(viewpoint, path)]."""
+    parts = folder / "parts"
+    parts.mkdir(parents=True, exist_ok=True)
+    meshes = []
+    for k, (name, mesh, albedo) in enumerate(issue_satellite()):
+        path = parts / f"{k:02d}_{name}.ply"
+        mesh.export(path)
+        meshes.append({"path": f"parts/{path.name}", "unit_scale_m": 1.0, "albedo": list(albedo)})
+    H = width * 3 // 4
+    f = width / 1280 * 4e-3 / 3.45e-6
+    cam = Camera(width, H, f, f, (width - 1) / 2, (H - 1) / 2)
+    out = []
+    for name, rho_dir, sun in issue_viewpoints():
+        rho = rho_dir / np.linalg.norm(rho_dir) * ISSUE_DISTANCE_M
+        R = look_at(rho)
+        t = -R @ rho
+        light = Lighting(sun_dir_body=tuple(sun / np.linalg.norm(sun)), ambient_radiance_W_m2_sr=1.0)
+        path = folder / f"{name}.json"
+        path.write_text(json.dumps(scene_to_dict(cam, R, t, light, meshes), indent=1) + "\n")
+        out.append((name, path))
+    return out
+
+
+def scenes_of(target: str, folder: Path, width: int) -> list[tuple[str, Path]]:
+    """:func:`write_scene`, or :func:`write_issue_scene` for ``ISSUE_SCENE``."""
+    return write_issue_scene(folder, width) if target == ISSUE_SCENE else write_scene(target, folder, width)
+
+
 def scene_frames(folder: Path, width: int, targets, views, per_target: bool = False):
     """The benchmark scenes (written into ``folder`` if missing), one at a time with its
     radiance cache built: (target, view, scene file, the first five arguments of
@@ -110,8 +198,8 @@ def scene_frames(folder: Path, width: int, targets, views, per_target: bool = Fa
     its views, instead of one per view."""
     for target in targets:
         scene = None
-        for view, spath in write_scene(target, Path(folder) / target, width):
-            if view not in views:
+        for view, spath in scenes_of(target, Path(folder) / target, width):
+            if views is not None and view not in views:
                 continue
             spec = load_scene_file(str(spath))
             if scene is None or not per_target:
@@ -201,8 +289,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", required=True)
     ap.add_argument("--width", type=int, default=1280)
-    ap.add_argument("--targets", nargs="*", default=list(BUILTIN_TARGETS))
-    ap.add_argument("--views", nargs="*", default=[v[0] for v in viewpoints()])
+    ap.add_argument("--targets", nargs="*", default=list(BUILTIN_TARGETS),
+                    help=f"built-in targets, or {ISSUE_SCENE} (the issue's bus + panels + dish, views "
+                         f"{' '.join(v[0] for v in issue_viewpoints())})")
+    ap.add_argument("--views", nargs="*", default=None, help="default: every view of each target")
     ap.add_argument("--ref-spp", type=int, default=512)
     ap.add_argument("--cycles-spp", type=int, nargs="*", default=[1, 4, 16, 64, 256])
     ap.add_argument("--no-cycles", action="store_true")
@@ -221,8 +311,8 @@ def main() -> None:
         print("# Cycles skipped: no .bpyenv/bin/python and BPY_PYTHON unset (see benchmarks/README_cycles.md)")
     results = []
     for target in args.targets:
-        for view, spath in write_scene(target, out / target, args.width):
-            if view not in args.views:
+        for view, spath in scenes_of(target, out / target, args.width):
+            if args.views is not None and view not in args.views:
                 continue
             spec = load_scene_file(str(spath))
             scene = Scene(spec.model)
