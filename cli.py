@@ -1728,6 +1728,10 @@ def render_scene_main(argv: list[str]) -> int:
         elapsed = time.perf_counter() - t0
         files, scale = frame_images(frame)
         geo = frame.geometry
+        if not geo.mask.any():
+            sys.stderr.write(f"{PROG}: warning: no pixel sees the target (it is behind the camera or outside the "
+                             "field of view: check camera.R_cam_from_body and t_cam_m); the frame holds only the "
+                             "background\n")
         info = {"scene": os.path.abspath(args.scene), "quality": frame.quality.name, "samples": samples,
                 "seed": seed, "render_s": elapsed, "timings_s": frame.timings_s, "exposure_scale": scale,
                 "width": spec.camera.width, "height": spec.camera.height, "K": spec.camera.K.tolist(),

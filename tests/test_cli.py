@@ -243,6 +243,24 @@ def test_render_scene_warns_when_shadow_fraction_contradicts_the_earth(tmp_path,
         assert ("warning: sun.shadow_fraction is 1" in err) == warns and err.count("\n") == int(warns)
 
 
+def test_render_scene_warns_when_no_pixel_sees_the_target(tmp_path, capsys):
+    """The camera turned away from the target (the box behind it): a valid scene, rendered, with
+    a one-line warning and an empty mask; facing it: no warning."""
+    from orbit.pose import look_at
+    rho = np.array([2.0, -8.0, 3.0])
+    R = look_at(-rho)  # looking away from the origin, which is now behind the camera
+    for name, over, warns in (("away", {"camera": {"K": [[120.0, 0, 31.5], [0, 120.0, 23.5], [0, 0, 1]],
+                                                   "width": 64, "height": 48, "R_cam_from_body": R.ravel().tolist(),
+                                                   "t_cam_m": (-R @ rho).tolist()}}, True),
+                              ("facing", {}, False)):
+        out = tmp_path / name
+        assert cli.main(["render-scene", str(_tiny_scene(tmp_path, **over)), "--out", str(out)]) == 0
+        counts = json.loads((out / "frame.json").read_text())["pixel_counts"]
+        assert (sum(counts[1:]) == 0) == warns  # index 0: the background
+        err = capsys.readouterr().err
+        assert ("warning: no pixel sees the target" in err) == warns and err.count("\n") == int(warns)
+
+
 def test_render_scene_checks_out_before_rendering(tmp_path, capsys, monkeypatch):
     """--out that is a file fails at once, one line, exit 2, before any rendering."""
     import raytrace.shade
