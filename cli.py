@@ -1251,7 +1251,6 @@ def execute(tasks: list, *, workers: int, scheduler: str | None = None, progress
         return
     import multiprocessing
     import shutil
-    import tempfile
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     n = min(workers, len(tasks))
     threads = max(1, default_workers() // n)

@@ -50,6 +50,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -116,13 +117,11 @@ ISSUE_SCENE = "issue-satellite"
 ISSUE_DISTANCE_M = 25.0
 
 
-def issue_satellite() -> list[tuple[str, "trimesh.Trimesh", tuple]]:
+def issue_satellite() -> list[tuple[str, trimesh.Trimesh, tuple]]:
     """(name, mesh [m], Lambertian albedo) of the issue's satellite, body frame (z up): a bus
     1.8 × 1.8 × 2.4 m (gold-MLI-like albedo), two solar wings 5.0 × 1.8 m, 4 cm thick, on yokes
     0.6 m from the bus (solar-cell blue-grey), and a parabolic dish 2.2 m across on a strut
     above the bus (white paint; an open mesh, both sides visible)."""
-    import trimesh
-
     parts = [("bus", trimesh.creation.box((1.8, 1.8, 2.4)), (0.65, 0.5, 0.25))]
     for sx, nm in ((1.0, "wing_px"), (-1.0, "wing_mx")):
         wing = trimesh.creation.box((5.0, 1.8, 0.04))
