@@ -772,8 +772,8 @@ def _load_prebuilt(path: str):
     import pickle
     try:
         with open(path, "rb") as fh:
-            scene, cache = pickle.load(fh)  # noqa: S301 - our own file, in our own private folder
-        scene.adopt_radiance_cache(cache)
+            scene, cache, options = pickle.load(fh)  # noqa: S301 - our own file, in our own private folder
+        scene.adopt_radiance_cache(cache, **options)
         return scene
     except (OSError, pickle.UnpicklingError, EOFError, ValueError) as exc:
         sys.stderr.write(f"{PROG}: warning: building the scene in the worker ({exc})\n")
@@ -794,12 +794,16 @@ def _prebuild_scenes(tasks: list, folder: str) -> dict:
             continue
         if not _shades(task):
             continue
+        from raytrace.presets import preset_cache_options, quality_preset
         from raytrace.scene import Scene
         scene = Scene(_load_model(spec))  # not kept here: only the workers render
-        cache = scene.radiance_cache()
+        r = task["cfg"]["render"]
+        # the cache the preset's frames ask for (balanced from 16 rays: a finer lattice)
+        options = preset_cache_options(quality_preset(r["quality"], r.get("samples")), scene.scale_m)
+        cache = scene.radiance_cache(**options)
         path = os.path.join(folder, f"scene{len(out)}.pickle")
         with open(path, "wb") as fh:
-            pickle.dump((scene, cache), fh, protocol=pickle.HIGHEST_PROTOCOL)
+            pickle.dump((scene, cache, options), fh, protocol=pickle.HIGHEST_PROTOCOL)
         out[spec] = path
         del scene, cache
     return out

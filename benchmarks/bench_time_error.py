@@ -2,7 +2,7 @@
 
     python benchmarks/bench_time_error.py --out bench_out/time_error [--width 1280]
         [--targets tiangong spacedragon icesat cassini | issue-satellite] [--ref-spp 512] [--cycles-spp 1 4 16 64 256]
-        [--no-cycles] [--repeats 3]
+        [--no-cycles] [--repeats 3] [--ref-dir DIR]
 
 Scenes: each built-in target with a Lambertian stand-in albedo per part (diffuse + F0 of its
 material preset, capped at 0.9, because the Cycles bridge takes albedo meshes only), written
@@ -293,6 +293,9 @@ def main() -> None:
                          f"{' '.join(v[0] for v in issue_viewpoints())})")
     ap.add_argument("--views", nargs="*", default=None, help="default: every view of each target")
     ap.add_argument("--ref-spp", type=int, default=512)
+    ap.add_argument("--ref-dir", default=None,
+                    help="keep the reference renders here and reuse them (the files of bench_bias_noise.py's "
+                         "--ref-dir: REF_DIR/w<width>/ref_<target>_<view>_<spp>.npz, the same seeds 1 and 2)")
     ap.add_argument("--cycles-spp", type=int, nargs="*", default=[1, 4, 16, 64, 256])
     ap.add_argument("--no-cycles", action="store_true")
     ap.add_argument("--repeats", type=int, default=3)
@@ -319,17 +322,28 @@ def main() -> None:
             t0 = time.perf_counter()
             scene.radiance_cache()
             build_s = time.perf_counter() - t0
+            ref_file = None if args.ref_dir is None else \
+                Path(args.ref_dir) / f"w{args.width}" / f"ref_{target}_{view}_{args.ref_spp}.npz"
             t0 = time.perf_counter()
-            r1 = render(scene, cam, R, t, light, quality="reference", samples=args.ref_spp, seed=1)
-            ref_s = time.perf_counter() - t0
-            r2 = render(scene, cam, R, t, light, quality="reference", samples=args.ref_spp, seed=2)
-            mask = r1.geometry.mask
-            a, b = r1.radiance.astype(np.float64), r2.radiance.astype(np.float64)
+            if ref_file is not None and ref_file.exists():
+                z = np.load(ref_file)
+                a, b, mask = z["a"].astype(np.float64), z["b"].astype(np.float64), z["mask"]
+                ref_s = float("nan")
+            else:
+                r1 = render(scene, cam, R, t, light, quality="reference", samples=args.ref_spp, seed=1)
+                ref_s = time.perf_counter() - t0
+                r2 = render(scene, cam, R, t, light, quality="reference", samples=args.ref_spp, seed=2)
+                mask = r1.geometry.mask
+                a, b = r1.radiance.astype(np.float64), r2.radiance.astype(np.float64)
+                if ref_file is not None:
+                    ref_file.parent.mkdir(parents=True, exist_ok=True)
+                    np.savez(ref_file, a=r1.radiance, b=r2.radiance, mask=mask, inst=r1.geometry.instance)
             ref = (a + b) / 2
             noise = rel_err(a, b, mask) / 2
             head = {"target": target, "view": view, "coverage": float(mask.mean()), "ref_noise": noise}
-            print(f"# {target}/{view}: cover {100 * mask.mean():.1f} %, reference {args.ref_spp} spp x2 in "
-                  f"{ref_s:.1f} s each, its noise {100 * noise:.2f} %, cache build {build_s:.2f} s", flush=True)
+            took = f"in {ref_s:.1f} s each" if math.isfinite(ref_s) else f"from {ref_file}"
+            print(f"# {target}/{view}: cover {100 * mask.mean():.1f} %, reference {args.ref_spp} spp x2 {took}, "
+                  f"its noise {100 * noise:.2f} %, cache build {build_s:.2f} s", flush=True)
 
             def record(renderer, preset, n, times, img, ref=ref, mask=mask, head=head, noise=noise, target=target,
                        view=view):

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["QUALITIES", "Quality", "quality_preset"]
+__all__ = ["QUALITIES", "Quality", "preset_cache_options", "quality_preset"]
 
 QUALITIES = ("fast", "balanced", "reference")
 
@@ -104,6 +104,10 @@ class Quality:
         whose first pattern saw the largest contrast (the range of its sub-samples' R + G + B,
         :func:`raytrace._shading.subsample_contrast`) — a truss, a silhouette against a bright
         part, a penumbra, where the sub-samples' noise sits (:func:`_balanced_aa_extra`) [-].
+    cache_divisions : int
+        > 0: the radiance cache's lattice spacing is the target's bounding-box diagonal divided
+        by this (:func:`preset_cache_options`); 0: the cache's default, 1/60 of it
+        (:class:`raytrace.cache.RadianceCache`; ``balanced`` from 16 rays: :func:`_cache_divisions`) [-].
     """
 
     name: str
@@ -123,6 +127,7 @@ class Quality:
     own_at_boundary: bool = False
     pilot_rays: int = 0
     aa_extra: float = 0.0
+    cache_divisions: int = 0
 
 
 # coverage grids of edge pixels (Quality.cov_grid), chosen on the scenes of
@@ -286,6 +291,33 @@ def _pilot_rays(samples: int) -> int:
     return max(4, samples // 2) if samples >= 8 else 0
 
 
+def _cache_divisions(samples: int) -> int:
+    """:attr:`Quality.cache_divisions` of ``balanced`` with N gather rays: 90 from N = 16 (a
+    lattice 1.5× as fine as the default's), else 0 (the default, 1/60 of the diagonal; ``fast``
+    keeps it too, whose frame waits on the cache's solve). Measured on the 12 scenes of
+    ``benchmarks/bench_time_error.py`` at 1280×960 (``benchmarks/bench_bias_noise.py``, median
+    error; time: ``benchmarks/bench_interleaved.py``, median of the per-scene ratios; the cache
+    solved on its side thread while the frame casts what needs no cache), 1/60 → 1/90 → 1/120:
+    N = 16 1.94 → 1.81 → 1.73 % for 1.043× / 1.071× the time; N = 8 2.68 → 2.57 → 2.49 % for
+    1.054× / 1.093×. Along the curve of more rays (error ∝ t^−0.73) the 16-ray steps would cost
+    1.10× / 1.17×, so both are below it there; at 8 rays they are on it. The one-off build of the
+    four targets' caches takes 1.6–2.2× as long at 1/90 (1/120: 2.0–3.3×; 1.5–4.7 s and
+    2.8–6.5 s against 1.0–2.2 s, each after a first build had compiled the kernels), so the
+    default ``balanced``-8 (``render-scene``'s) keeps the default lattice (BENCHMARKS.md, "A finer
+    radiance cache for `balanced`")."""
+    return 90 if samples >= 16 else 0
+
+
+def preset_cache_options(q: Quality, scale_m: float, options: dict | None = None) -> dict:
+    """The options of the radiance cache a frame of preset ``q`` uses, for a target whose
+    bounding-box diagonal is ``scale_m`` [m]: ``options`` (the caller's, which win), with the
+    preset's lattice spacing where it sets one (:attr:`Quality.cache_divisions`)."""
+    out = dict(options or {})
+    if q.cache_divisions > 0 and "spacing_m" not in out:
+        out["spacing_m"] = float(scale_m) / q.cache_divisions
+    return out
+
+
 _PRESETS = {
     "fast": Quality("fast", gather_rays=0, filter_passes=0, aa_grid=3, sun_rays=4, cov_grid=COV_FAST, slivers=True,
                     corner_rays=False),
@@ -317,7 +349,8 @@ def quality_preset(name: str, samples: int | None = None) -> Quality:
                        cov_grid=_balanced_cov(samples), borrow=_borrow(samples), sun_corners=True,
                        slivers=True, filter_sigma_l=_filter_sigma_l(samples), thin_shadows=True,
                        filter_linear=_filter_linear(samples), own_at_boundary=_own_at_boundary(samples),
-                       pilot_rays=_pilot_rays(samples), aa_extra=_balanced_aa_extra(samples))
+                       pilot_rays=_pilot_rays(samples), aa_extra=_balanced_aa_extra(samples),
+                       cache_divisions=_cache_divisions(samples))
     if name == "reference":
         return Quality(name, spp=samples)
     aa = max(1, min(samples, 16))

@@ -260,7 +260,7 @@ class Scene:
         self.semantic_lut = np.array([0] + [c.semantic_id for c in model.components], dtype=np.uint8)
         self._embree = None
         self._direct = None
-        self._cache = None
+        self._caches = {}  # radiance caches by their options (sorted items)
 
     # ------------------------------------------------------------------ build
     def _normals(self, comp_of_face: np.ndarray, creases: np.ndarray):
@@ -342,27 +342,28 @@ class Scene:
         return self._two_sided
 
     def radiance_cache(self, **options):
-        """The body-space radiance cache of this scene (:class:`raytrace.cache.RadianceCache`),
-        built on first use with ``options`` and reused while they stay the same."""
+        """The body-space radiance cache of this scene (:class:`raytrace.cache.RadianceCache`)
+        with ``options``, built on first use and kept with the others (the ``fast`` and
+        ``balanced`` presets can ask for different lattice spacings,
+        :func:`raytrace.presets.cache_options`)."""
         from .cache import RadianceCache
-        if self._cache is None or self._cache_options != options:
-            self._cache = RadianceCache(self, **options)
-            self._cache_options = dict(options)
-        return self._cache
+        key = tuple(sorted(options.items()))
+        if key not in self._caches:
+            self._caches[key] = RadianceCache(self, **options)
+        return self._caches[key]
 
     def adopt_radiance_cache(self, cache, **options) -> None:
         """Use ``cache`` (built for this scene with ``options``, e.g. in another process and
-        pickled with it) as :meth:`radiance_cache`'s."""
+        pickled with it) as :meth:`radiance_cache`'s with those options."""
         if cache.scene is not self:
             raise ValueError("the radiance cache was built for another scene")
-        self._cache = cache
-        self._cache_options = dict(options)
+        self._caches[tuple(sorted(options.items()))] = cache
 
     def __getstate__(self):
         state = self.__dict__.copy()
         state["_embree"] = None
         state["_direct"] = None
-        state["_cache"] = None
+        state["_caches"] = {}
         return state
 
     def __setstate__(self, state):

@@ -70,7 +70,7 @@ from ._threads import parallel_chunksize, submit as _submit
 from .brdf import split_sum_table
 from .camera import Camera
 from .lighting import Lighting
-from .presets import QUALITIES, Quality, quality_preset
+from .presets import QUALITIES, Quality, preset_cache_options, quality_preset
 from .scene import GeometryFrame, Scene, _check_pose
 
 __all__ = ["QUALITIES", "Quality", "RenderFrame", "quality_preset", "render"]
@@ -822,7 +822,8 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     geometry : GeometryFrame, optional, keyword-only
         The geometry pass of this pose, if already cast.
     cache_options : dict, optional, keyword-only
-        Options of the radiance cache (:class:`raytrace.cache.RadianceCache`).
+        Options of the radiance cache (:class:`raytrace.cache.RadianceCache`); without
+        ``spacing_m``, the preset's lattice spacing (:func:`raytrace.presets.preset_cache_options`).
 
     Returns
     -------
@@ -838,12 +839,13 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         raise ValueError(f"seed must be an integer in [0, 2**31), got {seed!r}")
     q = quality_preset(quality, samples)
     R, t = _check_pose(R_cam_from_body, t_cam_m)
+    cache_options = preset_cache_options(q, scene.scale_m, cache_options)
     timings = {}
     pending = None
     if _CONTEXT_ON_SIDE_THREAD and q.name != "reference" and numba.get_num_threads() > 1:
         # what both threads use and the scene builds on first use, built here, once
-        scene.embree, scene.direct, scene.radiance_cache(**(cache_options or {}))
-        pending = _submit("context", 1, _Context, scene, lighting, cache_options or {}, q.gather_rays == 0)
+        scene.embree, scene.direct, scene.radiance_cache(**cache_options)
+        pending = _submit("context", 1, _Context, scene, lighting, cache_options, q.gather_rays == 0)
     t0 = time.perf_counter()
     geo = geometry if geometry is not None else scene.render_geometry(camera, R, t)
     timings["geometry"] = time.perf_counter() - t0
@@ -903,7 +905,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     t_early = time.perf_counter() - t0
     t0 = time.perf_counter()
     ctx = pending.result() if pending is not None else \
-        _Context(scene, lighting, cache_options or {}, prefiltered_glossy=q.gather_rays == 0)
+        _Context(scene, lighting, cache_options, prefiltered_glossy=q.gather_rays == 0)
     timings["cache"] = time.perf_counter() - t0
     t0 = time.perf_counter() - t_direct  # the Sun at the centres counts in "direct"
     lbar = np.zeros((len(pix), 3))

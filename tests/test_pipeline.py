@@ -278,7 +278,7 @@ def test_a_prebuilt_scene_renders_the_same_bits(tmp_path):
     task = {"model_spec": spec, "cfg": {"render": {"quality": "fast"}}, "modalities": ["rgb"]}
     paths = cli._prebuild_scenes([task], str(tmp_path))
     loaded = cli._load_prebuilt(paths[spec])
-    assert loaded is not None and loaded._cache is not None
+    assert loaded is not None and len(loaded._caches) == 1
     fresh = Scene(load_target("icesat"))
     cam = Camera(160, 120, 150.0, 150.0, 79.5, 59.5)
     R = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
@@ -288,6 +288,32 @@ def test_a_prebuilt_scene_renders_the_same_bits(tmp_path):
     assert a.geometry.mask.any() and np.array_equal(a.radiance, b.radiance)
     with pytest.raises(ValueError, match="another scene"):
         fresh.adopt_radiance_cache(loaded.radiance_cache())
+
+
+def test_a_prebuilt_scene_carries_the_cache_its_preset_asks_for(tmp_path):
+    """``balanced`` with 16 rays renders with a finer cache lattice than the default: the
+    scene the main job pickles for its workers carries that cache, under the options a frame
+    asks for, and renders the same bits as a scene built afresh."""
+    from raytrace.camera import Camera
+    from raytrace.lighting import Lighting
+    from raytrace.presets import preset_cache_options, quality_preset
+    from raytrace.scene import Scene
+    from raytrace.shade import render
+    from raytrace.targets import load_target
+
+    spec = ("builtin", "cassini")
+    task = {"model_spec": spec, "cfg": {"render": {"quality": "balanced", "samples": 16}}, "modalities": ["rgb"]}
+    loaded = cli._load_prebuilt(cli._prebuild_scenes([task], str(tmp_path))[spec])
+    fresh = Scene(load_target("cassini"))
+    options = preset_cache_options(quality_preset("balanced", 16), fresh.scale_m)
+    assert options and list(loaded._caches) == [tuple(sorted(options.items()))]
+    cam = Camera(96, 72, 90.0, 90.0, 47.5, 35.5)
+    R = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+    light = Lighting(sun_dir_body=(0.6, 0.0, -0.8))
+    a = render(loaded, cam, R, [0.0, 0.0, 30.0], light, quality="balanced", samples=16, seed=3)
+    b = render(fresh, cam, R, [0.0, 0.0, 30.0], light, quality="balanced", samples=16, seed=3)
+    assert a.geometry.mask.any() and np.array_equal(a.radiance, b.radiance)
+    assert len(loaded._caches) == 1  # the adopted cache served the frame: none was built
     # geometry-only and reference tasks build nothing
     assert cli._prebuild_scenes([dict(task, modalities=["mask", "depth"])], str(tmp_path)) == {}
     assert cli._prebuild_scenes([dict(task, cfg={"render": {"quality": "reference"}})], str(tmp_path)) == {}

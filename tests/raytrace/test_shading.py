@@ -266,6 +266,32 @@ def test_same_seed_same_bytes_and_seed_changes_noise(sphere):
     assert a.dtype == np.float32 and a.shape == (H, W, 3)
 
 
+def test_each_preset_renders_with_its_own_cache_lattice_and_the_scene_keeps_both():
+    """``balanced`` from 16 rays asks for a lattice 1/90 of the target's size, ``fast`` and
+    ``balanced``-8 for the cache's default (1/60): each frame's cache has that spacing, a scene
+    keeps one cache per set of options (no rebuild when the presets alternate), and a caller's
+    own spacing wins."""
+    from raytrace.presets import preset_cache_options, quality_preset
+    scene = _sphere_scene()
+    R, t = _pose([1.0, -5.0, 2.0])
+    light = Lighting(sun_dir_body=(0.6, -0.48, 0.64), ambient_radiance_W_m2_sr=1.0)
+    assert preset_cache_options(quality_preset("fast"), scene.scale_m) == {}
+    assert preset_cache_options(quality_preset("balanced", 8), scene.scale_m) == {}
+    fine = preset_cache_options(quality_preset("balanced", 16), scene.scale_m)
+    assert fine == {"spacing_m": pytest.approx(scene.scale_m / 90)}
+    own = {"spacing_m": 0.3}
+    assert preset_cache_options(quality_preset("balanced", 16), scene.scale_m, own) == own
+    render(scene, CAM, R, t, light, quality="fast", seed=1)
+    coarse = scene.radiance_cache()
+    assert coarse.spacing_m == pytest.approx(scene.scale_m / 60)
+    render(scene, CAM, R, t, light, quality="balanced", samples=16, seed=1)
+    finer = scene.radiance_cache(**fine)
+    assert finer is not coarse and finer.spacing_m == pytest.approx(scene.scale_m / 90)
+    render(scene, CAM, R, t, light, quality="fast", seed=1)
+    render(scene, CAM, R, t, light, quality="balanced", samples=16, seed=1)
+    assert scene.radiance_cache() is coarse and scene.radiance_cache(**fine) is finer and len(scene._caches) == 2
+
+
 @pytest.mark.parametrize("quality,samples", [("fast", None), ("balanced", 8)])
 def test_context_built_on_a_side_thread_gives_the_same_bytes(monkeypatch, quality, samples):
     """The frame's context (cache solve, environment tables) is built on a side thread during
