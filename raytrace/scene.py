@@ -345,7 +345,7 @@ class Scene:
         """The body-space radiance cache of this scene (:class:`raytrace.cache.RadianceCache`)
         with ``options``, built on first use and kept with the others (the ``fast`` and
         ``balanced`` presets can ask for different lattice spacings,
-        :func:`raytrace.presets.cache_options`)."""
+        :func:`raytrace.presets.preset_cache_options`)."""
         from .cache import RadianceCache
         key = tuple(sorted(options.items()))
         if key not in self._caches:
