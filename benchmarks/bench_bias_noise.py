@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_time_error import scene_frames, viewpoints  # noqa: E402
+from bench_time_error import reference_renders, scene_frames, viewpoints  # noqa: E402
 
 from raytrace.shade import render  # noqa: E402
 from raytrace.targets import BUILTIN_TARGETS  # noqa: E402
@@ -60,13 +60,8 @@ def main() -> None:
     rows = {p: [] for p in args.presets}
     stages = {p: [] for p in args.presets}
     for tg, view, _path, pose in scene_frames(folder, args.width, args.targets, args.views, per_target=True):
-        ref_file = folder / f"ref_{tg}_{view}_{args.ref_spp}.npz"
-        if not ref_file.exists():
-            rs = [render(*pose, quality="reference", samples=args.ref_spp, seed=s) for s in (1, 2)]
-            np.savez(ref_file, a=rs[0].radiance, b=rs[1].radiance, mask=rs[0].geometry.mask,
-                     inst=rs[0].geometry.instance)
-        z = np.load(ref_file)
-        a, b, m, inst = z["a"].astype(float), z["b"].astype(float), z["mask"], z["inst"].astype(np.int64)
+        a, b, m, inst, _ = reference_renders(pose, args.ref_spp, folder / f"ref_{tg}_{view}_{args.ref_spp}.npz")
+        inst = inst.astype(np.int64)
         ref = (a + b) / 2
         edge = (maximum_filter(inst, 3) != minimum_filter(inst, 3)) & m
         silhouette = (minimum_filter(inst, 3) == 0) & m

@@ -190,6 +190,25 @@ def scenes_of(target: str, folder: Path, width: int) -> list[tuple[str, Path]]:
     return write_issue_scene(folder, width) if target == ISSUE_SCENE else write_scene(target, folder, width)
 
 
+def reference_renders(pose, spp: int, ref_file: Path | None = None):
+    """Our path tracer's two reference renders of a scene (``pose``: the first five arguments
+    of :func:`raytrace.shade.render`) at ``spp``, seeds 1 and 2: (a, b float64 radiance, mask,
+    instance ids, seconds of the first render). With ``ref_file`` (.npz), they are read from it
+    if it exists (seconds NaN), else rendered and written there."""
+    if ref_file is not None and Path(ref_file).exists():
+        z = np.load(ref_file)
+        return z["a"].astype(np.float64), z["b"].astype(np.float64), z["mask"], z["inst"], float("nan")
+    t0 = time.perf_counter()
+    r1 = render(*pose, quality="reference", samples=spp, seed=1)
+    seconds = time.perf_counter() - t0
+    r2 = render(*pose, quality="reference", samples=spp, seed=2)
+    if ref_file is not None:
+        Path(ref_file).parent.mkdir(parents=True, exist_ok=True)
+        np.savez(ref_file, a=r1.radiance, b=r2.radiance, mask=r1.geometry.mask, inst=r1.geometry.instance)
+    return (r1.radiance.astype(np.float64), r2.radiance.astype(np.float64), r1.geometry.mask, r1.geometry.instance,
+            seconds)
+
+
 def scene_frames(folder: Path, width: int, targets, views, per_target: bool = False):
     """The benchmark scenes (written into ``folder`` if missing), one at a time with its
     radiance cache built: (target, view, scene file, the first five arguments of
@@ -324,20 +343,7 @@ def main() -> None:
             build_s = time.perf_counter() - t0
             ref_file = None if args.ref_dir is None else \
                 Path(args.ref_dir) / f"w{args.width}" / f"ref_{target}_{view}_{args.ref_spp}.npz"
-            t0 = time.perf_counter()
-            if ref_file is not None and ref_file.exists():
-                z = np.load(ref_file)
-                a, b, mask = z["a"].astype(np.float64), z["b"].astype(np.float64), z["mask"]
-                ref_s = float("nan")
-            else:
-                r1 = render(scene, cam, R, t, light, quality="reference", samples=args.ref_spp, seed=1)
-                ref_s = time.perf_counter() - t0
-                r2 = render(scene, cam, R, t, light, quality="reference", samples=args.ref_spp, seed=2)
-                mask = r1.geometry.mask
-                a, b = r1.radiance.astype(np.float64), r2.radiance.astype(np.float64)
-                if ref_file is not None:
-                    ref_file.parent.mkdir(parents=True, exist_ok=True)
-                    np.savez(ref_file, a=r1.radiance, b=r2.radiance, mask=mask, inst=r1.geometry.instance)
+            a, b, mask, _, ref_s = reference_renders((scene, cam, R, t, light), args.ref_spp, ref_file)
             ref = (a + b) / 2
             noise = rel_err(a, b, mask) / 2
             head = {"target": target, "view": view, "coverage": float(mask.mean()), "ref_noise": noise}
