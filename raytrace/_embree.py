@@ -11,9 +11,10 @@ cached like any other (an address baked in through ``ctypes`` would not be).
 
 The scene is built here a second time, from the same float32 vertices and triangles, one
 geometry per component in order (geomID = component index), with the flag ``embreex`` uses
-(``robust``): the hits are the same, bit for bit, as ``Scene.intersect``'s (checked in
+(``robust``): the hits are the same, bit for bit, as embreex's (checked in
 ``tests/raytrace/test_fused_gather.py``; Embree 4.4's API, ``rtcore_ray.h`` /
-``rtcore_scene.h``).
+``rtcore_scene.h``). Built with ``robust=False`` it lets Embree take the faster arithmetic
+its robust mode avoids (:attr:`raytrace.scene.Scene.direct_fast`).
 
 Ray layout (``RTCRayHit``, 16-byte aligned, float32 / uint32 words): 0–2 origin, 3 tnear,
 4–6 direction, 7 time, 8 tfar, 9 mask, 10 id, 11 flags, 12–14 Ng, 15 u, 16 v, 17 primID,
@@ -97,9 +98,13 @@ _FORMAT_FLOAT3 = 0x9003
 class DirectScene:
     """An Embree scene of a :class:`raytrace.scene.Scene`'s components for the kernels of
     this module; ``handle`` is the ``RTCScene`` pointer they take. It keeps the vertex and
-    index arrays Embree shares alive, and releases the scene with itself."""
+    index arrays Embree shares alive, and releases the scene with itself. ``robust``: Embree's
+    robust traversal and intersection (``RTC_SCENE_FLAG_ROBUST``, as embreex builds its
+    scenes), which no ray passes through the edge shared by two triangles of a closed mesh;
+    without it Embree is faster and such leaks are rare (see
+    :attr:`raytrace.scene.Scene.direct_fast`)."""
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray, vertex_offset, face_offset):
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, vertex_offset, face_offset, robust: bool = True):
         if not available():
             raise RuntimeError(f"Embree 4 is not available for direct calls: {_ERROR}")
         lib = _LIB
@@ -108,7 +113,7 @@ class DirectScene:
         if not self._device:
             raise RuntimeError("Embree could not create a device")
         self._scene = lib.rtcNewScene(self._device)
-        lib.rtcSetSceneFlags(self._scene, _SCENE_FLAG_ROBUST)
+        lib.rtcSetSceneFlags(self._scene, _SCENE_FLAG_ROBUST if robust else 0)
         lib.rtcSetSceneBuildQuality(self._scene, _BUILD_QUALITY_MEDIUM)
         self._keep = []
         for k in range(len(vertex_offset) - 1):

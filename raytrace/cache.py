@@ -919,7 +919,7 @@ class RadianceCache:
             o = np.empty((n, 3), dtype=np.float32)
             d = np.empty((n, 3), dtype=np.float32)
             _cache_rays(rows, pos, nrm, self.eps_m, 8, G // 8, o, d)
-            h = scene.intersect(o, d)
+            h = scene.intersect(o, d, robust=True)
             hr = np.empty(n, np.int64)
             hc = np.empty((n, 3), np.int64)
             hw = np.empty((n, 3), np.float64)
@@ -1047,7 +1047,7 @@ class RadianceCache:
                        corner_normal, scene.component_of_face, self.f0, self.alpha,
                        self.eps_m, int(key0) * G, o2, d2, w2, n2)
         src = rows[idx // G]
-        h2 = scene.intersect(o2, d2)
+        h2 = scene.intersect(o2, d2, robust=True)
         hr = np.empty(m, np.int64)
         hc = np.empty((m, 3), np.int64)
         hw = np.empty((m, 3), np.float64)
@@ -1170,7 +1170,7 @@ class RadianceCache:
             sx, sy, sz = lighting.sun_dir_body
             _sun_rays(rows, pos, nrm, self.eps_m, sx, sy, sz, cosv, o, d)
             lit = cosv > 0.0
-            seen = ~self.scene.occluded(o[lit], d[lit])
+            seen = ~self.scene.occluded(o[lit], d[lit], robust=True)
             vals = np.zeros(len(rows))
             vals[np.flatnonzero(lit)[seen]] = e_sun * cosv[lit][seen]
             E_sun[rows] = vals

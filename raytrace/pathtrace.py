@@ -207,7 +207,9 @@ def render_reference(scene, camera, R, t, lighting, geo, *, spp: int, seed: int)
         d = np.empty((n, 3))
         d32 = np.empty((n, 3), np.float32)
         _primary(pix, W, s, seed, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, z0, o32, d, d32)
-        h = scene.intersect(o32, d32)
+        # the yardstick traces every ray through Embree's robust scene (Scene.direct), as the
+        # labels do, not the faster one the presets' shading rays take
+        h = scene.intersect(o32, d32, robust=True)
         O = np.ascontiguousarray(np.broadcast_to(o_body, (n, 3)))
         miss = np.flatnonzero(h["geomID"] < 0)
         if len(miss) and lighting.earth is not None:
@@ -242,7 +244,7 @@ def render_reference(scene, camera, R, t, lighting, geo, *, spp: int, seed: int)
                     e_sun, eps, sh_o, sh_d, sh_c, sh_ok, nx_o, nx_d, alive)
             sidx = np.flatnonzero(sh_ok)
             if len(sidx):
-                blocked = scene.occluded(sh_o[sidx], sh_d[sidx])
+                blocked = scene.occluded(sh_o[sidx], sh_d[sidx], robust=True)
                 _add_shadowed(pix_of, sh_c, sidx, blocked, acc)
             keep = np.flatnonzero(alive)
             if len(keep) == 0:
@@ -251,7 +253,7 @@ def render_reference(scene, camera, R, t, lighting, geo, *, spp: int, seed: int)
             D = np.ascontiguousarray(nx_d[keep])
             pix_of = pix_of[keep]
             thr = thr[keep]
-            h = scene.intersect(O, D)
+            h = scene.intersect(O, D, robust=True)
             esc = np.flatnonzero(h["geomID"] < 0)
             if len(esc):
                 _escape(esc, pix_of, O, D, thr, p, tex, acc)

@@ -40,6 +40,20 @@ _MIN_CHUNK = 2048  # fewest rays per Embree call of a batch on the thread pool
 # Scene.intersect / occluded through raytrace._embree's kernels where Embree 4 is loaded (False:
 # always through embreex; the tests compare the two)
 _DIRECT_BATCHES = True
+# The rays a preset's frame casts to shade it (sub-samples' Sun, soft shadows, final gathers and
+# their paths, glossy lobes and mirror rays, anti-aliasing sub-samples, coverage and corner rays,
+# stars) go through Embree built without its robust flag (Scene.direct_fast). The robust one
+# (Scene.direct) casts the geometry pass (the labels), the pixel centres' exact Sun, camera rays
+# that may start on a face (the camera inside the target's hull), the radiance cache's rays and
+# the reference path tracer's: only the robust mode reports a face a ray starts on (t = 0), which
+# the labels and the cache's contact rows count on. Measured (BENCHMARKS.md, "Embree's robust flag
+# where it matters only"): ``balanced``-16 one frame on both cores 0.894× the time with every
+# frame ray fast (median of the 12 scenes' ratios, 0.868–0.987); sub-pixel primary rays
+# 0.69–0.84× (Cassini's 11 m boom triangles gain most); of 2 M rays from random surface points of
+# each target, 3 or fewer found no hit where the robust scene found one, ~1 % another triangle at
+# the same distance (coincident faces, shared edges), and the hit distances' error along the
+# normal stayed below 0.005 of the rays' offset ray_eps_m. False: every ray robust.
+_FAST_TRAVERSAL = True
 _POOL: ThreadPoolExecutor | None = None
 
 
@@ -260,6 +274,7 @@ class Scene:
         self.semantic_lut = np.array([0] + [c.semantic_id for c in model.components], dtype=np.uint8)
         self._embree = None
         self._direct = None
+        self._direct_fast = None
         self._caches = {}  # radiance caches by their options (sorted items)
 
     # ------------------------------------------------------------------ build
@@ -323,6 +338,23 @@ class Scene:
         return self._direct or None
 
     @property
+    def direct_fast(self):
+        """:attr:`direct` built without Embree's robust flag (its faster traversal and
+        intersection arithmetic), for the rays that shade a preset's frame, where a ray that
+        slips through the edge two triangles share (measured: once in 24 M rays cast at and
+        from inside closed meshes) is one Monte Carlo sample in millions; the labels, the
+        pixel centres' Sun, the radiance cache and the reference keep the robust scene
+        (``_FAST_TRAVERSAL``).
+        :attr:`direct` itself where ``_FAST_TRAVERSAL`` is off; None where :attr:`direct` is."""
+        if not _FAST_TRAVERSAL or self.direct is None:
+            return self.direct
+        if self._direct_fast is None:
+            from . import _embree
+            self._direct_fast = _embree.DirectScene(self.vertices, self.faces, self.vertex_offset, self.face_offset,
+                                                    robust=False)
+        return self._direct_fast
+
+    @property
     def materials(self) -> tuple:
         """BRDF of each component (:func:`raytrace.materials.material_of`), made once (a
         frame's shading asks for them; made anew they took 2 ms a frame on ICESat)."""
@@ -363,6 +395,7 @@ class Scene:
         state = self.__dict__.copy()
         state["_embree"] = None
         state["_direct"] = None
+        state["_direct_fast"] = None
         state["_caches"] = {}
         return state
 
@@ -392,9 +425,10 @@ class Scene:
             parts = list(_pool().map(run, spans))
         return parts
 
-    def _direct_rays(self, origins, directions, tfar):
+    def _direct_rays(self, origins, directions, tfar, robust: bool = True):
         """(direct scene, O, D) for the kernels of raytrace._embree when they can take this
-        batch (Embree 4 loaded, no ``tfar``, a non-empty batch of (n, 3) rows), else None. The
+        batch (Embree 4 loaded, no ``tfar``, a non-empty batch of (n, 3) rows), else None: the
+        robust scene (:attr:`direct`), or with ``robust`` False :attr:`direct_fast`. The
         rows become float32, as :meth:`_run` makes them for embreex."""
         if tfar is not None or not _DIRECT_BATCHES:
             return None
@@ -402,21 +436,22 @@ class Scene:
         D = np.asarray(directions)
         if O.ndim != 2 or O.shape[1:] != (3,) or D.shape != O.shape or not len(O):
             return None
-        direct = self.direct
+        direct = self.direct if robust else self.direct_fast
         if direct is None:
             return None
         return direct, np.ascontiguousarray(O, dtype=np.float32), np.ascontiguousarray(D, dtype=np.float32)
 
-    def intersect(self, origins, directions, *, tfar=None) -> dict:
+    def intersect(self, origins, directions, *, tfar=None, robust: bool = False) -> dict:
         """Closest hits of a batch of rays (float32 body frame; directions need not be unit):
         Embree's ``geomID``, ``primID``, ``u``, ``v``, ``tfar`` arrays (geomID −1 on a miss;
         ``tfar`` in units of the direction's length). Where Embree 4 can be called from numba
         (:mod:`raytrace._embree`) and no ``tfar`` is given, the rays go through
-        :func:`raytrace._embree.intersect_batch` on numba's threads (the same arrays bit for bit;
-        on batches of 0.5–5.8 M sub-pixel rays of the 12 benchmark scenes 0.85–1.07× embreex's
-        time, median 0.91, ``benchmarks/bench_embree_paths.py``); else through embreex in chunks
-        on the thread pool."""
-        fast = self._direct_rays(origins, directions, tfar)
+        :func:`raytrace._embree.intersect_batch` on numba's threads (on batches of 0.5–5.8 M
+        sub-pixel rays of the 12 benchmark scenes 0.85–1.07× embreex's time, median 0.91,
+        ``benchmarks/bench_embree_paths.py``), in :attr:`direct_fast` (the rays of shading),
+        or with ``robust`` in :attr:`direct` (embreex's arrays bit for bit); else through
+        embreex (robust) in chunks on the thread pool."""
+        fast = self._direct_rays(origins, directions, tfar, robust)
         if fast is not None:
             from . import _embree
             direct, O, D = fast
@@ -432,10 +467,10 @@ class Scene:
                     "u": np.empty(0, np.float32), "v": np.empty(0, np.float32), "tfar": np.empty(0, np.float32)}
         return {k: np.concatenate([p[k] for p in parts]) for k in ("geomID", "primID", "u", "v", "tfar")}
 
-    def occluded(self, origins, directions, *, tfar=None) -> np.ndarray:
+    def occluded(self, origins, directions, *, tfar=None, robust: bool = False) -> np.ndarray:
         """True where a ray hits anything before ``tfar`` (default: infinity), shape (n,); without
-        ``tfar`` through raytrace._embree where it can (as :meth:`intersect`)."""
-        fast = self._direct_rays(origins, directions, tfar)
+        ``tfar`` through raytrace._embree where it can (as :meth:`intersect`, ``robust`` too)."""
+        fast = self._direct_rays(origins, directions, tfar, robust)
         if fast is not None:
             from . import _embree
             direct, O, D = fast

@@ -206,13 +206,15 @@ class _Sunlight:
         self.eps = scene.ray_eps_m
         self.p_background, self.tex = _background_params(lighting)
 
-    def sunlight(self, s, *, disc=None, occluder_t=None):
+    def sunlight(self, s, *, disc=None, occluder_t=None, robust: bool = False):
         """Sunlight (shadowed) at the points ``s``: radiance (n, 3) and the Sun's visibility
         (n,) in {0, 1}. The shadow ray goes towards the Sun's centre, or, with ``disc`` =
         (pixel, number, n_strata, seed) per point, towards one solar-disc sample per point
         (:func:`raytrace._shading.sun_disc_dirs`), drawn only for the points facing the Sun;
         ``occluder_t``, when given, receives the distance to the occluder of every blocked
-        point. The cheap specular term of everything else is :meth:`_Context.add_mirror`'s."""
+        point. ``robust``: through Embree's robust scene (the pixel centres' exact Sun: no ray
+        slips through an edge there), else the faster one (:attr:`Scene.direct_fast`). The
+        cheap specular term of everything else is :meth:`_Context.add_mirror`'s."""
         n = len(s["P"])
         L = np.zeros((n, 3))
         vis = np.zeros(n)
@@ -224,7 +226,9 @@ class _Sunlight:
             o = np.empty((n, 3), np.float32)  # Embree's precision: rounded once, as before
             K.sun_rays(s["P"], s["NS"], s["NG"], sx, sy, sz, self.eps, want, o)
             idx = np.flatnonzero(want)
-            direct = self.scene.direct if _FUSED_GATHER and occluder_t is None else None
+            direct = None
+            if _FUSED_GATHER and occluder_t is None:
+                direct = self.scene.direct if robust else self.scene.direct_fast
             if len(idx) and direct is not None:
                 # the disc samples drawn and the shadow rays cast in one kernel
                 pixel, number, n_strata, seed = disc if disc is not None else (idx, idx, 0, 0)
@@ -241,9 +245,9 @@ class _Sunlight:
                     K.sun_disc_dirs(pixel[idx], number[idx], n_strata, seed, sx, sy, sz,
                                     math.cos(0.5 * light.sun_angular_diameter_rad), d)
                 if occluder_t is None:
-                    blocked = self.scene.occluded(o[idx], d)
+                    blocked = self.scene.occluded(o[idx], d, robust=robust)
                 else:
-                    h = self.scene.intersect(o[idx], d)
+                    h = self.scene.intersect(o[idx], d, robust=robust)
                     blocked = h["geomID"] >= 0
                     occluder_t[idx[blocked]] = h["tfar"][blocked]
                 vis[idx[~blocked]] = 1.0
@@ -386,7 +390,7 @@ class _Context(_Sunlight):
         idx = np.flatnonzero(self.lobe_sampled[s["comp"]])
         if len(idx) == 0:
             return out
-        direct = self.scene.direct if _FUSED_GATHER else None
+        direct = self.scene.direct_fast if _FUSED_GATHER else None
         if direct is not None:
             val = np.empty((len(idx), 3))
             v = np.empty(len(idx))
@@ -455,7 +459,7 @@ class _Context(_Sunlight):
             counts = np.asarray(counts, dtype=np.int64)
             kmul = int(counts.max()) if n else 1
         seeds = (seed, seed if path_seed is None else path_seed)
-        direct = self.scene.direct if _FUSED_GATHER else None
+        direct = self.scene.direct_fast if _FUSED_GATHER else None
         if direct is not None:
             return self._gather_fused(direct, s, counts, kmul, first, pix, seeds, var, hits)
         end = np.cumsum(counts)
@@ -845,7 +849,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     pending = None
     if _CONTEXT_ON_SIDE_THREAD and q.name != "reference" and numba.get_num_threads() > 1:
         # what both threads use and the scene builds on first use, built here, once
-        scene.embree, scene.direct, scene.radiance_cache(**cache_options)
+        scene.embree, scene.direct, scene.direct_fast, scene.radiance_cache(**cache_options)
         pending = _submit("context", 1, _Context, scene, lighting, cache_options, q.gather_rays == 0)
     t0 = time.perf_counter()
     geo = geometry if geometry is not None else scene.render_geometry(camera, R, t)
@@ -880,7 +884,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     s = _surfaces(scene, O, D, face)
     soft = q.sun_rays > 1 and lighting.sun_angular_diameter_rad > 0.0
     occ_t = np.full(len(pix), np.inf) if soft else None  # occluder distances cost a closest-hit query
-    L, vis = sunl.sunlight(s, occluder_t=occ_t)
+    L, vis = sunl.sunlight(s, occluder_t=occ_t, robust=True)
     penumbra = None
     if soft:
         footprint_m = geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx
@@ -1100,7 +1104,7 @@ def _corner_rays(scene: Scene, camera: Camera, R, t, o_body, geo):
     d32 = np.empty((h * w, 3), dtype=np.float32)
     make_rays(o_body, np.ascontiguousarray(R.T), camera.fx, camera.fy, camera.cx + 0.5, camera.cy + 0.5, u0, v0, w,
               h, z0, o32, d32)
-    return o32, d32, scene.intersect(o32, d32)
+    return o32, d32, scene.intersect(o32, d32, robust=z0 <= 0.0)
 
 
 def _corner_edges(scene: Scene, geo, corners, lit=None, sun_dir=None, eps: float = 0.0) -> np.ndarray:
@@ -1281,11 +1285,14 @@ def _shade_chunk(ctx: _Context, camera: Camera, geo, tr: dict, seed: int, residu
 
 def _intersect_from(scene: Scene, o_body, z0: float, D):
     """Closest hits of the rays from the camera centre o_body along D (float64), started at
-    the plane z_cam = z0 (:meth:`Scene.intersect`)."""
+    the plane z_cam = z0 (:meth:`Scene.intersect`): in the scene the labels are cast in
+    (robust) where z0 = 0, the camera inside the target's hull, where it may lie on a face
+    (only Embree's robust mode reports that face, at t = 0, as the labels do); else, the rays
+    starting in front of the target, in the faster one."""
     o32 = np.empty(D.shape, np.float32)
     d32 = np.empty(D.shape, np.float32)
     ray_origins32(np.asarray(o_body, dtype=np.float64), float(z0), D, o32, d32)
-    return scene.intersect(o32, d32)
+    return scene.intersect(o32, d32, robust=z0 <= 0.0)
 
 
 def _trace_subsamples(sunl: _Sunlight, scene: Scene, o_body, D, h, centre, number, S, seed) -> dict:

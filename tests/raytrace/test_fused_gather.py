@@ -4,6 +4,8 @@ level by level (a second implementation of the same estimator, kept as the fallb
 
 * the direct Embree scene returns the same hits as ``Scene.intersect`` / ``Scene.occluded``,
   bit for bit, on rays that graze, hit edges and vertices, start inside parts and miss;
+* the scene built without Embree's robust flag (``Scene.direct_fast``, the rays of shading)
+  finds the same hits on all but a few of those rays;
 * a ``balanced`` frame with the fused gather and lobe sampling equals the batched one on a scene with a glossy
   part, a crevice (paths several bounces deep), Earth and sky, with the Sun on and eclipsed,
   and with the control variate's weight α ≠ 1 (a branch the presets do not take).
@@ -58,7 +60,7 @@ def test_direct_embree_hits_equal_embreex_bit_for_bit(scene, monkeypatch):
     D[::7] = rng.normal(size=(len(D[::7]), 3))  # and some in any direction (many misses)
     O[::11] = V[rng.integers(0, len(V), len(O[::11]))] * 0.5  # some from inside the parts
     monkeypatch.setattr(scene_module, "_DIRECT_BATCHES", False)  # Scene.intersect through embreex
-    want = scene.intersect(O, D)
+    want = scene.intersect(O, D, robust=True)
     direct = scene.direct
     g = np.empty(n, np.int64)
     p = np.empty(n, np.int64)
@@ -76,9 +78,9 @@ def test_direct_embree_hits_equal_embreex_bit_for_bit(scene, monkeypatch):
     assert np.all(t[g < 0] == np.float32(1e37))
     occ = np.empty(n, np.bool_)
     _embree.occluded_batch(direct.handle, O, D, occ)
-    np.testing.assert_array_equal(occ, scene.occluded(O, D))
-    # Scene.intersect / occluded through the direct kernels (the default): the same arrays and
-    # dtypes, from float32 rows and from broadcast float64 rows alike
+    np.testing.assert_array_equal(occ, scene.occluded(O, D, robust=True))
+    # Scene.intersect / occluded through the direct kernels (the default) of the robust scene:
+    # the same arrays and dtypes, from float32 rows and from broadcast float64 rows alike
     monkeypatch.setattr(scene_module, "_DIRECT_BATCHES", True)
     for O_, D_ in ((O, D), (O.astype(np.float32), D.astype(np.float32)),
                    (np.broadcast_to(O[0], O.shape), D)):
@@ -86,14 +88,79 @@ def test_direct_embree_hits_equal_embreex_bit_for_bit(scene, monkeypatch):
         ref = scene.intersect(O_, D_)
         ref_occ = scene.occluded(O_, D_)
         monkeypatch.setattr(scene_module, "_DIRECT_BATCHES", True)
-        got = scene.intersect(O_, D_)
+        got = scene.intersect(O_, D_, robust=True)
         for k in ("geomID", "primID", "u", "v", "tfar"):
             assert got[k].dtype == ref[k].dtype, k
             np.testing.assert_array_equal(got[k], ref[k], err_msg=k)
-        np.testing.assert_array_equal(scene.occluded(O_, D_), ref_occ)
+        np.testing.assert_array_equal(scene.occluded(O_, D_, robust=True), ref_occ)
     assert scene._direct_rays(O, D, None) is not None  # the direct path was the one taken
     assert scene._direct_rays(O, D, np.ones(n)) is None  # a tfar goes through embreex
     np.testing.assert_array_equal(occ, g >= 0)
+
+
+def test_the_fast_scene_finds_the_robust_hits_but_on_edges(scene, monkeypatch):
+    """``Scene.direct_fast`` (no robust flag; the default of ``Scene.intersect`` / ``occluded``)
+    against the robust scene:
+
+    * on rays aimed at vertices (±1 mm) from around the parts, the same hit on all but a few,
+      and each of those a tie (the same distance: another triangle at a shared edge or
+      vertex) or a ray that one of them let through an edge or vertex (the nearer of the two
+      hits has a barycentric coordinate < 10⁻³);
+    * on rays leaving surface points as the shading casts them (offset ``ray_eps_m`` along
+      the normal, cosine-like directions), the distances agree so well that a hit point
+      o + t·d lies within a tenth of that offset of the robust one along the hit's normal (the
+      gather's paths continue from o + t·d; measured on the four targets: ≤ 0.005 of it)."""
+    monkeypatch.setattr(scene_module, "_FAST_TRAVERSAL", True)
+    rng = np.random.default_rng(8)
+    n = 200_000
+    V = scene.vertices
+    O = rng.normal(0.0, 2.0, (n, 3))
+    D = V[rng.integers(0, len(V), n)] + rng.normal(0.0, 1e-3, (n, 3)) - O
+    fast = scene.direct_fast
+    assert fast is not None and fast is not scene.direct
+    assert scene._direct_rays(O, D, None, robust=False)[0] is fast
+    robust = scene.intersect(O, D, robust=True)
+    got = scene.intersect(O, D)
+    assert (robust["geomID"] >= 0).mean() > 0.5
+    same = (got["geomID"] == robust["geomID"]) & (got["primID"] == robust["primID"])
+    assert same.mean() > 0.999
+    k = np.flatnonzero(~same)
+    t_r, t_f = robust["tfar"][k].astype(np.float64), got["tfar"][k].astype(np.float64)
+    tie = (robust["geomID"][k] >= 0) & (got["geomID"][k] >= 0) & (np.abs(t_f - t_r) <= 1e-5 * t_r)
+    # otherwise one of them passed through an edge or vertex where the other hit: the nearer
+    # hit lies on it
+    t_r[robust["geomID"][k] < 0] = np.inf
+    t_f[got["geomID"][k] < 0] = np.inf
+    nearer = np.where(t_r <= t_f, 0, 1)
+    bary = [np.stack([h["u"][k], h["v"][k], 1.0 - h["u"][k] - h["v"][k]], axis=1).min(axis=1) for h in (robust, got)]
+    on_edge = np.where(nearer == 0, bary[0], bary[1]) < 1e-3
+    assert np.all(tie | on_edge)
+    hit = np.flatnonzero(same & (robust["geomID"] >= 0))
+    np.testing.assert_allclose(got["tfar"][hit], robust["tfar"][hit], rtol=1e-4)
+    assert (scene.occluded(O, D) == (robust["geomID"] >= 0)).mean() > 0.999
+
+    # rays of shading: from random points of random triangles, off the surface by ray_eps_m
+    m = 100_000
+    f = rng.integers(0, len(scene.faces), m)
+    r1, r2 = np.sqrt(rng.random(m)), rng.random(m)
+    tri = V[scene.faces[f]].astype(np.float64)
+    P = (1 - r1)[:, None] * tri[:, 0] + (r1 * (1 - r2))[:, None] * tri[:, 1] + (r1 * r2)[:, None] * tri[:, 2]
+    N = scene.face_normal[f] * np.where(rng.random(m) < 0.5, 1.0, -1.0)[:, None]
+    d = N + rng.normal(size=(m, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[(d * N).sum(axis=1) <= 0.0] *= -1.0
+    O2 = P + scene.ray_eps_m * N
+    robust = scene.intersect(O2, d, robust=True)
+    got = scene.intersect(O2, d)
+    both = np.flatnonzero((robust["geomID"] >= 0) & (got["geomID"] == robust["geomID"])
+                          & (got["primID"] == robust["primID"]))
+    assert len(both) > 0.2 * m and len(both) > 0.99 * (robust["geomID"] >= 0).sum()
+    fh = scene.face_offset[robust["geomID"][both]] + robust["primID"][both]
+    along_normal = np.abs(got["tfar"][both].astype(np.float64) - robust["tfar"][both]) * \
+        np.abs((d[both] * scene.face_normal[fh]).sum(axis=1))
+    assert along_normal.max() < 0.1 * scene.ray_eps_m
+    monkeypatch.setattr(scene_module, "_FAST_TRAVERSAL", False)
+    assert scene.direct_fast is scene.direct
 
 
 def _frame(scene, light, monkeypatch, fused: bool, samples: int = 16):
