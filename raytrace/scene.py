@@ -47,12 +47,13 @@ _DIRECT_BATCHES = True
 # that may start on a face (the camera inside the target's hull), the radiance cache's rays and
 # the reference path tracer's: only the robust mode reports a face a ray starts on (t = 0), which
 # the labels and the cache's contact rows count on. Measured (BENCHMARKS.md, "Embree's robust flag
-# where it matters only"): ``balanced``-16 one frame on both cores 0.894× the time with every
-# frame ray fast (median of the 12 scenes' ratios, 0.868–0.987); sub-pixel primary rays
-# 0.69–0.84× (Cassini's 11 m boom triangles gain most); of 2 M rays from random surface points of
-# each target, 3 or fewer found no hit where the robust scene found one, ~1 % another triangle at
-# the same distance (coincident faces, shared edges), and the hit distances' error along the
-# normal stayed below 0.005 of the rays' offset ray_eps_m. False: every ray robust.
+# where it matters only"): one frame on both cores 0.924× / 0.891× / 0.911× the time for
+# ``fast`` / ``balanced``-8 / -16 (median of the 12 scenes' ratios, side by side), the same
+# errors; sub-pixel primary rays 0.69–0.84× (Cassini's 11 m boom triangles gain most); of 2 M
+# rays from random surface points of each target, 3 or fewer found no hit where the robust
+# scene found one, ~1 % another triangle at the same distance (coincident faces, shared edges),
+# and the hit distances' error along the normal stayed below 0.005 of the rays' offset
+# ray_eps_m. False: every ray robust.
 _FAST_TRAVERSAL = True
 _POOL: ThreadPoolExecutor | None = None
 
