@@ -798,7 +798,7 @@ def _prebuild_scenes(tasks: list, folder: str) -> dict:
         from raytrace.scene import Scene
         scene = Scene(_load_model(spec))  # not kept here: only the workers render
         r = task["cfg"]["render"]
-        # the cache the preset's frames ask for (balanced from 16 rays: a finer lattice)
+        # the cache the preset's frames ask for (balanced from 12 rays: a finer lattice)
         options = preset_cache_options(quality_preset(r["quality"], r.get("samples")), scene.scale_m)
         cache = scene.radiance_cache(**options)
         path = os.path.join(folder, f"scene{len(out)}.pickle")

@@ -107,7 +107,7 @@ class Quality:
     cache_divisions : int
         > 0: the radiance cache's lattice spacing is the target's bounding-box diagonal divided
         by this (:func:`preset_cache_options`); 0: the cache's default, 1/60 of it
-        (:class:`raytrace.cache.RadianceCache`; ``balanced`` from 16 rays: :func:`_cache_divisions`) [-].
+        (:class:`raytrace.cache.RadianceCache`; ``balanced`` from 12 rays: :func:`_cache_divisions`) [-].
     """
 
     name: str
@@ -292,7 +292,7 @@ def _pilot_rays(samples: int) -> int:
 
 
 def _cache_divisions(samples: int) -> int:
-    """:attr:`Quality.cache_divisions` of ``balanced`` with N gather rays: 90 from N = 16 (a
+    """:attr:`Quality.cache_divisions` of ``balanced`` with N gather rays: 90 from N = 12 (a
     lattice 1.5× as fine as the default's), else 0 (the default, 1/60 of the diagonal; ``fast``
     keeps it too, whose frame waits on the cache's solve). Measured on the 12 scenes of
     ``benchmarks/bench_time_error.py`` at 1280×960 (``benchmarks/bench_bias_noise.py``, median
@@ -304,8 +304,12 @@ def _cache_divisions(samples: int) -> int:
     four targets' caches takes 1.6–2.2× as long at 1/90 (1/120: 2.0–3.3×; 1.5–4.7 s and
     2.8–6.5 s against 1.0–2.2 s, each after a first build had compiled the kernels), so the
     default ``balanced``-8 (``render-scene``'s) keeps the default lattice (BENCHMARKS.md, "A finer
-    radiance cache for `balanced`")."""
-    return 90 if samples >= 16 else 0
+    radiance cache for `balanced`"). At N = 12 (forty-fifth session, an AVX-512 machine):
+    2.11 → 1.95 % (ten scenes lower, ICESat ``sunlit`` and ``backlit`` +0.01 / +0.04 %) for
+    1.053× the time (0.996–1.082 by scene), where the curve from 12 to 16 rays (2.09 → 1.84 % for
+    0.292 → 0.348 s, t^−0.73) would ask 1.12× for that error: below it, and 12 rays then reach
+    2 % (BENCHMARKS.md, "Twelve rays")."""
+    return 90 if samples >= 12 else 0
 
 
 def preset_cache_options(q: Quality, scale_m: float, options: dict | None = None) -> dict:

@@ -45,7 +45,7 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     another surface takes the
     correction of the nearest neighbouring centre on its surface (N ≤ 16) or gets its own
     N/4-ray gather (N > 16, or no such neighbour and N = 16; below that the cache alone,
-    which is less noisy). From N = 16 the cache's lattice is 1.5× as fine as ``fast``'s
+    which is less noisy). From N = 12 the cache's lattice is 1.5× as fine as ``fast``'s
     (:func:`raytrace.presets.preset_cache_options`; the scene keeps both caches).
 ``reference``
     Unbiased path tracing (:mod:`raytrace.pathtrace`): every sample jittered over the pixel
