@@ -97,6 +97,40 @@ def test_solve_matches_a_direct_sparse_solve_and_does_not_depend_on_threads():
         assert np.array_equal(a, b)
 
 
+
+@pytest.mark.parametrize("omega", [1.0, 1.95])
+def test_the_over_relaxed_solve_converges_to_the_direct_solve_or_falls_back(monkeypatch, omega):
+    """The sweeps are over-relaxed (cache._SOR_OMEGA); where that does not converge, a sweep
+    whose residual grows drops back to Gauss–Seidel. ω = 1.95 is far past where the open box's
+    facing walls and floor let over-relaxation converge quickly: the solve must still reach the
+    LU solution, and ω = 1 (plain Gauss–Seidel) must too."""
+    import raytrace.cache as cache_module
+    monkeypatch.setattr(cache_module, "_SOR_OMEGA", omega)
+    scene = _open_box()
+    cache = scene.radiance_cache(spacing_m=0.4, contact_refine=False)
+    sun = np.array([0.3, -0.2, 1.0])
+    lighting = Lighting(sun_dir_body=sun / np.linalg.norm(sun), sun_irradiance_W_m2=1361.0,
+                        ambient_radiance_W_m2_sr=1.0)
+    E_lu, scale = _direct_solution(cache, lighting)
+    tight = cache.solve(lighting, tolerance=1e-11, max_iterations=5000)
+    assert tight.iterations < 5000
+    np.testing.assert_allclose(tight.irradiance_W_m2, E_lu[cache._alias], rtol=0.0, atol=1e-8 * scale)
+    frame = cache.solve(lighting)
+    assert np.abs(frame.irradiance_W_m2 - E_lu[cache._alias]).max() <= 5e-3 * scale
+    if omega > 1.5:
+        # the fallback is what converged: as many sweeps at ω = 1.95 throughout are far off
+        p, tex = lighting.packed()
+        c = cache._c
+        _, E0 = cache._sources(cache._c_pos, cache._c_nrm, cache._c_solved, c, lighting,
+                               env.irradiance_table(p, tex), env.env_cells(p, tex, cache.n_cells, 4), None)
+        E = E0.copy()
+        Y, Yb = cache._c_rho_ss * E, cache._c_rho_bounce * E
+        for _ in range(tight.iterations):
+            cache_module._gauss_seidel_sweep(c["W_ss"].indptr, c["W_ss"].indices, c["W_ss"].data, *c["W_g"],
+                                             cache._c_rho_ss, cache._c_rho_bounce, E0, E, Y, Yb, omega)
+        E[~cache._c_solved] = 0.0
+        assert np.abs(E - E_lu).max() > 1e-2 * scale
+
 def _same(a, b, where):
     if isinstance(a, dict):
         assert a.keys() == b.keys(), where
