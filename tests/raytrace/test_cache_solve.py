@@ -97,7 +97,6 @@ def test_solve_matches_a_direct_sparse_solve_and_does_not_depend_on_threads():
         assert np.array_equal(a, b)
 
 
-
 @pytest.mark.parametrize("omega", [1.0, 1.95])
 def test_the_over_relaxed_solve_converges_to_the_direct_solve_or_falls_back(monkeypatch, omega):
     """The sweeps are over-relaxed (cache._SOR_OMEGA); where that does not converge, a sweep
@@ -130,6 +129,7 @@ def test_the_over_relaxed_solve_converges_to_the_direct_solve_or_falls_back(monk
                                              cache._c_rho_ss, cache._c_rho_bounce, E0, E, Y, Yb, omega)
         E[~cache._c_solved] = 0.0
         assert np.abs(E - E_lu).max() > 1e-2 * scale
+
 
 def _same(a, b, where):
     if isinstance(a, dict):
