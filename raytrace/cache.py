@@ -115,7 +115,7 @@ _CAST_CHUNKS_ON_TWO_THREADS = True
 _ASSEMBLE_CONTACT_PER_CHUNK = True
 # over-relaxation of the solve's Gauss–Seidel sweeps (RadianceCache.solve; 1: none). ω = 1.2 took
 # the 1/90 caches of the built-in targets 13–15 → 9–11 sweeps (Spacedragon 7 → 6) to the same
-# tolerance, nearer the exact solution; ω = 1.3 diverged on Cassini, so a sweep whose residual
+# tolerance, nearer the exact solution; ω = 1.3–1.4 failed on Cassini, so a sweep whose residual
 # grows drops back to ω = 1 (BENCHMARKS.md, "Over-relaxed sweeps for the radiance cache")
 _SOR_OMEGA = 1.2
 
