@@ -179,20 +179,26 @@ def test_snapshots_command_fails_on_a_changed_reference_and_update_restores_it(t
     out = capsys.readouterr().out
     assert f"FAIL {SMALL_TARGET}: mask: 1 of" in out and str(tmp_path / "diffs") in out and "--update" in out
     assert (tmp_path / "diffs" / f"{SMALL_TARGET}.mask.diff.png").is_file()
-    # --update rewrites the reference; the render is reproducible, so it equals the committed one
-    # within the check's own tolerances, on any machine (bit for bit on the machine that wrote the
-    # committed snapshots; another CPU's SIMD width can move a float rounding, an Embree tie, and
-    # with them a few 8-bit values: seen on an AVX-512 machine against AVX2 snapshots), and the
-    # files hold the same modalities, types and shapes (the files' bytes also depend on the
-    # encoders' versions: zlib, libwebp, and CPython's zipfile, which marks numpy's .npz entries
-    # ZIP64-version only from 3.11.4)
+    # --update rewrites the reference with this machine's render, which is reproducible: it equals
+    # a second render written apart pixel for pixel and value for value, and the committed
+    # reference within the check's own tolerances on any machine (bit for bit on the machine that
+    # wrote the committed snapshots; another CPU's SIMD width can move a float rounding, an Embree
+    # tie, and with them a few 8-bit values: seen on an AVX-512 machine against AVX2 snapshots).
+    # The files' bytes also depend on the encoders' versions: zlib, libwebp, and CPython's
+    # zipfile, which marks numpy's .npz entries ZIP64-version only from 3.11.4.
     assert cli.main(argv[:-2] + ["--update"]) == 0
     assert "review them" in capsys.readouterr().out
     assert sorted(p.name for p in refs.iterdir()) == sorted(p.name for p in SNAPS.glob(f"{SMALL_TARGET}.*")) + [
         "settings.json"]
     new, old = cli.read_snapshot(str(refs), SMALL_TARGET), cli.read_snapshot(str(SNAPS), SMALL_TARGET)
     assert new.keys() == old.keys()
+    again = tmp_path / "again"
+    again.mkdir()
+    cli.write_snapshot(str(again), SMALL_TARGET, cli.render_snapshot(SMALL_TARGET))
+    again = cli.read_snapshot(str(again), SMALL_TARGET)
+    assert new.keys() == again.keys()
     for key in new:
+        assert new[key].dtype == again[key].dtype and np.array_equal(new[key], again[key]), key
         assert new[key].dtype == old[key].dtype and new[key].shape == old[key].shape, key
     assert cli.compare_snapshot(SMALL_TARGET, old, new, diff_dir=str(tmp_path / "diffs2")) == []
     assert (refs / "settings.json").read_bytes() == (SNAPS / "settings.json").read_bytes()

@@ -38,13 +38,18 @@ def _plate(size, at):
     return m
 
 
-def _direct_solution(cache, lighting):
-    """E on the coarse rows by LU, per channel, from the cache's own matrices and sources."""
+def _source_term(cache, lighting):
+    """The coarse rows' source term E0 of the cache's solve under ``lighting``."""
     p, tex = lighting.packed()
     L_env = env.env_cells(p, tex, cache.n_cells, 4)
     table = env.irradiance_table(p, tex)
+    return cache._sources(cache._c_pos, cache._c_nrm, cache._c_solved, cache._c, lighting, table, L_env, None)[1]
+
+
+def _direct_solution(cache, lighting):
+    """E on the coarse rows by LU, per channel, from the cache's own matrices and sources."""
     c = cache._c
-    _, E0 = cache._sources(cache._c_pos, cache._c_nrm, cache._c_solved, c, lighting, table, L_env, None)
+    E0 = _source_term(cache, lighting)
     n = cache.n_coarse_rows
     E = np.zeros((n, 3))
     for ch in range(3):
@@ -118,10 +123,8 @@ def test_the_over_relaxed_solve_converges_to_the_direct_solve_or_falls_back(monk
     assert np.abs(frame.irradiance_W_m2 - E_lu[cache._alias]).max() <= 5e-3 * scale
     if omega > 1.5:
         # the fallback is what converged: as many sweeps at ω = 1.95 throughout are far off
-        p, tex = lighting.packed()
         c = cache._c
-        _, E0 = cache._sources(cache._c_pos, cache._c_nrm, cache._c_solved, c, lighting,
-                               env.irradiance_table(p, tex), env.env_cells(p, tex, cache.n_cells, 4), None)
+        E0 = _source_term(cache, lighting)
         E = E0.copy()
         Y, Yb = cache._c_rho_ss * E, cache._c_rho_bounce * E
         for _ in range(tight.iterations):
