@@ -1,7 +1,7 @@
 """Random scenes, our renderer against Blender Cycles: does the whole light model agree?
 
     python benchmarks/bench_random_vs_cycles.py --out bench_out/random [--n 16] [--seed 0]
-        [--spp 256] [--width 320] [--models ../shared/models] [--presets fast balanced:16]
+        [--spp 256] [--width 320] [--models ../shared/models] [--presets fast balanced:16] [--no-cycles]
 
 The time-against-error study (``bench_time_error.py``) measures our presets against our own
 path tracer on twelve fixed views. This one asks whether that yardstick is right on views
@@ -15,6 +15,10 @@ W/(m²·sr), from ``numpy.random.default_rng([seed, i])``. Every scene is a ``SC
 
 * our ``reference`` path tracer at ``--spp``, seeds 1 and 2, and our ``--presets``;
 * Cycles 5.0.1 (``benchmarks/cycles_render.py``, the same file) at ``--spp``, seeds 1 and 2.
+
+With ``--no-cycles`` it needs no Blender: each preset renders seeds 1 and 2 and its error
+against our reference's mean (the reference's noise removed in quadrature) is the root of the
+two squares' mean (``table.md``: preset vs ours).
 
 Errors are relative RMS over the target pixels (the exact geometry mask), all channels. Half
 the difference of two seeds estimates the noise of their mean (σ/√2 each), and the noise of
@@ -124,9 +128,11 @@ def main() -> None:
     ap.add_argument("--width", type=int, default=320)
     ap.add_argument("--models", default=None, help="folder whose .glb files join the built-in targets")
     ap.add_argument("--presets", nargs="*", default=["fast", "balanced:16"])
+    ap.add_argument("--no-cycles", action="store_true",
+                    help="our presets against our reference only (no Blender needed; seeds 1 and 2 each)")
     args = ap.parse_args()
-    py = bpy_python()
-    if py is None:
+    py = None if args.no_cycles else bpy_python()
+    if py is None and not args.no_cycles:
         sys.exit("bench_random_vs_cycles: needs Blender's Python (.bpyenv or BPY_PYTHON; benchmarks/README_cycles.md)")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -141,16 +147,30 @@ def main() -> None:
             r1, r2 = (render(*a, quality="reference", samples=args.spp, seed=s) for s in (1, 2))
             m = r1.geometry.mask
             o1, o2 = r1.radiance.astype(np.float64), r2.radiance.astype(np.float64)
-            c1, c2 = (cycles(py, path, args.spp, s, out / f"scene_{i:03d}_cycles{s}.exr") for s in (1, 2))
-            ours, cyc = 0.5 * (o1 + o2), 0.5 * (c1 + c2)
-            n_ours, n_cyc = 0.5 * rel_err(o1, o2, m), 0.5 * rel_err(c1, c2, m)
+            ours = 0.5 * (o1 + o2)
+            n_ours = 0.5 * rel_err(o1, o2, m)
             doc = json.loads(path.read_text())
             row = {"scene": path.name, "target": target, "earth": earth, "ambient": doc["ambient_radiance_W_m2_sr"],
-                   "shadow_fraction": doc["sun"]["shadow_fraction"], "target_px": int(m.sum()),
-                   "noise_ours": n_ours, "noise_cycles": n_cyc,
-                   "ref_vs_cycles": _minus_noise(rel_err(ours, cyc, m), n_ours, n_cyc),
-                   "ref_vs_cycles_raw": rel_err(ours, cyc, m),
-                   "ref_over_cycles": float(ours[m].sum() / cyc[m].sum())}
+                   "shadow_fraction": doc["sun"]["shadow_fraction"], "target_px": int(m.sum()), "noise_ours": n_ours}
+            if args.no_cycles:
+                for q, n in presets:
+                    name = q if n is None else f"{q}:{n}"
+                    e2 = [rel_err(render(*a, quality=q, samples=n, seed=s).radiance.astype(np.float64), ours, m) ** 2
+                          - n_ours ** 2 for s in (1, 2)]
+                    row[f"{name}_vs_ref"] = math.sqrt(max(sum(e2) / 2, 0.0))
+                rows.append(row)
+                log.write(json.dumps(row) + "\n")
+                log.flush()
+                print(f"{path.name} {target:18s} earth {earth:9s} target px {m.sum():6d}  "
+                      + "  ".join(f"{k[:-7]} {100 * v:.2f} %" for k, v in row.items() if k.endswith("_vs_ref")),
+                      flush=True)
+                continue
+            c1, c2 = (cycles(py, path, args.spp, s, out / f"scene_{i:03d}_cycles{s}.exr") for s in (1, 2))
+            cyc = 0.5 * (c1 + c2)
+            n_cyc = 0.5 * rel_err(c1, c2, m)
+            row.update({"noise_cycles": n_cyc, "ref_vs_cycles": _minus_noise(rel_err(ours, cyc, m), n_ours, n_cyc),
+                        "ref_vs_cycles_raw": rel_err(ours, cyc, m),
+                        "ref_over_cycles": float(ours[m].sum() / cyc[m].sum())})
             for q, n in presets:
                 img = render(*a, quality=q, samples=n, seed=1).radiance.astype(np.float64)
                 name = q if n is None else f"{q}:{n}"
@@ -163,7 +183,18 @@ def main() -> None:
                   f"{100 * row['ref_vs_cycles']:.2f} % (noise {100 * n_ours:.2f} / {100 * n_cyc:.2f} %)  "
                   + "  ".join(f"{k[:-10]} {100 * v:.2f} %" for k, v in row.items() if k.endswith("_vs_cycles")
                               and not k.startswith("ref")), flush=True)
-    write_table(rows, out / "table.md", [q if n is None else f"{q}:{n}" for q, n in presets])
+    names = [q if n is None else f"{q}:{n}" for q, n in presets]
+    if args.no_cycles:
+        lines = ["| scene | target | target px | " + " | ".join(f"{p} vs ours" for p in names) + " |",
+                 "|" + "---|" * (3 + len(names))]
+        lines += [f"| {r['scene']} | {r['target']} | {r['target_px']} | "
+                  + " | ".join(f"{100 * r[f'{p}_vs_ref']:.2f} %" for p in names) + " |" for r in rows]
+        lines.append("| median | | | " + " | ".join(f"{100 * statistics.median(r[f'{p}_vs_ref'] for r in rows):.2f} %"
+                                                    for p in names) + " |")
+        (out / "table.md").write_text("\n".join(lines) + "\n")
+        print("\n".join(lines))
+        return
+    write_table(rows, out / "table.md", names)
 
 
 def write_table(rows: list, path: Path, presets: list) -> None:

@@ -43,7 +43,7 @@ def _source_term(cache, lighting):
     p, tex = lighting.packed()
     L_env = env.env_cells(p, tex, cache.n_cells, 4)
     table = env.irradiance_table(p, tex)
-    return cache._sources(cache._c_pos, cache._c_nrm, cache._c_solved, cache._c, lighting, table, L_env, None)[1]
+    return cache._sources(cache._c_ray_pos, cache._c_nrm, cache._c_solved, cache._c, lighting, table, L_env, None)[1]
 
 
 def _direct_solution(cache, lighting):
