@@ -1285,8 +1285,9 @@ def execute(tasks: list, *, workers: int, scheduler: str | None = None, progress
                 if progress is not None:
                     progress.update(1)
                 yield res
-    except KeyboardInterrupt:  # Ctrl-C, or Terminated
-        _stop_workers(pool)
+    except BaseException as exc:  # Ctrl-C or Terminated, or what failed as it unwound the wait
+        if _interruption(exc) is not None:
+            _stop_workers(pool)
         raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
@@ -1460,6 +1461,21 @@ def install_termination_handlers() -> None:
             signal.signal(sig, _on_termination)
 
 
+def _interruption(exc: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C or :class:`Terminated` behind ``exc``, if any: itself, or one it was raised
+    while handling (``__context__``). The signal's exception lands wherever the main thread is,
+    and code it interrupts can fail in turn as it unwinds (a lock released twice in
+    ``threading``: "release unlocked lock"); that failure is the signal's doing, not the
+    render's."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 def _interrupted(exc: KeyboardInterrupt, after: str) -> int:
     """One line for Ctrl-C or :class:`Terminated`; the exit status, 128 + the signal."""
     how = f"terminated by {exc}" if isinstance(exc, Terminated) else "interrupted"
@@ -1492,6 +1508,9 @@ def _guarded(run, usage_errors=(CLIError,)) -> tuple:
     except KeyboardInterrupt as exc:
         return None, _interrupted(exc, "complete frames are kept, rerun the same command to resume")
     except Exception as exc:  # noqa: BLE001 - a failure while rendering: one line, frames done are kept
+        signal_exc = _interruption(exc)
+        if signal_exc is not None:  # raised while a signal's exception unwound the job
+            return None, _interrupted(signal_exc, "complete frames are kept, rerun the same command to resume")
         return None, _render_failed(exc)
 
 

@@ -759,3 +759,30 @@ def test_roll_turns_the_camera_about_its_boresight(capsys):
         np.testing.assert_allclose(D[2], [0, 0, 1], atol=1e-12)
         assert math.degrees(abs(math.atan2(D[1, 0], D[0, 0]))) == pytest.approx(30.0, abs=1e-9)
         np.testing.assert_allclose(b["t_cam_m"][2], a["t_cam_m"][2], rtol=1e-12)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP, None], ids=["SIGTERM", "SIGHUP", "Ctrl-C"])
+def test_a_failure_while_a_signal_unwinds_the_job_reports_the_signal(signum, capsys):
+    """The signal's exception lands wherever the main thread is; code it interrupts can fail in
+    turn as it unwinds (``threading``'s "release unlocked lock" once turned a SIGTERM into
+    "rendering failed", exit 1, in test_terminated_pool_stops_its_workers_and_removes_its_temporaries).
+    Such a failure reports the signal and its status; a failure of its own stays a failure."""
+    def run():
+        try:
+            raise cli.Terminated(signum) if signum is not None else KeyboardInterrupt()
+        except KeyboardInterrupt:
+            raise RuntimeError("release unlocked lock")
+
+    result, status = cli._guarded(run)
+    assert result is None
+    name = signal.Signals(signum).name if signum is not None else None
+    assert status == 128 + (signum if signum is not None else signal.SIGINT)
+    err = capsys.readouterr().err.strip()
+    assert err == (f"cli.py: terminated by {name}" if name else "cli.py: interrupted") \
+        + "; complete frames are kept, rerun the same command to resume"
+
+    def failing():
+        raise RuntimeError("a render's own failure")
+
+    assert cli._guarded(failing) == (None, 1)
+    assert "rendering failed (RuntimeError: a render's own failure)" in capsys.readouterr().err
