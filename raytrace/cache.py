@@ -113,6 +113,19 @@ _CONTACT_REACH = 1.0
 _ORIGIN_NUDGE = 4.0
 
 
+def _barycentrics(tri, p):
+    """Barycentrics (b1, b2) of points ``p`` (n, 3) in the planes of triangles ``tri`` (n, 3, 3),
+    by least squares on the edges (p ≈ v0 + b1 (v1 − v0) + b2 (v2 − v0)), and whether the
+    triangle has an area (where it has none, b1 and b2 mean nothing)."""
+    e1, e2, dp = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], p - tri[:, 0]
+    d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    p1, p2 = (dp * e1).sum(1), (dp * e2).sum(1)
+    den = d11 * d22 - d12 * d12
+    ok = den > 0.0
+    den = np.where(ok, den, 1.0)
+    return (d22 * p1 - d12 * p2) / den, (d11 * p2 - d12 * p1) / den, ok
+
+
 def _EMPTY_CSR3(n_rows):
     """An empty (indptr, indices, data (0, 3)) matrix of ``n_rows`` rows."""
     return np.zeros(n_rows + 1, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
@@ -773,6 +786,7 @@ class RadianceCache:
         # the coarse system: its rows, its lattice (the columns of every transfer matrix)
         self._c_face_s, self._c_lat_start, self._c_lat_ids = face_s, lat_start, lat_ids
         self._c_pos, self._c_nrm = pos, nrm
+        self._creases = self._crease_edges()
         self._c_ray_pos = self._ray_origins(pos, sample_face)
         comp_c = scene.component_of_face[sample_face]
         mats = scene.materials
@@ -861,16 +875,10 @@ class RadianceCache:
                        passive=np.flatnonzero(~active))
         # the coarse rows interpolated at every refined sample: the passive samples' light and
         # every refined sample's direct sunlight (as without them)
-        tri = scene.vertices[scene.faces[face_f]]
-        e1, e2, dp = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], pos_f - tri[:, 0]
-        d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-        p1, p2 = (dp * e1).sum(1), (dp * e2).sum(1)
-        den = d11 * d22 - d12 * d12
-        den = np.where(den > 0.0, den, 1.0)
+        b1, b2, _ = _barycentrics(scene.vertices[scene.faces[face_f]], pos_f)
         cols = np.empty((2 * n_f, 3), np.int64)
         w = np.empty((2 * n_f, 3))
-        _interp_rows(self._c_valid, face_s, lat_start, lat_ids, face_f, (d22 * p1 - d12 * p2) / den,
-                     (d11 * p2 - d12 * p1) / den, cols, w)
+        _interp_rows(self._c_valid, face_s, lat_start, lat_ids, face_f, b1, b2, cols, w)
         self._f["P"] = sp.csr_matrix((w.ravel(), (np.repeat(np.arange(2 * n_f), 3), cols.ravel())),
                                      shape=(2 * n_f, 2 * n_c))
         self._f["P_passive"] = self._f["P"][self._f["passive"]]
@@ -884,9 +892,7 @@ class RadianceCache:
         vertices welded by position, and rises above the face's plane on that side, the front or
         either side of an open part, by more than 10⁻³ of its reach); and vertex i of a face is
         an end of such an edge of any face (a fan of triangles touches a crease at a vertex
-        only). Built on first use."""
-        if getattr(self, "_creases", None) is not None:
-            return self._creases
+        only)."""
         scene = self.scene
         V = np.asarray(scene.vertices, dtype=np.float64)
         Vw, weld = np.unique(V, axis=0, return_inverse=True)
@@ -914,8 +920,7 @@ class RadianceCache:
         f, i = np.nonzero(out)
         ends[F[f, (i + 1) % 3]] = True
         ends[F[f, (i + 2) % 3]] = True
-        self._creases = (out, ends[F])
-        return self._creases
+        return out, ends[F]
 
     def _ray_origins(self, pos, face):
         """Where the rays of the samples at ``pos`` (on triangles ``face``) leave from, before
@@ -926,13 +931,7 @@ class RadianceCache:
         far from both edges' lines (k/sin(α/2) for a vertex angle α); at most a quarter of the
         way to the centroid. The others stay where they are (see :data:`_ORIGIN_NUDGE`)."""
         tri = self.scene.vertices[self.scene.faces[face]].astype(np.float64)
-        e1, e2, dp = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], pos - tri[:, 0]
-        d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-        p1, p2 = (dp * e1).sum(1), (dp * e2).sum(1)
-        den = d11 * d22 - d12 * d12
-        ok = den > 0.0
-        den = np.where(ok, den, 1.0)
-        b1, b2 = (d22 * p1 - d12 * p2) / den, (d11 * p2 - d12 * p1) / den
+        b1, b2, ok = _barycentrics(tri, pos)
         bary = np.stack([1.0 - b1 - b2, b1, b2], axis=1)
         k = _ORIGIN_NUDGE * self.eps_m
         move = np.zeros_like(pos)
@@ -944,7 +943,7 @@ class RadianceCache:
             w = vi - vj
             perp = w - e * ((w * e).sum(1) / np.maximum((e * e).sum(1), 1e-300))[:, None]
             inward.append(perp / np.maximum(np.linalg.norm(perp, axis=1), 1e-300)[:, None])
-        edge, corner = self._crease_edges()
+        edge, corner = self._creases
         zero = (bary <= 1e-9) & ok[:, None]
         on = zero & edge[face]
         for j in range(3):  # at vertex j (its two other barycentrics 0) that ends a crease neither
