@@ -1505,11 +1505,9 @@ def _guarded(run, usage_errors=(CLIError,)) -> tuple:
         return run(), None
     except usage_errors as exc:
         return None, _fail(exc)
-    except KeyboardInterrupt as exc:
-        return None, _interrupted(exc, "complete frames are kept, rerun the same command to resume")
-    except Exception as exc:  # noqa: BLE001 - a failure while rendering: one line, frames done are kept
-        signal_exc = _interruption(exc)
-        if signal_exc is not None:  # raised while a signal's exception unwound the job
+    except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - a failure while rendering: one line
+        signal_exc = _interruption(exc)  # Ctrl-C or Terminated, or a failure raised as it unwound the job
+        if signal_exc is not None:
             return None, _interrupted(signal_exc, "complete frames are kept, rerun the same command to resume")
         return None, _render_failed(exc)
 
@@ -1771,6 +1769,9 @@ def render_scene_main(argv: list[str]) -> int:
         sys.stderr.write(f"{PROG}: error: {exc}\n")
         return 1
     except Exception as exc:  # noqa: BLE001 - any other failure: one line, nothing written (as the main job)
+        signal_exc = _interruption(exc)
+        if signal_exc is not None:  # raised as a signal's exception unwound the render: main() reports it
+            raise signal_exc from None
         msg = " ".join(str(exc).split()) or type(exc).__name__
         sys.stderr.write(f"{PROG}: error: rendering {args.scene} failed ({type(exc).__name__}: {msg}); "
                          f"nothing was written to {args.out}\n")

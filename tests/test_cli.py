@@ -131,6 +131,36 @@ def _tiny_scene(tmp_path, **over):
     return path
 
 
+def test_render_scene_reports_a_signal_whose_unwinding_failed(tmp_path, monkeypatch, capsys):
+    """A SIGTERM's exception can make the code it lands in fail as it unwinds (threading's
+    "release unlocked lock"): render-scene reports the signal, exit 143, and writes nothing;
+    a failure of its own stays "rendering ... failed", exit 1."""
+    import signal
+
+    import raytrace.shade
+
+    def interrupted(*a, **k):
+        try:
+            raise cli.Terminated(signal.SIGTERM)
+        except KeyboardInterrupt:
+            raise RuntimeError("release unlocked lock")
+
+    path = _tiny_scene(tmp_path)
+    out = tmp_path / "out"
+    monkeypatch.setattr(raytrace.shade, "render", interrupted)
+    assert cli.main(["render-scene", str(path), "--out", str(out)]) == 128 + signal.SIGTERM
+    assert capsys.readouterr().err.strip() == "cli.py: terminated by SIGTERM; nothing half-written is left"
+    assert not out.exists()
+
+    def failing(*a, **k):
+        raise RuntimeError("a render's own failure")
+
+    monkeypatch.setattr(raytrace.shade, "render", failing)
+    assert cli.main(["render-scene", str(path), "--out", str(out)]) == 1
+    assert "failed (RuntimeError: a render's own failure); nothing was written" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_render_scene_writes_a_frame(tmp_path):
     import OpenImageIO as oiio
     path = _tiny_scene(tmp_path)
