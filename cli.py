@@ -36,6 +36,7 @@ import argparse
 import json
 import math
 import os
+import re
 import sys
 import time
 from dataclasses import dataclass
@@ -488,6 +489,8 @@ def _unit_rows(v: np.ndarray) -> np.ndarray:
 
 def _explicit_pattern(cfg: dict, given: set, n: float, band, radius_m: float):
     """Initial state from --amplitude-m/--kappa (and optional γ, B, phases) instead of a draw."""
+    from dataclasses import replace
+
     from orbit import cw
     from orbit.patterns import parameters, state_from_kappa
     from orbit.sampling import default_window_s
@@ -505,8 +508,13 @@ def _explicit_pattern(cfg: dict, given: set, n: float, band, radius_m: float):
     gamma = p["gamma_m"] if p["gamma_m"] is not None else beta * (window / 2.0 + tau0 / n)
     s0 = state_from_kappa(A, kappa, gamma, n, z_amp=z_amp, z_phase=z_phase, tau0=tau0)
     params = parameters(s0, n)
-    if "pattern" in given and params.pattern != seq["pattern"]:
-        raise CLIError(f"argument --kappa: amplitude {A:g} m and kappa {kappa:g} make the pattern {params.pattern}, "
+    # the class is that of the kappa given (SPEC §4: |kappa| = kappa* is drip-drop, 1 drift); kappa recomputed from
+    # the state can fall an ulp on the other side of a boundary (kappa* gave "spiral")
+    pattern = _class_of(kappa)
+    if params.pattern != pattern and params.pattern in PATTERNS:
+        params = replace(params, pattern=pattern)
+    if "pattern" in given and pattern != seq["pattern"]:
+        raise CLIError(f"argument --kappa: amplitude {A:g} m and kappa {kappa:g} make the pattern {pattern}, "
                        f"not {seq['pattern']} (spiral: 0 < |kappa| < 0.2896, drip-drop: < 1, drift: >= 1)")
     frames = seq["frames"]
     t_s = np.linspace(0.0, window, frames) if frames > 1 else np.zeros(1)
@@ -2360,9 +2368,27 @@ COMMANDS = {"render-scene": render_scene_main, "dataset": dataset_main, "ablatio
             "preview": preview_main, "snapshots": snapshots_main}
 
 
+_NEGATIVE_VALUE = re.compile(r"-(?:\d|\.\d|inf|nan)", re.IGNORECASE)
+
+
+def _attach_negative_values(argv: list) -> list:
+    """argparse takes a value that starts with '-' only when it looks like a plain negative number ('-15',
+    '-.5'): `--attitude-ypr-deg -40,5,60` or `--roll-deg -1e-3` stopped with "expected one argument". Such a value
+    is joined to the long option before it (`--attitude-ypr-deg=-40,5,60`), which argparse reads as that option's
+    value and its check then judges like any other."""
+    out = []
+    for tok in argv:
+        prev = str(out[-1]) if out else ""
+        if _NEGATIVE_VALUE.match(str(tok)) and prev.startswith("--") and "=" not in prev:
+            out[-1] = f"{prev}={tok}"
+        else:
+            out.append(tok)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the process exit status."""
-    argv = sys.argv[1:] if argv is None else list(argv)
+    argv = _attach_negative_values(sys.argv[1:] if argv is None else list(argv))
     try:
         if argv and argv[0] in COMMANDS:
             return COMMANDS[argv[0]](argv[1:])

@@ -5,8 +5,8 @@ target whose bounding radius is at most :data:`REFERENCE_RADIUS_M` (4 m, a Crew 
 For a larger target every length — the band, A, |x_l|, B and the drift length — is
 multiplied by ``scale = max(1, R_b / REFERENCE_RADIUS_M)``. CW motion is linear and the
 pattern classes depend only on κ, so the shapes and the acceptance rates are unchanged, and
-the target keeps the same apparent size at the band's edges: a 55 m Tiangong
-(R_b ≈ 28 m) is viewed from 70–420 m instead of 10–60 m.
+the target keeps the same apparent size at the band's edges: the built-in Tiangong
+(R_b = 36.2 m) is viewed from 91–544 m instead of 10–60 m.
 
 A sample is rejected unless r_min ≤ |r(t)| ≤ r_max at every frame time **and** on a
 1024-point grid over the window, so the band also holds between sparse frames.

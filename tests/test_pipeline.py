@@ -514,6 +514,31 @@ def test_explicit_pattern_attitude_and_paper_preset(tmp_path):
     assert 2 * math.acos(min(1.0, abs(q0 @ q2))) > 0.1  # the target spun between frames
 
 
+def test_negative_option_values_are_read_as_values(capsys):
+    """`--attitude-ypr-deg -40,5,60` and `--roll-deg -1e-3` (argparse alone stops at a value that starts with '-'
+    unless it looks like '-15'), each the same as the `=` form."""
+    docs = []
+    for argv in (["--attitude-ypr-deg", "-40,5,60", "--roll-deg", "-1e-3"], ["--attitude-ypr-deg=-40,5,60", "--roll-deg=-1e-3"]):
+        assert run_main(*SMALL, "--attitude", "inertial", *argv, "--frames", "2", "--json") == 0
+        docs.append(json.loads(capsys.readouterr().out))
+    assert docs[0] == docs[1]
+    assert run_main(*SMALL, "--attitude", "inertial", "--frames", "2", "--json") == 0
+    assert json.loads(capsys.readouterr().out)["frames"][1]["q_cam_from_body"] != docs[0]["frames"][1]["q_cam_from_body"]
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_explicit_kappa_on_the_spiral_boundary_is_drip_drop(capsys, sign):
+    """SPEC §4: |kappa| = kappa* is drip-drop, just below it spiral. kappa recomputed from the state built from
+    kappa* falls an ulp below it; the class is that of the kappa given (it refused `--pattern drip-drop`)."""
+    from orbit.patterns import KAPPA_STAR
+    for kappa, pattern in ((sign * KAPPA_STAR, "drip-drop"), (sign * np.nextafter(KAPPA_STAR, 0.0), "spiral")):
+        assert run_main("--target", "spacedragon", "--pattern", pattern, "--amplitude-m", "12", "--kappa", repr(float(kappa)),
+                        "--frames", "3", "--json") == 0
+        doc = json.loads(capsys.readouterr().out)
+        assert doc["pattern"] == doc["pattern_parameters"]["pattern"] == pattern
+        assert doc["pattern_parameters"]["kappa"] == pytest.approx(kappa, rel=1e-12)
+
+
 def test_dataset_command_table(tmp_path, capsys):
     argv = ["dataset", "--targets", "icesat", "--patterns", "--frames", "2", "--width", "48", "--height", "36",
             "--focal-length-mm", "0.15", "--workers", "1", "--quiet", "--out", tmp_path / "ds"]
@@ -571,6 +596,9 @@ BAD = [
     (["--focal-length-mm", "-4"], ["--focal-length-mm"]),
     (["--pixel-pitch-um", "0"], ["--pixel-pitch-um"]),
     (["--spin-axis", "0,0,0"], ["--spin-axis", "non-zero"]),
+    # values starting with '-' that argparse alone would not take ("expected one argument"): the option's own check
+    (["--attitude-ypr-deg", "-40,5"], ["--attitude-ypr-deg", "3 comma-separated", "-40,5"]),
+    (["--roll-deg", "-inf"], ["--roll-deg", "finite", "[-360, 360]"]),
     (["--shard", "3/2"], ["--shard", "K/N"]),
     (["--kappa", "0.1"], ["--amplitude-m"]),
     (["--amplitude-m", "12", "--kappa", "0.5"], ["--kappa", "drip-drop", "spiral"]),
