@@ -252,8 +252,8 @@ def _options() -> tuple:
         # [camera]
         O("--width", "camera", _int_in(1, 65535), 1280, "image width [px]"),
         O("--height", "camera", _int_in(1, 65535), 960, "image height [px]"),
-        O("--focal-length-mm", "camera", _float_in(0.0, 1e4, lo_open=True, unit="mm"), 4.0, "focal length [mm]"),
-        O("--pixel-pitch-um", "camera", _float_in(0.0, 1e3, lo_open=True, unit="um"), 3.45, "pixel pitch [um]"),
+        O("--focal-length-mm", "camera", _float_in(1e-3, 1e4, unit="mm"), 4.0, "focal length [mm]"),
+        O("--pixel-pitch-um", "camera", _float_in(0.1, 1e3, unit="um"), 3.45, "pixel pitch [um]"),
         O("--roll-deg", "camera", _float_in(-360.0, 360.0, unit="deg"), 0.0,
           "camera roll about its boresight, applied after the look-at pointing (SPEC §9) [deg]"),
         # [render]
@@ -284,7 +284,7 @@ def _options() -> tuple:
         O("--exposure-us", "degrade", _float_in(0.0, 1e7, lo_open=True, unit="us"), 20.0,
           "physical preset: exposure time [us]"),
         O("--quantum-efficiency", "degrade", _float_in(0.0, 1.0, lo_open=True), 0.6, "physical preset: QE"),
-        O("--full-well-e", "degrade", _float_in(0.0, 1e9, lo_open=True, unit="e-"), 10000.0, "physical preset: full well"),
+        O("--full-well-e", "degrade", _float_in(1.0, 1e9, unit="e-"), 10000.0, "physical preset: full well"),
         O("--read-noise-e", "degrade", _float_in(0.0, 1e6, unit="e-"), 5.0, "physical preset: read noise sigma"),
         O("--bit-depth", "degrade", _int_in(1, 16), 12, "physical preset: ADC bits"),
         O("--aberration-sigma-px", "degrade", _float_in(0.0, 100.0, unit="px"), 0.0,
@@ -380,6 +380,9 @@ def _toml_text(value) -> str:
         return repr(value)
     if isinstance(value, (int, str)):
         return str(value)
+    if type(value).__name__ in ("datetime", "date", "time"):  # tomllib's bare date-times
+        raise argparse.ArgumentTypeError("must be a quoted string (e.g. \"2026-03-20T12:00:00Z\"), got a bare TOML "
+                                         f"{type(value).__name__}")
     raise argparse.ArgumentTypeError(f"has an unsupported TOML type {type(value).__name__}")
 
 
@@ -401,9 +404,12 @@ def read_config(path: str) -> dict:
         raise CLIError(f"--config: {path} is not valid TOML ({exc})") from None
     out = {}
     for section, table in data.items():
-        if section not in SECTIONS or not isinstance(table, dict):
+        if section not in SECTIONS:
             raise CLIError(f"--config: {path}: unknown table [{section}]; allowed tables are "
                            f"{', '.join(f'[{s}]' for s in SECTIONS)}")
+        if not isinstance(table, dict):
+            raise CLIError(f"--config: {path}: {section} must be a table ([{section}] and its keys below), "
+                           f"got a {type(table).__name__}")
         for key, value in table.items():
             opt = _BY_KEY.get((section, key))
             if opt is None:
@@ -422,6 +428,13 @@ def resolve_config(args: argparse.Namespace, defaults: dict | None = None) -> tu
     defaults = defaults or {}
     file_cfg = read_config(args.config) if getattr(args, "config", None) else {}
     cfg, given = {s: {} for s in SECTIONS}, set()
+    if getattr(args, "target", None) is not None and getattr(args, "mesh", None) is not None:
+        sys.stderr.write(f"{PROG}: warning: --mesh {args.mesh} is rendered instead of --target {args.target} "
+                         "(give one of them)\n")
+    if getattr(args, "target", None) is not None or getattr(args, "mesh", None) is not None:
+        # the flag chooses the model: a file's mesh (or target) gives way to it, as flags override the file
+        file_cfg = {**file_cfg, "sequence": {k: v for k, v in file_cfg.get("sequence", {}).items()
+                                             if k not in ("target", "mesh", "mesh_unit_m")}}
     for o in OPTIONS:
         value = getattr(args, o.key, None)
         if value is None and o.key in file_cfg.get(o.section, {}):
@@ -473,13 +486,16 @@ def _toml_value(value) -> str:
 
 
 # --------------------------------------------------------------------------- planning (orbit → pose → light)
-def _load_model(spec: tuple):
-    """The target model of a model spec: ("builtin", name) or ("mesh", path, unit_scale_m)."""
+def _load_model(spec: tuple, warn: bool = False):
+    """The target model of a model spec: ("builtin", name) or ("mesh", path, unit_scale_m);
+    ``warn``: one line on stderr when the mesh file needed more than routine repair."""
     if spec[0] == "builtin":
         from raytrace.targets import load_target
         return load_target(spec[1])
     from raytrace.meshio import load_mesh
-    model, _report = load_mesh(spec[1], unit_scale_m=spec[2])
+    model, report = load_mesh(spec[1], unit_scale_m=spec[2])
+    if warn and report.non_finite_note():
+        sys.stderr.write(f"{PROG}: warning: --mesh {report.non_finite_note()}\n")
     return model
 
 
@@ -553,7 +569,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
     if seq["mesh"] is not None:
         spec = ("mesh", seq["mesh"], seq["mesh_unit_m"])
         try:
-            model = _load_model(spec)
+            model = _load_model(spec, warn=True)
         except ValueError as exc:
             raise CLIError(f"argument --mesh: {exc}") from None
         target = model.name
@@ -562,8 +578,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
         model = _load_model(spec)
         target = seq["target"]
     try:
-        from raytrace.scene import Scene
-        Scene(model)  # validates the mesh (e.g. zero-area triangles) before anything is written
+        _scene_of(model, warn=True)  # validates the mesh (e.g. zero-area triangles) before anything is written
     except ValueError as exc:
         raise CLIError(f"argument --mesh: {exc}") from None
     _star_field(cfg)  # validates the star catalogue before anything is written
@@ -619,6 +634,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
         motion = _image_motion(model, camera, cfg["degrade"]["exposure_us"] * 1e-6, s0, n, t_s, attitude,
                                math.radians(cam["roll_deg"]))
     frames, lights = [], []
+    visible = vis.visible  # a property that builds the whole array: once, not per frame (a million frames)
     for i in range(t_s.size):
         frames.append({
             "frame": i,
@@ -641,7 +657,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
             "sun_clear": bool(vis.sun_clear[i]),
             "shadow": ("sunlit", "penumbra", "umbra")[int(vis.shadow[i])],
             "shadow_fraction": float(vis.illuminated_fraction[i]),
-            "visible": bool(vis.visible[i]),
+            "visible": bool(visible[i]),
         })
         lights.append({"sun_dir_body": sun_dir_body[i].tolist(), "shadow_fraction": float(vis.illuminated_fraction[i]),
                        "earth_dir_body": earth_dir_body[i].tolist(), "earth_distance_m": float(earth_distance_m[i]),
@@ -767,8 +783,7 @@ def _scene(spec: tuple, prebuilt: str | None = None):
         if scene is None:
             scene = _load_prebuilt(prebuilt) if prebuilt else None
             if scene is None:
-                from raytrace.scene import Scene
-                scene = Scene(_load_model(spec))
+                scene = _scene_of(_load_model(spec), warn=False)
             scene.embree  # noqa: B018 - build now, under the lock
             _SCENES[spec] = scene
         return scene
@@ -803,8 +818,7 @@ def _prebuild_scenes(tasks: list, folder: str) -> dict:
         if not _shades(task):
             continue
         from raytrace.presets import preset_cache_options, quality_preset
-        from raytrace.scene import Scene
-        scene = Scene(_load_model(spec))  # not kept here: only the workers render
+        scene = _scene_of(_load_model(spec), warn=False)  # not kept here: only the workers render
         r = task["cfg"]["render"]
         # the cache the preset's frames ask for (balanced from 12 rays: a finer lattice)
         options = preset_cache_options(quality_preset(r["quality"], r.get("samples")), scene.scale_m)
@@ -834,6 +848,20 @@ def _worker_ready(quality: str) -> None:
     _precompile.load_here(_precompile_groups(quality))
     if quality != "reference":
         split_sum_table()
+
+
+def _scene_of(model, warn: bool):
+    """``raytrace.scene.Scene(model)``; its warnings about the model (a mesh far from its origin)
+    as one line each on stderr when ``warn`` (planning, once), else dropped (the workers, which
+    build the scene the plan already built)."""
+    import warnings
+    from raytrace.scene import Scene
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = Scene(model)
+    for w in caught if warn else ():
+        sys.stderr.write(f"{PROG}: warning: {' '.join(str(w.message).split())}\n")
+    return scene
 
 
 def _worker_init(threads: int) -> None:
@@ -1231,28 +1259,40 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def execute(tasks: list, *, workers: int, scheduler: str | None = None, progress=None):
+def connect_scheduler(scheduler: str):
+    """A dask.distributed client of ``--scheduler``, connected before anything is written (a
+    scheduler that cannot be reached leaves no folder behind)."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise CLIError("--scheduler needs dask.distributed: pip install 'orbitsynth[dask]'") from None
+    try:
+        return Client(scheduler, timeout="10s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise CLIError(f"--scheduler: cannot connect to {scheduler} ({exc})") from None
+
+
+def execute(tasks: list, *, workers: int, scheduler: str | None = None, progress=None, client=None):
     """Run :func:`run_frame` on every task: in this process (1 worker), on a pool of
-    ``workers`` spawned processes, or on a dask.distributed cluster; yields results as they
-    complete and advances ``progress`` (a tqdm bar) by one per frame."""
+    ``workers`` spawned processes, or on a dask.distributed cluster (``client``, or one
+    connected to ``scheduler`` here); yields results as they complete and advances
+    ``progress`` (a tqdm bar) by one per frame."""
     if not tasks:
         return
-    if scheduler is not None:
+    if client is not None or scheduler is not None:
+        from distributed import as_completed
+        own = client is None
+        client = connect_scheduler(scheduler) if own else client
         try:
-            from distributed import Client, as_completed
-        except ImportError:
-            raise CLIError("--scheduler needs dask.distributed: pip install 'orbitsynth[dask]'") from None
-        try:
-            client = Client(scheduler, timeout="10s")
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise CLIError(f"--scheduler: cannot connect to {scheduler} ({exc})") from None
-        with client:
             futures = client.map(run_frame, tasks, pure=False)
             for fut in as_completed(futures):
                 res = fut.result()
                 if progress is not None:
                     progress.update(1)
                 yield res
+        finally:
+            if own:
+                client.close()
         return
     if workers <= 1 or len(tasks) == 1:
         for task in tasks:
@@ -1395,6 +1435,15 @@ def run_plans(jobs: list, args: argparse.Namespace, *, desc: str | None = None) 
     this shard on the chosen backend (one progress bar), then assemble labels and manifests.
     Returns one stats dict per sequence."""
     workers = args.workers or default_workers()
+    client = connect_scheduler(args.scheduler) if args.scheduler is not None else None
+    try:
+        return _run_plans(jobs, args, desc, workers, client)
+    finally:
+        if client is not None:
+            client.close()
+
+
+def _run_plans(jobs: list, args: argparse.Namespace, desc: str | None, workers: int, client) -> list:
     for plan, seq_dir in jobs:
         prepare_sequence(plan, seq_dir)
     all_tasks, stats = [], []
@@ -1411,7 +1460,7 @@ def run_plans(jobs: list, args: argparse.Namespace, *, desc: str | None = None) 
         _compile_kernels(missing, quiet=args.quiet)
     bar = _progress(len(all_tasks) + skipped, skipped, desc or jobs[0][0]["name"], args.quiet)
     try:
-        for _ in execute(all_tasks, workers=workers, scheduler=args.scheduler, progress=bar):
+        for _ in execute(all_tasks, workers=workers, client=client, progress=bar):
             pass
     finally:
         bar.close()
@@ -1567,6 +1616,9 @@ def dataset_main(argv: list) -> int:
         cfg, given = resolve_config(args, defaults)
         if cfg["sequence"]["mesh"] is not None:
             raise CLIError("--config: [sequence] mesh is not used by the dataset command (built-in targets only)")
+        if args.patterns and (cfg["pattern"]["amplitude_m"] is not None or cfg["pattern"]["kappa"] is not None):
+            # one (A, kappa) is one pattern: the four would all be it, in one folder
+            raise CLIError("argument --patterns: draws each pattern from --seed; drop --amplitude-m/--kappa")
         jobs = []
         patterns = list(PATTERNS) if args.patterns else [cfg["sequence"]["pattern"]]
         root = args.out or os.path.join("output", "dataset")
@@ -1605,9 +1657,10 @@ def ablation_main(argv: list) -> int:
     p.add_argument("--mode", type=_choice(("paper", "physical", "both")), default="both",
                    help="which study to report (default: both)")
     p.add_argument("--pattern", type=_choice(PATTERNS), default="spiral", help="pattern (default: spiral)")
-    p.add_argument("--width", type=_int_in(1, 65535), default=640, help="image width [px] (default: 640)")
-    p.add_argument("--height", type=_int_in(1, 65535), default=480, help="image height [px] (default: 480)")
-    p.add_argument("--focal-length-mm", type=_float_in(0.0, 1e4, lo_open=True, unit="mm"), default=2.0,
+    # SSIM's 7 × 7 window (skimage.metrics.structural_similarity) needs images of at least 7 px a side
+    p.add_argument("--width", type=_int_in(7, 65535), default=640, help="image width [px], >= 7 (default: 640)")
+    p.add_argument("--height", type=_int_in(7, 65535), default=480, help="image height [px], >= 7 (default: 480)")
+    p.add_argument("--focal-length-mm", type=_float_in(1e-3, 1e4, unit="mm"), default=2.0,
                    help="focal length [mm] (default: 2, the field of view of the full-size default camera)")
     p.add_argument("--quality", type=_choice(QUALITIES), default="fast", help="shading preset (default: fast)")
     p.add_argument("--seed", type=_int_in(0, 2**63 - 1), default=0, help="seed (default: 0)")
@@ -1695,30 +1748,61 @@ def geometric_shadow_fraction(lighting) -> float | None:
     return float(illuminated_fraction(r_target, r_sun))
 
 
-def check_out_folder(out_dir: str) -> None:
-    """Fail before any work when ``--out`` cannot become a writable folder: it exists and is not
-    a folder or not writable, or its nearest existing parent is not a writable folder."""
+def check_out_folder(out_dir: str, option: str = "--out") -> None:
+    """Fail before any work when ``option`` (``--out``) cannot become a writable folder: it exists
+    and is not a folder or not writable, or its nearest existing parent is not a writable folder."""
     if not str(out_dir).strip():
-        raise CLIError("--out must name a folder, got an empty string")
+        raise CLIError(f"{option} must name a folder, got an empty string")
     path = os.path.abspath(out_dir)
     if os.path.exists(path):
         if not os.path.isdir(path):
-            raise CLIError(f"--out: {out_dir} exists and is not a folder")
+            raise CLIError(f"{option}: {out_dir} exists and is not a folder")
         if not os.access(path, os.W_OK | os.X_OK):
-            raise CLIError(f"--out: {out_dir} is not writable")
+            raise CLIError(f"{option}: {out_dir} is not writable")
         return
     parent = os.path.dirname(path)
     while not os.path.exists(parent):
         parent = os.path.dirname(parent)
     if not os.path.isdir(parent) or not os.access(parent, os.W_OK | os.X_OK):
-        raise CLIError(f"--out: cannot create {out_dir} ({parent} is not a writable folder)")
+        raise CLIError(f"{option}: cannot create {out_dir} ({parent} is not a writable folder)")
     # os.access says yes to root everywhere, /proc and /sys included: make (and remove) a
     # folder there to be sure before the render
     import tempfile
     try:
         os.rmdir(tempfile.mkdtemp(prefix=".probe-", dir=parent))
     except OSError as exc:
-        raise CLIError(f"--out: cannot create {out_dir} ({parent}: {exc.strerror})") from None
+        raise CLIError(f"{option}: cannot create {out_dir} ({parent}: {exc.strerror})") from None
+
+
+_SCENE_DIRS = ("rgb", "mask", "depth", "normal", "hdr")
+
+
+def check_scene_out(out_dir: str) -> None:
+    """``render-scene`` writes frame 000000's five modality files and ``frame.json`` into a new folder, a
+    folder without them, or over its own earlier frame. A folder holding a sequence (its
+    ``scenario.json``, ``labels.json`` or ``manifest.json``), modality folders with other files, or
+    those files without a ``frame.json`` is refused before the render, so nothing of it is
+    overwritten or mixed with this frame. Unrelated files beside them are left alone."""
+    path = os.path.abspath(out_dir)
+    if not os.path.isdir(path):
+        return
+    own = {f"{d}/000000.{'png' if d in ('rgb', 'mask') else 'exr'}" for d in _SCENE_DIRS}
+    found, other = set(), []
+    for name in ("scenario.json", "labels.json", "manifest.json"):
+        if os.path.exists(os.path.join(path, name)):
+            other.append(name)
+    for d in _SCENE_DIRS:
+        if not os.path.isdir(os.path.join(path, d)):
+            continue
+        for sub in os.scandir(os.path.join(path, d)):
+            name = f"{d}/{sub.name}"
+            (found.add(name) if name in own and sub.is_file() else other.append(name))
+            if len(other) >= 3:
+                break
+    if other or (found and not os.path.isfile(os.path.join(path, "frame.json"))):
+        what = ", ".join(sorted(other)[:3]) if other else f"{', '.join(sorted(found)[:2])} without a frame.json"
+        raise CLIError(f"--out: {out_dir} holds files render-scene did not write ({what}); give a new folder, or "
+                       "one holding an earlier render-scene frame")
 
 
 def render_scene_main(argv: list[str]) -> int:
@@ -1739,6 +1823,9 @@ def render_scene_main(argv: list[str]) -> int:
     try:
         spec = load_scene_file(args.scene)
         check_out_folder(args.out)
+        check_scene_out(args.out)
+        for note in spec.notes:
+            sys.stderr.write(f"{PROG}: warning: {note}\n")
         quality = args.quality or spec.quality
         samples = args.samples if args.samples is not None else (spec.samples if args.quality is None else None)
         seed = args.seed if args.seed is not None else spec.seed
@@ -1865,6 +1952,13 @@ def preview_main(argv: list) -> int:
     from raytrace import preview
     t0 = time.perf_counter()
     try:
+        for option, path, ext in (("--out", args.out, ".png"), ("--html", args.html, ".html")):
+            # a folder or a name without the extension had the file written elsewhere (name + ext)
+            if path is not None and os.path.isdir(path):
+                raise CLIError(f"{option}: {path} is a folder; give the file's name (e.g. "
+                               f"{os.path.join(path, 'preview' + ext)})")
+            if path is not None and not str(path).endswith(ext):
+                raise CLIError(f"{option} must be a {ext} file name, got {path!r}")
         if args.interactive and not preview.has_display():
             raise CLIError("argument --interactive: no display (DISPLAY and WAYLAND_DISPLAY are unset); "
                            "drop --interactive to write the PNG off-screen")
@@ -2314,6 +2408,16 @@ def snapshots_main(argv: list) -> int:
                    help="where diff images go (default: a new temporary folder)")
     args = p.parse_args(argv)
     names = snapshot_cases(args.targets, args.patterns)
+    try:  # the folders are checked before the renders (a bad one failed after them, blamed on --dir)
+        if args.update:
+            check_out_folder(args.dir, option="--dir")
+        elif not os.path.isdir(args.dir):
+            raise CLIError(f"--dir: {args.dir} is not a folder of snapshot references (python cli.py snapshots "
+                           "--update --dir DIR writes them)")
+        if args.diff_dir:
+            check_out_folder(args.diff_dir, option="--diff-dir")
+    except CLIError as exc:
+        return _fail(exc)
     diff_dir = args.diff_dir or tempfile.mkdtemp(prefix="orbitsynth-snapshots-")
     try:
         return _snapshots_run(args, names, diff_dir)

@@ -222,6 +222,14 @@ class MeshReport:
         """Kept parts whose winding is not consistent (never repaired)."""
         return sum(1 for p in self.parts if not p.dropped and not p.winding_consistent)
 
+    def non_finite_note(self) -> str | None:
+        """One line when faces touching NaN/inf vertices were removed (a corrupt file, unlike the
+        routine degenerate and duplicate faces of exported meshes), else None."""
+        if not self.removed_nan:
+            return None
+        return (f"{Path(self.path).name}: {self.removed_nan} of {self.faces_in} triangles touch a NaN/inf vertex and "
+                f"were removed; the other {self.faces_out} are rendered")
+
     def summary(self) -> str:
         """One line: parts and triangles kept, faces removed by reason, mesh quality flags."""
         kept = len(self.parts) - len(self.dropped_parts)

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .camera import Camera
-from .lighting import EARTH_RADIUS_M, SOLAR_CONSTANT_W_M2, Earth, Lighting, only_numbers
+from .lighting import EARTH_RADIUS_M, EARTH_TEXTURES, SOLAR_CONSTANT_W_M2, Earth, Lighting, only_numbers
 from .model import MATERIALS, TargetModel
 
 __all__ = ["SceneSpec", "load_scene_file", "scene_to_dict"]
@@ -72,6 +72,10 @@ class SceneSpec:
     ``t_cam_m`` and ``lighting`` describe the same scene in that shifted frame: a point p of
     ``model`` is p + body_offset_m in the file, and the file's ``t_cam_m`` is
     ``t_cam_m − R_cam_from_body @ body_offset_m`` (:meth:`file_t_cam_m`)."""
+
+    notes: tuple = ()
+    """One line per mesh file that was repaired beyond routine clean-up (faces touching NaN/inf
+    vertices removed, :meth:`raytrace.meshio.MeshReport.non_finite_note`), for the caller to show."""
 
     def file_t_cam_m(self) -> np.ndarray:
         """``camera.t_cam_m`` as the file gives it (the pose of the file's body frame)."""
@@ -156,7 +160,7 @@ def _section(data: dict, key: str, required: bool = True) -> dict | None:
     return v
 
 
-def _model(data: dict, folder: str) -> TargetModel:
+def _model(data: dict, folder: str, notes: list | None = None) -> TargetModel:
     from .meshio import load_mesh
     from .targets import BUILTIN_TARGETS, load_target
     if ("meshes" in data) == ("target" in data):
@@ -188,6 +192,8 @@ def _model(data: dict, folder: str) -> TargetModel:
             if not only_numbers(m["albedo"]):
                 raise _err(f"meshes[{i}].albedo must be 1 or 3 numbers in [0, 1], got {m['albedo']!r}")
             a = np.ravel(m["albedo"])
+            if a.size not in (1, 3):
+                raise _err(f"meshes[{i}].albedo must be 1 or 3 numbers in [0, 1], got {m['albedo']!r}")
             if a.size == 1:
                 a = np.repeat(a, 3)
             a = _numbers(f"meshes[{i}].albedo", a, 3)
@@ -199,10 +205,12 @@ def _model(data: dict, folder: str) -> TargetModel:
             raise _err(f"meshes[{i}].path must be a string")
         path = path if os.path.isabs(path) else os.path.join(folder, path)
         try:
-            part, _ = load_mesh(path, unit_scale_m=m.get("unit_scale_m", 1.0), default_material=material,
-                                name=m.get("name"))
+            part, report = load_mesh(path, unit_scale_m=m.get("unit_scale_m", 1.0), default_material=material,
+                                     name=m.get("name"))
         except ValueError as exc:
             raise _err(f"meshes[{i}]: {exc}") from None
+        if notes is not None and report.non_finite_note():
+            notes.append(f"meshes[{i}]: {report.non_finite_note()}")
         for c in part.components:
             name = c.name if len(meshes) == 1 else f"m{i}_{c.name}"
             comps.append(replace(c, name=name, material=material, albedo=albedo))
@@ -287,6 +295,9 @@ def _lighting(data: dict, folder: str = ".") -> Lighting:
             for key in ("earth_dir_body", "earth_distance_m"):
                 if key not in e:
                     raise _err(f"earth.{key} is required")
+            if not isinstance(e.get("texture", "uniform"), str):  # a JSON array is not an image here
+                raise _err(f"earth.texture must be one of {', '.join(EARTH_TEXTURES)} (an equirectangular image is "
+                           f"given to the Python API), got {e['texture']!r:.60}")
             earth = Earth(earth_dir_body=e["earth_dir_body"], distance_m=e["earth_distance_m"],
                           radius_m=e.get("radius_m", EARTH_RADIUS_M), albedo=e.get("albedo", 0.3),
                           texture=e.get("texture", "uniform"))
@@ -342,8 +353,9 @@ def load_scene_file(path) -> SceneSpec:
     camera, R, t = _camera(_section(data, "camera"))
     folder = os.path.dirname(os.path.abspath(path))
     lighting = _lighting(data, folder)
-    model, t, lighting, offset = _recentred(_model(data, folder), R, t, lighting)
-    return SceneSpec(model, camera, R, t, lighting, quality, samples, seed, offset)
+    notes = []
+    model, t, lighting, offset = _recentred(_model(data, folder, notes), R, t, lighting)
+    return SceneSpec(model, camera, R, t, lighting, quality, samples, seed, offset, tuple(notes))
 
 
 def scene_to_dict(camera: Camera, R_cam_from_body, t_cam_m, lighting: Lighting, meshes: list,

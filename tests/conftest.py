@@ -7,6 +7,8 @@ themselves where a first call compiles or integrates.
 
 import os
 
+import numpy as np
+import pytest
 from hypothesis import settings
 
 settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
@@ -27,3 +29,18 @@ def pytest_sessionstart(session):
         precompile(max(1, min(os.cpu_count() or 1, 4)), GROUPS)
     except Exception as exc:  # noqa: BLE001 (a speed-up only; the tests report real errors)
         print(f"conftest: precompile skipped ({type(exc).__name__}: {exc})")
+
+
+@pytest.fixture
+def nan_box_obj():
+    """Writes a 2 × 1 × 1 box (8 vertices, 12 triangles) as OBJ with its first vertex NaN, and
+    returns how many triangles touch that vertex."""
+    def write(path):
+        import trimesh
+        box = trimesh.creation.box((2.0, 1.0, 1.0))
+        v = box.vertices.copy()
+        v[0, 0] = np.nan
+        lines = [f"v {x} {y} {z}" for x, y, z in v] + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in box.faces]
+        path.write_text("\n".join(lines) + "\n")
+        return int((box.faces == 0).any(axis=1).sum())
+    return write

@@ -217,6 +217,9 @@ def test_render_scene_writes_a_frame(tmp_path):
     ({"sun": {"sun_dir_body": [False, False, True]}}, "sun_dir_body must be a unit 3-vector of numbers"),
     ({"meshes": [{"path": "parts/bus.ply", "albedo": True}]}, "meshes[0].albedo must be 1 or 3 numbers"),
     ({"meshes": [{"path": "parts/bus.ply", "albedo": ["0.5", 0.5, 0.5]}]}, "meshes[0].albedo must be 1 or 3 numbers"),
+    ({"meshes": [{"path": "parts/bus.ply", "albedo": [0.5, 0.5]}]}, "meshes[0].albedo must be 1 or 3 numbers"),
+    ({"earth": {"earth_dir_body": [0, 0, -1], "earth_distance_m": 6.8e6, "texture": [[1, 2], [3]]}},
+     "earth.texture must be one of uniform, procedural"),
     # a focal length no lens has (it overflowed the culling's arithmetic)
     ({"camera": {"K": [[1e300, 0, 31.5], [0, 1e300, 23.5], [0, 0, 1]], "width": 64, "height": 48,
                  "R_cam_from_body": np.eye(3).ravel().tolist(), "t_cam_m": [0, 0, 5]}}, "fx must be a number in (0, 1e+09]"),
@@ -300,6 +303,47 @@ def test_render_scene_checks_out_before_rendering(tmp_path, capsys, monkeypatch)
     assert cli.main(["render-scene", str(path), "--out", str(tmp_path / "taken")]) == 2
     err = capsys.readouterr().err
     assert "--out" in err and "not a folder" in err and err.count("\n") == 1
+
+
+def test_render_scene_overwrites_only_its_own_earlier_frame(tmp_path, capsys):
+    """A folder holding a sequence, other modality files, or frame 000000's files without a frame.json is
+    refused before the render and left byte for byte; a new folder, one with unrelated files only, and the
+    command's own earlier output are written."""
+    def snapshot(d):
+        return {p.relative_to(d).as_posix(): p.read_bytes() for p in d.rglob("*") if p.is_file()}
+    path = _tiny_scene(tmp_path)
+    own = tmp_path / "own"
+    assert cli.main(["render-scene", str(path), "--out", str(own)]) == 0
+    assert cli.main(["render-scene", str(path), "--out", str(own), "--seed", "3"]) == 0  # over its own frame
+    for name, make in (("sequence", lambda d: (d / "scenario.json").write_text("{}")),
+                       ("other frames", lambda d: ((d / "rgb").mkdir(), (d / "rgb" / "000001.png").write_bytes(b"x"))),
+                       ("no frame.json", lambda d: ((d / "mask").mkdir(), (d / "mask" / "000000.png").write_bytes(b"x")))):
+        out = tmp_path / name.replace(" ", "_")
+        out.mkdir()
+        make(out)
+        before = snapshot(out)
+        capsys.readouterr()
+        assert cli.main(["render-scene", str(path), "--out", str(out)]) == 2, name
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--out" in err and "render-scene did not write" in err, (name, err)
+        assert snapshot(out) == before, name
+    side = tmp_path / "notes"
+    side.mkdir()
+    (side / "README.txt").write_text("mine")
+    assert cli.main(["render-scene", str(path), "--out", str(side)]) == 0
+    assert (side / "README.txt").read_text() == "mine" and (side / "hdr" / "000000.exr").is_file()
+
+
+def test_render_scene_warns_of_a_mesh_with_non_finite_vertices(tmp_path, capsys, nan_box_obj):
+    """The scene's mesh loses the faces that touch its NaN vertex and the command says so in one line."""
+    path = _tiny_scene(tmp_path)
+    n_bad = nan_box_obj(tmp_path / "parts" / "bus.obj")
+    scene = json.loads(path.read_text())
+    scene["meshes"][0]["path"] = "parts/bus.obj"
+    path.write_text(json.dumps(scene))
+    assert cli.main(["render-scene", str(path), "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"warning: meshes[0]: bus.obj: {n_bad} of 12 triangles touch" in err, err
 
 
 def test_render_scene_file_not_utf8_or_empty_out_is_one_line(tmp_path, capsys):

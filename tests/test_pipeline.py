@@ -484,6 +484,20 @@ def test_dask_local_cluster_gives_the_same_bytes(ref, tmp_path):
     assert_same_tree(ref, tmp_path / "dask")
 
 
+def test_unreachable_scheduler_is_one_line_and_writes_nothing(tmp_path, capsys):
+    """The scheduler is connected before the sequence folder is prepared (it left scenario.json, the model and
+    empty modality folders behind)."""
+    pytest.importorskip("distributed")
+    import socket
+    with socket.socket() as sock:  # a port nobody listens on
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    assert run_main(*SMALL, "--frames", "2", "--scheduler", f"tcp://127.0.0.1:{port}", "--out", tmp_path / "seq") == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--scheduler" in err and "cannot connect" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 # --------------------------------------------------------------------------- options
 def test_only_visible_drops_frames_and_keeps_flags(ref, tmp_path):
     out = tmp_path / "vis"
@@ -553,6 +567,17 @@ def test_dataset_command_table(tmp_path, capsys):
     assert "total" in out and "4 sequences x 4 modalities" in out
 
 
+def test_dataset_of_all_patterns_refuses_one_explicit_pattern_and_writes_nothing(tmp_path, capsys):
+    """--patterns with --amplitude-m/--kappa made the same pattern four times into one folder and stopped
+    half-way ("holds another sequence"); it is refused up front, as preview --all-patterns does."""
+    argv = ["dataset", "--targets", "icesat", "--patterns", "--amplitude-m", "15", "--kappa", "0.1", "--frames", "2",
+            "--width", "48", "--height", "36", "--workers", "1", "--quiet", "--out", tmp_path / "ds"]
+    assert run_main(*argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--patterns" in err and "--kappa" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_ablation_command_prints_the_table(capsys):
     argv = ["ablation", "--target", "icesat", "--frames", "2", "--width", "64", "--height", "48",
             "--focal-length-mm", "0.2", "--workers", "1", "--quiet"]
@@ -595,6 +620,8 @@ BAD = [
     (["--height", "-5"], ["--height"]),
     (["--focal-length-mm", "-4"], ["--focal-length-mm"]),
     (["--pixel-pitch-um", "0"], ["--pixel-pitch-um"]),
+    (["--pixel-pitch-um", "1e-300"], ["--pixel-pitch-um", "[0.1, 1000]"]),  # was fx = 4e+303, an internal name
+    (["--full-well-e", "1e-300"], ["--full-well-e", "[1, 1e+09]"]),  # was a NaN image after rendering, exit 1
     (["--spin-axis", "0,0,0"], ["--spin-axis", "non-zero"]),
     # values starting with '-' that argparse alone would not take ("expected one argument"): the option's own check
     (["--attitude-ypr-deg", "-40,5"], ["--attitude-ypr-deg", "3 comma-separated", "-40,5"]),
@@ -611,6 +638,8 @@ BAD = [
     (_bad_config("[camera]\nwidht = 3\n"), ["--config", "widht", "width"]),
     (_bad_config("[camera]\nwidth = 'wide'\n"), ["--config", "width", "integer"]),
     (_bad_config("[lens]\nf = 1\n"), ["--config", "[lens]", "[camera]"]),
+    (_bad_config("sequence = 5\n"), ["--config", "sequence must be a table"]),  # was "unknown table [sequence]"
+    (_bad_config("[orbit]\nepoch = 2026-03-20T12:00:00Z\n"), ["--config", "epoch", "quoted string"]),
     (lambda tmp: ["--config", str(tmp / "nope.toml")], ["--config", "nope.toml"]),
     (_out_under_a_file, ["--out", "afile"]),
 ]
@@ -621,7 +650,9 @@ def test_bad_input_is_one_line_exit_2_and_leaves_nothing(tmp_path, capsys, args,
     extra = args(tmp_path) if callable(args) else args
     before = sorted(str(p) for p in tmp_path.rglob("*"))
     out = ["--out", str(tmp_path / "seq")] if "--out" not in extra else []
-    assert run_main(*SMALL, "--workers", "1", *extra, *out) == 2
+    base = SMALL[2:] if "--mesh" in extra else SMALL  # SMALL's --target would conflict with --mesh
+    assert SMALL[:2] == ["--target", "icesat"]
+    assert run_main(*base, "--workers", "1", *extra, *out) == 2
     cap = capsys.readouterr()
     assert cap.out == ""
     err = cap.err.strip()
@@ -629,6 +660,48 @@ def test_bad_input_is_one_line_exit_2_and_leaves_nothing(tmp_path, capsys, args,
     for name in names:
         assert name in err, (name, err)
     assert sorted(str(p) for p in tmp_path.rglob("*")) == before  # nothing created
+
+
+def test_mesh_with_non_finite_vertices_is_repaired_with_a_one_line_warning(tmp_path, capsys, nan_box_obj):
+    """The faces touching a NaN vertex are removed (raytrace.meshio), and the main job says so (it was silent)."""
+    n_bad = nan_box_obj(tmp_path / "nan.obj")
+    assert run_main("--mesh", tmp_path / "nan.obj", "--frames", "2", "--json") == 0
+    cap = capsys.readouterr()
+    assert json.loads(cap.out)["frames"]
+    assert cap.err.count("\n") == 1 and "warning: --mesh nan.obj" in cap.err, cap.err
+    assert f"{n_bad} of 12 triangles touch a NaN/inf vertex" in cap.err
+
+
+def test_target_and_mesh_flags_and_a_flag_overrides_the_files_model(tmp_path, capsys):
+    """--mesh is rendered instead of --target (documented), now with a one-line warning (the target was dropped
+    silently); a --target flag replaces the mesh of a --config file, as every flag overrides the file, and a
+    --mesh flag its target."""
+    import trimesh
+    trimesh.creation.box((2.0, 1.0, 1.0)).export(tmp_path / "box.ply")
+    assert run_main("--target", "tiangong", "--mesh", tmp_path / "box.ply", "--frames", "2", "--json") == 0
+    cap = capsys.readouterr()
+    assert json.loads(cap.out)["target"] == "box"
+    assert cap.err.count("\n") == 1 and "warning: --mesh" in cap.err and "instead of --target tiangong" in cap.err
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[sequence]\nmesh = "{tmp_path / "box.ply"}"\nframes = 2\n')
+    for flags, target in (([], "box"), (["--target", "icesat"], "icesat")):
+        assert run_main("--config", cfg, *flags, "--json") == 0
+        assert json.loads(capsys.readouterr().out)["target"] == target
+    cfg.write_text('[sequence]\ntarget = "tiangong"\nframes = 2\n')
+    assert run_main("--config", cfg, "--mesh", tmp_path / "box.ply", "--json") == 0
+    assert json.loads(capsys.readouterr().out)["target"] == "box"
+
+
+def test_a_library_warning_is_one_line_once(tmp_path, capsys):
+    """A mesh far from its origin (raytrace.scene warns) gave Python's two-line warning, twice; now one line."""
+    import trimesh
+    box = trimesh.creation.box((2.0, 1.0, 1.0))
+    box.apply_translation((5000.0, 0.0, 0.0))
+    box.export(tmp_path / "far.ply")
+    assert run_main(*SMALL[2:], "--mesh", tmp_path / "far.ply", "--frames", "2", "--workers", "1",
+                    "--modalities", "mask", "--out", tmp_path / "seq") == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("cli.py: warning: model far:") and "recentre" in err, err
 
 
 def test_another_sequence_in_the_folder_is_refused(ref, tmp_path, capsys):

@@ -197,6 +197,19 @@ def test_preview_errors_are_one_line_and_write_nothing(tmp_path, capsys, monkeyp
     assert not out.exists()
 
 
+@pytest.mark.parametrize("name, text", [("afolder", "--out: {} is a folder"), ("noext", "--out must be a .png file name"),
+                                        ("p.PNG", "--out must be a .png file name")])
+def test_preview_out_is_a_png_file_name(tmp_path, capsys, name, text):
+    """--out naming a folder or a file without .png had the PNG written beside it as NAME.png (and reported
+    the path given); both are refused, one line, nothing written."""
+    (tmp_path / "afolder").mkdir()
+    out = tmp_path / name
+    assert cli.main(["preview", "--frames", "4", "--size", "320x200", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert text.format(out) in err and err.count("\n") == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afolder"] and not any((tmp_path / "afolder").iterdir())
+
+
 def test_html_needs_the_exporter(tmp_path, capsys):
     if preview.html_export_available():
         assert cli.main(["preview", *OPTS, "--size", "320x200", "--out", str(tmp_path / "p.png"),

@@ -216,6 +216,22 @@ def test_snapshots_command_errors_are_one_line(tmp_path, capsys):
     assert err.count("\n") == 1 and "--targets" in err and "tiangong" in err
 
 
+def test_snapshots_command_checks_its_folders_before_rendering(tmp_path, monkeypatch, capsys):
+    """A --dir that is not a folder, or a --diff-dir / --update --dir that cannot be written, is one line on
+    stderr naming that option, exit 2, before any render (they failed after the renders: exit 1 on stdout,
+    or --diff-dir blamed on --dir with a raw errno)."""
+    monkeypatch.setattr(cli, "render_snapshot", lambda name: pytest.fail("rendered before checking the folders"))
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    base = ["snapshots", "--targets", "icesat", "--patterns", "spiral"]
+    for extra, option in ((["--dir", str(tmp_path / "nowhere")], "--dir"), (["--dir", str(afile)], "--dir"),
+                          (["--update", "--dir", str(afile / "refs")], "--dir"),
+                          (["--diff-dir", str(afile)], "--diff-dir")):
+        assert cli.main([*base, *extra]) == 2, extra
+        cap = capsys.readouterr()
+        assert cap.out == "" and cap.err.count("\n") == 1 and f"error: {option}" in cap.err, (extra, cap)
+
+
 def test_snapshots_command_leaves_no_empty_temporary_folder(tmp_path, monkeypatch, capsys):
     # without --diff-dir the diff images go to a new temporary folder; it must not stay behind
     # empty when there is nothing to show (stale references, --update, all matching)
