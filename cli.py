@@ -94,6 +94,7 @@ def _int_in(lo: int, hi: int):
         if not lo <= value <= hi:
             raise argparse.ArgumentTypeError(f"must be an integer in [{lo}, {hi}], got {value}")
         return value
+    parse.toml = "an integer"
     return parse
 
 
@@ -108,6 +109,7 @@ def _float_in(lo: float, hi: float, *, lo_open: bool = False, unit: str = ""):
         if not math.isfinite(value) or value < lo or value > hi or (lo_open and value == lo):
             raise argparse.ArgumentTypeError(f"must be {allowed}, got {text}")
         return value
+    parse.toml = "a number"
     return parse
 
 
@@ -123,6 +125,7 @@ def _floats(n: int, lo: float, hi: float, *, unit: str = "", nonzero: bool = Fal
         if nonzero and not any(values):
             raise argparse.ArgumentTypeError(f"must be a non-zero vector, got {text!r}")
         return values
+    parse.toml = f"an array of {n} numbers"
     return parse
 
 
@@ -151,6 +154,9 @@ def _bool(text: str) -> bool:
     if str(text).lower() in ("false", "0", "no"):
         return False
     raise argparse.ArgumentTypeError(f"must be true or false, got {text!r}")
+
+
+_bool.toml = "true or false"
 
 
 def _path(text: str) -> str:
@@ -386,6 +392,24 @@ def _toml_text(value) -> str:
     raise argparse.ArgumentTypeError(f"has an unsupported TOML type {type(value).__name__}")
 
 
+def _toml_type_ok(kind: str | None, value) -> bool:
+    """Whether a TOML value has the type its option takes (a flag's text is parsed, but a file's
+    ``frames = "2"`` or ``only_visible = "yes"`` is a type error in TOML terms)."""
+    def number(v):
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+    if type(value).__name__ in ("datetime", "date", "time"):
+        return True  # _toml_text says how to write it
+    if kind is None:  # names, lists of names, paths, times: a string (or a list of strings)
+        return isinstance(value, str) or (isinstance(value, list) and all(isinstance(v, str) for v in value))
+    if kind == "an integer":
+        return isinstance(value, int) and not isinstance(value, bool)
+    if kind == "a number":
+        return number(value)
+    if kind == "true or false":
+        return isinstance(value, bool)
+    return isinstance(value, list) and all(number(v) for v in value)  # an array of n numbers
+
+
 def read_config(path: str) -> dict:
     """Read a TOML configuration; returns {section: {key: value}} validated like the flags.
 
@@ -415,6 +439,9 @@ def read_config(path: str) -> dict:
             if opt is None:
                 keys = ", ".join(o.key for o in OPTIONS if o.section == section)
                 raise CLIError(f"--config: {path}: unknown key {key!r} in [{section}]; allowed: {keys}")
+            if not _toml_type_ok(getattr(opt.parse, "toml", None), value):
+                kind = getattr(opt.parse, "toml", "a string (or an array of strings)")
+                raise CLIError(f"--config: {path}: [{section}] {key} must be {kind}, got {value!r}")
             try:
                 out.setdefault(section, {})[key] = opt.parse(_toml_text(value))
             except argparse.ArgumentTypeError as exc:

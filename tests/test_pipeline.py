@@ -639,6 +639,9 @@ BAD = [
     (_bad_config("[camera]\nwidth = 'wide'\n"), ["--config", "width", "integer"]),
     (_bad_config("[lens]\nf = 1\n"), ["--config", "[lens]", "[camera]"]),
     (_bad_config("sequence = 5\n"), ["--config", "sequence must be a table"]),  # was "unknown table [sequence]"
+    (_bad_config('[sequence]\nframes = "2"\n'), ["--config", "frames must be an integer", "'2'"]),  # was accepted
+    (_bad_config('[output]\nonly_visible = "yes"\n'), ["--config", "only_visible must be true or false"]),
+    (_bad_config('[attitude]\nspin_axis = "0,0,1"\n'), ["--config", "spin_axis must be an array of 3 numbers"]),
     (_bad_config("[orbit]\nepoch = 2026-03-20T12:00:00Z\n"), ["--config", "epoch", "quoted string"]),
     (lambda tmp: ["--config", str(tmp / "nope.toml")], ["--config", "nope.toml"]),
     (_out_under_a_file, ["--out", "afile"]),
