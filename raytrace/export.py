@@ -237,7 +237,9 @@ def _write_png(path: Path, pixels: np.ndarray) -> None:
         raise OSError(f"cannot create {path}: {oiio.geterror()}")
     h, w = pixels.shape
     fmt = oiio.UINT8 if pixels.dtype == np.uint8 else oiio.UINT16
-    ok = out.open(str(path), oiio.ImageSpec(w, h, 1, fmt)) and out.write_image(np.ascontiguousarray(pixels[:, :, None]))
+    spec = oiio.ImageSpec(w, h, 1, fmt)
+    spec.attribute("oiio:ColorSpace", "Raw")  # depth codes and masks: no sRGB/gAMA/cHRM chunks, as bop_toolkit's
+    ok = out.open(str(path), spec) and out.write_image(np.ascontiguousarray(pixels[:, :, None]))
     err = out.geterror()
     out.close()
     if not ok:
@@ -521,13 +523,14 @@ def _gt_info(visib: np.ndarray, codes: np.ndarray, f: _Frame, scene, K: np.ndarr
     n_visib = int(np.count_nonzero(visib))
     n_valid = int(np.count_nonzero(visib & (codes > 0)))
     bbox_visib = bbox_obj = [-1, -1, -1, -1]
-    n_all = n_visib
-    if n_visib > 0:  # as calc_gt_info: boxes only for a visible object
+    # as calc_gt_info: px_count_all over the 3W × 3H canvas for every object, even one wholly
+    # outside the image; the boxes only for a visible one
+    n_out, cols_out, rows_out = _silhouette_beyond(scene, K, visib.shape[1], visib.shape[0],
+                                                   f.R_cam_from_body, f.t_cam_m, hull_m)
+    n_all = n_visib + n_out
+    if n_visib > 0:
         rows, cols = np.nonzero(visib)
         bbox_visib = _bop_bbox(cols, rows)
-        n_out, cols_out, rows_out = _silhouette_beyond(scene, K, visib.shape[1], visib.shape[0],
-                                                       f.R_cam_from_body, f.t_cam_m, hull_m)
-        n_all += n_out
         bbox_obj = _bop_bbox(np.concatenate([cols, cols_out]), np.concatenate([rows, rows_out]))
     return {"bbox_obj": bbox_obj, "bbox_visib": bbox_visib, "px_count_all": n_all, "px_count_valid": n_valid,
             "px_count_visib": n_visib, "visib_fract": n_visib / n_all if n_all > 0 else 0.0}

@@ -81,7 +81,8 @@ def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False) -> None:
     path : str
         Destination; its extension picks the format.
     pixels : ndarray, shape (H, W) or (H, W, C), uint8, uint16 or float32
-        Pixel values, row 0 at the top.
+        Pixel values, row 0 at the top. A one-channel PNG is data (instance ids) and is written
+        without colour-space chunks; a three-channel one is sRGB.
     noisy : bool, keyword-only
         The image is mostly noise (a degraded camera frame): a PNG is filtered and deflated
         for speed (:data:`_PNG_NOISY`), not for the last bytes; otherwise :data:`_PNG`. The
@@ -116,6 +117,8 @@ def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False) -> None:
     if path.endswith(".png"):
         for key, value in (_PNG_NOISY if noisy else _PNG).items():
             spec.attribute(key, value)
+        if c == 1:  # a one-channel PNG holds data (instance ids): no sRGB/gAMA/cHRM chunks a viewer would apply
+            spec.attribute("oiio:ColorSpace", "Raw")
     if path.endswith(".exr"):
         spec.attribute("compression", "zip")
         spec.attribute("DateTime", "")  # no capture date: the same pixels give the same bytes

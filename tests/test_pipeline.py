@@ -21,6 +21,7 @@ import pytest
 
 import cli
 from raytrace import files as F
+from tests.raytrace.oracles import png_chunks
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--target", "icesat", "--pattern", "spiral", "--frames", "8", "--width", "160", "--height", "120",
@@ -730,6 +731,14 @@ def test_noisy_png_is_lossless_deterministic_and_written_its_own_way(tmp_path, d
     for p in paths:
         np.testing.assert_array_equal(F.read_image(p), px[..., 0] if channels == 1 else px)
     assert F.sha256_file(paths[0]) == F.sha256_file(paths[1]) != F.sha256_file(paths[2])
+
+
+def test_data_pngs_carry_no_colour_space(ref):
+    """Instance masks are data: no sRGB/gAMA/cHRM chunk that a colour-managed reader would apply (OpenImageIO
+    tagged every PNG sRGB); the RGB frames keep their sRGB tag."""
+    lab = json.loads((ref / "labels.json").read_text())[0]
+    assert not {"sRGB", "gAMA", "cHRM", "iCCP"} & set(png_chunks(ref / lab["files"]["mask"]))
+    assert "sRGB" in png_chunks(ref / lab["files"]["rgb"])
 
 
 def test_atomic_writes_leave_no_temporary(tmp_path):

@@ -23,3 +23,13 @@ def point_mesh_distance(points, V, F):
             d = np.minimum(d, np.linalg.norm(p - (u + s[:, None] * e), axis=1))
         out[i] = d.min()
     return out
+
+
+def png_chunks(path) -> list:
+    """The chunk types of a PNG file, in order (PNG spec: 8-byte signature, then length, type, data, CRC)."""
+    data, i, out = open(path, "rb").read(), 8, []
+    while i < len(data):
+        n = int.from_bytes(data[i:i + 4], "big")
+        out.append(data[i + 4:i + 8].decode("ascii"))
+        i += 12 + n
+    return out

@@ -31,7 +31,7 @@ from raytrace.camera import Camera
 from raytrace.export import BOP_DEPTH_MAX_CODE, export_bop, export_speedplus
 from raytrace.scene import Scene
 from raytrace.targets import load_target
-from tests.raytrace.oracles import point_mesh_distance
+from tests.raytrace.oracles import png_chunks, point_mesh_distance
 
 W, H = 160, 120
 CAMERA = Camera(width=W, height=H, fx=145.0, fy=145.0, cx=79.5, cy=59.5)
@@ -221,6 +221,29 @@ def test_bop_gt_info(bop):
     cut = js["scene_gt_info"]["7"][0]
     assert cut["bbox_obj"][0] + cut["bbox_obj"][2] > W - 1  # reaches beyond the image
     assert cut["visib_fract"] < 0.95 and cut["px_count_all"] > cut["px_count_visib"]
+
+
+def test_bop_data_pngs_carry_no_colour_space(bop):
+    """Depth codes and masks are plain PNGs, as bop_toolkit's inout.save_depth writes them (no sRGB/gAMA/cHRM)."""
+    _, scene_dir, *_ = bop
+    for sub in ("depth", "mask", "mask_visib"):
+        for path in sorted((scene_dir / sub).iterdir()):
+            assert not {"sRGB", "gAMA", "cHRM", "iCCP"} & set(png_chunks(path)), path
+
+
+def test_bop_gt_info_of_an_object_wholly_outside_the_image(tmp_path, monkeypatch):
+    """calc_gt_info counts px_count_all on its 3W × 3H canvas for every object; one wholly beyond the
+    image's right border but on the canvas got 0 (the boxes stay [-1, -1, -1, -1], visib_fract 0)."""
+    import tests.raytrace.test_export as me
+    monkeypatch.setattr(me, "POSES", {0: ((30.0, 20.0, 10.0), (13.3, 0.0, 12.0))})
+    scene = Scene(load_target("icesat"))
+    (R, t, g), = make_sequence(tmp_path / "seq", scene).values()
+    n_all, _ = large_canvas(scene, R, t)
+    assert not g.instance.any() and n_all > 500  # nothing in the image, a silhouette on the canvas
+    out = export_bop(tmp_path / "seq", tmp_path / "bop")
+    info = json.loads((out / "train" / "000000" / "scene_gt_info.json").read_text())["0"][0]
+    assert info == {"bbox_obj": [-1, -1, -1, -1], "bbox_visib": [-1, -1, -1, -1], "px_count_all": n_all,
+                    "px_count_valid": 0, "px_count_visib": 0, "visib_fract": 0.0}
 
 
 def test_bop_images_linked_or_copied(sequence, tmp_path):
