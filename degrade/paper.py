@@ -16,6 +16,9 @@ same float64 arithmetic). So with ``p, g = np.random.default_rng(seed).spawn(2)`
     D4 == random_noise(random_noise(B, "poisson", rng=p), "gaussian", var=0.01, rng=g)
           .astype(np.float32)
 
+with B in float64 (``random_noise`` of a float32 B rounds differently in about 10 % of pixels,
+by one float32 ulp; this module computes in float64 as scikit-image does on float64 input)
+
 and D2, D4 share their Poisson realisation for one seed, D3, D4 their Gaussian one. Two
 streams let the Gaussian draws run concurrently with the Poisson draws (they do not depend
 on each other).
