@@ -1299,27 +1299,20 @@ def connect_scheduler(scheduler: str):
         raise CLIError(f"--scheduler: cannot connect to {scheduler} ({exc})") from None
 
 
-def execute(tasks: list, *, workers: int, scheduler: str | None = None, progress=None, client=None):
+def execute(tasks: list, *, workers: int, progress=None, client=None):
     """Run :func:`run_frame` on every task: in this process (1 worker), on a pool of
-    ``workers`` spawned processes, or on a dask.distributed cluster (``client``, or one
-    connected to ``scheduler`` here); yields results as they complete and advances
-    ``progress`` (a tqdm bar) by one per frame."""
+    ``workers`` spawned processes, or on a dask.distributed cluster (``client``, connected by
+    :func:`connect_scheduler`); yields results as they complete and advances ``progress`` (a
+    tqdm bar) by one per frame."""
     if not tasks:
         return
-    if client is not None or scheduler is not None:
+    if client is not None:
         from distributed import as_completed
-        own = client is None
-        client = connect_scheduler(scheduler) if own else client
-        try:
-            futures = client.map(run_frame, tasks, pure=False)
-            for fut in as_completed(futures):
-                res = fut.result()
-                if progress is not None:
-                    progress.update(1)
-                yield res
-        finally:
-            if own:
-                client.close()
+        for fut in as_completed(client.map(run_frame, tasks, pure=False)):
+            res = fut.result()
+            if progress is not None:
+                progress.update(1)
+            yield res
         return
     if workers <= 1 or len(tasks) == 1:
         for task in tasks:
@@ -1823,7 +1816,10 @@ def check_scene_out(out_dir: str) -> None:
             continue
         for sub in os.scandir(os.path.join(path, d)):
             name = f"{d}/{sub.name}"
-            (found.add(name) if name in own and sub.is_file() else other.append(name))
+            if name in own and sub.is_file():
+                found.add(name)
+            else:
+                other.append(name)
             if len(other) >= 3:
                 break
     if other or (found and not os.path.isfile(os.path.join(path, "frame.json"))):

@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .files import process_folder, remove_stale_process_folders
+from .files import process_folder, remove_stale_process_folders, write_image
 
 __all__ = ["BOP_DEPTH_MAX_CODE", "export_bop", "export_speedplus"]
 
@@ -227,23 +227,6 @@ def _read_image(path: Path, fmt: str, shape: tuple) -> np.ndarray:
         raise ValueError(f"{path} must be {shape[1]}×{shape[0]} px (camera.json), got "
                          f"{pixels.shape[1]}×{pixels.shape[0]}")
     return pixels[:, :, 0]
-
-
-def _write_png(path: Path, pixels: np.ndarray) -> None:
-    import OpenImageIO as oiio
-
-    out = oiio.ImageOutput.create(str(path))
-    if out is None:
-        raise OSError(f"cannot create {path}: {oiio.geterror()}")
-    h, w = pixels.shape
-    fmt = oiio.UINT8 if pixels.dtype == np.uint8 else oiio.UINT16
-    spec = oiio.ImageSpec(w, h, 1, fmt)
-    spec.attribute("oiio:ColorSpace", "Raw")  # depth codes and masks: no sRGB/gAMA/cHRM chunks, as bop_toolkit's
-    ok = out.open(str(path), spec) and out.write_image(np.ascontiguousarray(pixels[:, :, None]))
-    err = out.geterror()
-    out.close()
-    if not ok:
-        raise OSError(f"cannot write {path}: {err}")
 
 
 def _place(src: Path, dst: Path, link: bool) -> None:
@@ -501,12 +484,12 @@ def export_bop(sequence_dir, out_dir, *, obj_id: int = 1, scene_id: int = 0, spl
             codes = np.rint(depth_m.astype(np.float64) * (1000.0 / depth_scale))
             codes[~np.isfinite(codes) | (codes > 65535)] = 0  # background, or beyond 16 bits: no depth
             codes = codes.astype(np.uint16)
-            _write_png(scene / "depth" / f"{im:06d}.png", codes)
+            write_image(str(scene / "depth" / f"{im:06d}.png"), codes)
 
             visib = ids > 0
             mask8 = np.where(visib, np.uint8(255), np.uint8(0))
-            _write_png(scene / "mask" / f"{im:06d}_000000.png", mask8)
-            _write_png(scene / "mask_visib" / f"{im:06d}_000000.png", mask8)
+            write_image(str(scene / "mask" / f"{im:06d}_000000.png"), mask8)
+            write_image(str(scene / "mask_visib" / f"{im:06d}_000000.png"), mask8)
 
             scene_camera[str(im)] = {"cam_K": K.ravel().tolist(), "depth_scale": depth_scale}
             scene_gt[str(im)] = [{"cam_R_m2c": f.R_cam_from_body.ravel().tolist(),
