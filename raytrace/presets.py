@@ -82,8 +82,8 @@ class Quality:
         An edge sub-sample on its pixel centre's surface takes the centres' corrections
         interpolated (:func:`raytrace._shading.add_interpolated_rows`) only where all four
         centres around it lie on that surface; nearer than a pixel to where the surface meets
-        another part, folds (a crease) or ends, it casts its own final gather (gather_rays / 4
-        rays), since the correction there is extrapolated from centres farther from the
+        another part, folds (a crease) or ends, it casts its own final gather
+        (:attr:`aa_gather_rays` rays), since the correction there is extrapolated from centres farther from the
         contact: a rod lying on a module left a line along the contact too bright, the
         residual's steep fall towards the contact missed (:func:`_own_at_boundary`).
     filter_linear : float
@@ -104,6 +104,10 @@ class Quality:
         whose first pattern saw the largest contrast (the range of its sub-samples' R + G + B,
         :func:`raytrace._shading.subsample_contrast`) — a truss, a silhouette against a bright
         part, a penumbra, where the sub-samples' noise sits (:func:`_balanced_aa_extra`) [-].
+    aa_gather_rays : int
+        Rays of the final gather an edge sub-sample casts of its own (off its pixel centre's
+        surface, or near that surface's boundary with :attr:`own_at_boundary`); 0: a quarter of
+        :attr:`gather_rays`, at least 2 (:func:`_balanced_aa_gather`) [-].
     cache_divisions : int
         > 0: the radiance cache's lattice spacing is the target's bounding-box diagonal divided
         by this (:func:`preset_cache_options`); 0: the cache's default, 1/60 of it
@@ -128,6 +132,7 @@ class Quality:
     pilot_rays: int = 0
     aa_extra: float = 0.0
     cache_divisions: int = 0
+    aa_gather_rays: int = 0
 
 
 # coverage grids of edge pixels (Quality.cov_grid), chosen on the scenes of
@@ -155,8 +160,29 @@ def _balanced_aa(samples: int) -> int:
     12 scenes at 1280×960 for the time-error trade: the grid 3/4/6/8 (N ≤ 8/32/128/more) gave
     N = 8: 0.254 s, 5.03 % and N = 16: 0.387 s, 3.73 %; 4/6/6/8 gives 0.283 s, 4.37 % and
     0.481 s, 3.23 %, below the old curve at those times; 6/8 cost more than it gained
-    (N = 8: 0.353 s, 4.03 %) and so did 8×8 at N = 64 (1.04 s, 2.35 % → 1.34 s, 2.13 %)."""
-    return 4 if samples <= 8 else (6 if samples <= 128 else 8)
+    (N = 8: 0.353 s, 4.03 %) and so did 8×8 at N = 64 (1.04 s, 2.35 % → 1.34 s, 2.13 %).
+    From N = 32, where edge sub-samples near a boundary cast their own gathers
+    (:func:`_own_at_boundary`), 8×8 with gathers of N / 8 rays (:func:`_balanced_aa_gather`) and a
+    second pattern at 20 % of the pixels (:func:`_balanced_aa_extra`) instead of 6×6, N / 4 and
+    10 % (forty-eighth session, an AVX-512 machine; ``benchmarks/bench_bias_noise.py``, median
+    error and time, each setting in its own run): N = 32 1.39 % in 0.607 s → 1.23 % in 0.733 s,
+    N = 64 1.22 % in 0.941 s → 1.02 % in 1.031 s, N = 256 0.89 % in 4.09 s → 0.86 % in 3.02 s:
+    below the curve of more gather rays (error ∝ t^−0.2 from 32 to 256 rays). At N = 64, step by
+    step: 8×8 with N / 8-ray gathers 1.08 % in 0.951 s; with N / 16 rays 1.16 % in 0.801 s; 6×6
+    with N / 8 rays 1.28 % in 0.710 s, 5×5 with N / 4 rays 1.42 % in 0.762 s, 7×7 with N / 8
+    1.17 % in 0.836 s, 9×9 with N / 16 1.09 % in 0.970 s; the edge pixels' noise is the sub-samples' count
+    more than their gathers'. At N = 12, 7×7 instead of 6×6 gave 1.89 % in 0.315 s against
+    1.95 % in 0.279 s, above the curve there (t^−0.73)."""
+    return 4 if samples <= 8 else (6 if samples < 32 else 8)
+
+
+def _balanced_aa_gather(samples: int) -> int:
+    """Rays of an edge sub-sample's own final gather (:attr:`Quality.aa_gather_rays`) for N
+    gather rays per pixel: N / 4 (at least 2; below _MIN_SUB_GATHER the sub-sample takes the
+    cache alone) below N = 32, N / 8 from N = 32, where the 8×8 grid (:func:`_balanced_aa`) has
+    1.8× the sub-samples of 6×6 and most sub-samples near a part's boundary gather their own
+    (:func:`_own_at_boundary`): the measurements are :func:`_balanced_aa`'s."""
+    return max(2, samples // 4) if samples < 32 else samples // 8
 
 
 def _balanced_cov(samples: int) -> int:
@@ -169,7 +195,9 @@ def _balanced_cov(samples: int) -> int:
     0.406 s. Along the curve of more gather rays the error falls as t^−0.6 to t^−0.95 (8 → 16
     rays, in the side-by-side runs and in these), so each of these steps down (error ~t^−0.15)
     buys more time than its error would cost there. At N = 64, 6² took the error
-    1.52 → 1.56 % for a few % of the time, and stays at 8²."""
+    1.52 → 1.56 % for a few % of the time, and stays at 8². With the 8×8 shaded grid from N = 32
+    (:func:`_balanced_aa`) it is 10²: at N = 64 (N / 8-ray sub-sample gathers, 10 % second
+    patterns) 1.08 % in 0.951 s with 8², 1.06 % in 0.957 s with 10²."""
     aa = _balanced_aa(samples)
     return aa if samples <= 16 else max(COV_BAL, aa + 2)
 
@@ -195,8 +223,14 @@ def _balanced_aa_extra(samples: int) -> float:
     against none: 1.06 / 1.07 / 1.10 / 1.10× the time for 0.961 / 0.971 / 0.938 / 0.944× the
     error at 8 / 16 / 64 / 256 rays (half-split) — on the curve at 8 and 16 rays, below it at
     64 and 256 (t^−0.2 there); and the pixels that flicker most in a sequence get half the
-    noise variance."""
-    return 0.1
+    noise variance. From N = 32, with the 8×8 grid (:func:`_balanced_aa`), 20 %: at N = 64 with
+    N / 8-ray sub-sample gathers, 10 % gave 1.08 % in 0.951 s, none 1.15 % in 0.919 s, 20 %
+    1.03 % in 1.006 s (forty-eighth session, each in its own run of
+    ``benchmarks/bench_bias_noise.py``). Tried there and not kept: the extra patterns shared out by
+    contrast (k patterns at a pixel ∝ its sub-samples' range, up to 4 or 8, as many in all as
+    10 %), 1.08 % in 0.97 s — the contrast ranks the noisiest pixels but does not measure their
+    noise."""
+    return 0.1 if samples < 32 else 0.2
 
 
 def _filter_passes(samples: int) -> int:
@@ -329,7 +363,7 @@ _PRESETS = {
                         sun_rays=16, cov_grid=_balanced_cov(8), borrow=_borrow(8), sun_corners=True,
                         slivers=True, filter_sigma_l=_filter_sigma_l(8), thin_shadows=True,
                         filter_linear=_filter_linear(8), pilot_rays=_pilot_rays(8),
-                        aa_extra=_balanced_aa_extra(8)),
+                        aa_extra=_balanced_aa_extra(8), aa_gather_rays=_balanced_aa_gather(8)),
     "reference": Quality("reference", spp=1024),
 }
 
@@ -354,7 +388,7 @@ def quality_preset(name: str, samples: int | None = None) -> Quality:
                        slivers=True, filter_sigma_l=_filter_sigma_l(samples), thin_shadows=True,
                        filter_linear=_filter_linear(samples), own_at_boundary=_own_at_boundary(samples),
                        pilot_rays=_pilot_rays(samples), aa_extra=_balanced_aa_extra(samples),
-                       cache_divisions=_cache_divisions(samples))
+                       cache_divisions=_cache_divisions(samples), aa_gather_rays=_balanced_aa_gather(samples))
     if name == "reference":
         return Quality(name, spp=samples)
     aa = max(1, min(samples, 16))

@@ -35,7 +35,7 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     noise, not detail. Glossy parts also sample their GGX lobe with N rays, minus the
     radiance their cheap mirror term reflects (a control variate of known mean, the split-sum
     albedo), filtered with the same weights. Gather and lobe directions are correlated
-    multi-jittered per pixel. Edge pixels get 4×4 (N ≤ 8), 6×6 (N ≤ 128) or 8×8 multi-jittered
+    multi-jittered per pixel. Edge pixels get 4×4 (N ≤ 8), 6×6 (N < 32) or 8×8 multi-jittered
     shaded sub-pixel rays, plus 8×8 to 10×10 coverage rays where they are mixed (and pixels
     whose corners disagree with the centre on the Sun's visibility, or that a sliver of a
     triangle — a wire thinner than a pixel — crosses in front of the centre's surface, are edge
@@ -45,7 +45,8 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     another surface takes the
     correction of the nearest neighbouring centre on its surface (N ≤ 16) or gets its own
     N/4-ray gather (N > 16, or no such neighbour and N = 16; below that the cache alone,
-    which is less noisy). From N = 12 the cache's lattice is 1.5× as fine as ``fast``'s
+    which is less noisy; N/8 rays from N = 32, where sub-samples near their surface's boundary
+    gather their own too and the 8×8 grid has more of them). From N = 12 the cache's lattice is 1.5× as fine as ``fast``'s
     (:func:`raytrace.presets.preset_cache_options`; the scene keeps both caches).
 ``reference``
     Unbiased path tracing (:mod:`raytrace.pathtrace`): every sample jittered over the pixel
@@ -78,7 +79,8 @@ __all__ = ["QUALITIES", "Quality", "RenderFrame", "quality_preset", "render"]
 
 
 # the fewest final-gather rays worth casting at an edge sub-sample off its pixel centre's
-# surface (render gives such a sub-sample gather_rays / 4 of them, at least 2): on the scenes of
+# surface (render gives such a sub-sample Quality.aa_gather_rays of them, gather_rays / 4 below 32
+# rays, at least 2): on the scenes of
 # benchmarks/bench_time_error.py at 640×480, 2-ray sub-sample gathers made ``balanced``-8 worse
 # than the cache alone (``backlit`` views 14.7–14.9 % with them, 13.0–13.1 % without), 4-ray ones
 # made ``balanced``-16 better (median of four views 7.3 → 6.5 %)
@@ -970,7 +972,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     # ---- anti-aliasing where neighbours disagree (Earth behind the target is drawn above)
     t0 = time.perf_counter() - t_early  # Earth, the edges and their trace count in "antialias"
     if len(epix):
-        sub_rays = max(2, q.gather_rays // 4)
+        sub_rays = q.aa_gather_rays if q.aa_gather_rays > 0 else max(2, q.gather_rays // 4)
         centre = None
         if residual is not None:
             # the centre's surface (point, normal, footprint; row k of s for pixel pix[k]):

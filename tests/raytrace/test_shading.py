@@ -460,7 +460,7 @@ def _silhouette_error(sphere, quality, samples, seed):
     return frame.radiance[edge][:, 0] / 5.0 - cover
 
 
-@pytest.mark.parametrize("quality,samples", [("fast", None), ("balanced", 8), ("balanced", 16)])
+@pytest.mark.parametrize("quality,samples", [("fast", None), ("balanced", 8), ("balanced", 16), ("balanced", 32)])
 def test_silhouette_pixels_carry_the_covered_fraction_of_the_pixel(sphere, quality, samples):
     """3×3 shaded sub-samples alone measure the covered fraction (:func:`_silhouette_error`)
     with 6 % RMS error here; with the coverage rays (measured 3 %) it must be within 4 %."""
@@ -469,6 +469,42 @@ def test_silhouette_pixels_carry_the_covered_fraction_of_the_pixel(sphere, quali
     rms = float(np.sqrt(np.mean(err ** 2)))
     assert rms < 0.04, f"silhouette coverage RMS error {rms:.3f}"
     assert abs(float(np.mean(err))) < 0.01  # and unbiased
+
+
+def test_edge_sub_samples_gather_the_presets_own_ray_count(sphere, monkeypatch):
+    """``Quality.aa_gather_rays`` is the ray count of an edge sub-sample's own final gather:
+    ``balanced``-32 anti-aliases with 8×8 sub-samples whose own gathers have 32 / 8 = 4 rays
+    (``raytrace.presets._balanced_aa_gather``), a preset with 6 casts 6, and those are the
+    counts the sub-samples' gathers are called with."""
+    import dataclasses
+
+    from raytrace import shade
+
+    q = shade.quality_preset("balanced", 32)
+    assert (q.aa_grid, q.aa_gather_rays) == (8, 4)
+    assert shade.quality_preset("balanced", 16).aa_gather_rays == 4  # a quarter below 32 rays
+    seen = []
+    gather = shade._Context.gather_E
+
+    def record(self, s, n_rays, *args, **kwargs):
+        seen.append((len(s["P"]), n_rays, "counts" in kwargs or "hits" in kwargs))
+        return gather(self, s, n_rays, *args, **kwargs)
+
+    monkeypatch.setattr(shade._Context, "gather_E", record)
+    R, t = _pose([0.0, -5.0, 0.0])
+    light = Lighting(sun_dir_body=(1.0, 0.0, 0.0), sun_irradiance_W_m2=1000.0, ambient_radiance_W_m2_sr=5.0)
+    preset = shade.quality_preset
+    for rays in (None, 6):
+        seen.clear()
+        if rays is not None:
+            monkeypatch.setattr(shade, "quality_preset",
+                                lambda name, samples=None: dataclasses.replace(preset(name, samples),
+                                                                               aa_gather_rays=rays))
+        render(sphere, CAM, R, t, light, quality="balanced", samples=32, seed=2)
+        # the pixel centres' two-pass gather (raytrace.shade._gather_two_pass) asks for the
+        # pilot's hits, then per-point counts; the sub-samples' gathers for neither
+        sub = {n for _, n, centres in seen if not centres}
+        assert sub == {4 if rays is None else rays}, seen
 
 
 def test_second_sub_sample_pattern_halves_the_silhouette_noise(sphere, monkeypatch):
