@@ -83,8 +83,8 @@ class Quality:
         interpolated (:func:`raytrace._shading.add_interpolated_rows`) only where all four
         centres around it lie on that surface; nearer than a pixel to where the surface meets
         another part, folds (a crease) or ends, it casts its own final gather
-        (:attr:`aa_gather_rays` rays), since the correction there is extrapolated from centres farther from the
-        contact: a rod lying on a module left a line along the contact too bright, the
+        (:attr:`aa_gather_rays` rays), since the correction there is extrapolated from centres
+        farther from the contact: a rod lying on a module left a line along the contact too bright, the
         residual's steep fall towards the contact missed (:func:`_own_at_boundary`).
     filter_linear : float
         β > 0: the residual filter returns the local-linear estimate (the weighted plane through
@@ -170,8 +170,8 @@ def _balanced_aa(samples: int) -> int:
     below the curve of more gather rays (error ∝ t^−0.2 from 32 to 256 rays). At N = 64, step by
     step: 8×8 with N / 8-ray gathers 1.08 % in 0.951 s; with N / 16 rays 1.16 % in 0.801 s; 6×6
     with N / 8 rays 1.28 % in 0.710 s, 5×5 with N / 4 rays 1.42 % in 0.762 s, 7×7 with N / 8
-    1.17 % in 0.836 s, 9×9 with N / 16 1.09 % in 0.970 s; the edge pixels' noise is the sub-samples' count
-    more than their gathers'. At N = 12, 7×7 instead of 6×6 gave 1.89 % in 0.315 s against
+    1.17 % in 0.836 s, 9×9 with N / 16 1.09 % in 0.970 s; the edge pixels' noise is the
+    sub-samples' count more than their gathers'. At N = 12, 7×7 instead of 6×6 gave 1.89 % in 0.315 s against
     1.95 % in 0.279 s, above the curve there (t^−0.73)."""
     return 4 if samples <= 8 else (6 if samples < 32 else 8)
 

@@ -46,8 +46,9 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     correction of the nearest neighbouring centre on its surface (N ≤ 16) or gets its own
     N/4-ray gather (N > 16, or no such neighbour and N = 16; below that the cache alone,
     which is less noisy; N/8 rays from N = 32, where sub-samples near their surface's boundary
-    gather their own too and the 8×8 grid has more of them). From N = 12 the cache's lattice is 1.5× as fine as ``fast``'s
-    (:func:`raytrace.presets.preset_cache_options`; the scene keeps both caches).
+    gather their own too and the 8×8 grid has more of them). From N = 12 the cache's lattice
+    is 1.5× as fine as ``fast``'s (:func:`raytrace.presets.preset_cache_options`; the scene
+    keeps both caches).
 ``reference``
     Unbiased path tracing (:mod:`raytrace.pathtrace`): every sample jittered over the pixel
     (box filter), the solar disc sampled for soft shadows, BRDF-sampled bounces with Russian
