@@ -106,8 +106,9 @@ class Quality:
         part, a penumbra, where the sub-samples' noise sits (:func:`_balanced_aa_extra`) [-].
     aa_gather_rays : int
         Rays of the final gather an edge sub-sample casts of its own (off its pixel centre's
-        surface, or near that surface's boundary with :attr:`own_at_boundary`); 0: a quarter of
-        :attr:`gather_rays`, at least 2 (:func:`_balanced_aa_gather`) [-].
+        surface, or near that surface's boundary with :attr:`own_at_boundary`;
+        :func:`_balanced_aa_gather`); below ``raytrace.shade._MIN_SUB_GATHER`` none, the cache
+        alone [-].
     cache_divisions : int
         > 0: the radiance cache's lattice spacing is the target's bounding-box diagonal divided
         by this (:func:`preset_cache_options`); 0: the cache's default, 1/60 of it

@@ -973,7 +973,6 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     # ---- anti-aliasing where neighbours disagree (Earth behind the target is drawn above)
     t0 = time.perf_counter() - t_early  # Earth, the edges and their trace count in "antialias"
     if len(epix):
-        sub_rays = q.aa_gather_rays if q.aa_gather_rays > 0 else max(2, q.gather_rays // 4)
         centre = None
         if residual is not None:
             # the centre's surface (point, normal, footprint; row k of s for pixel pix[k]):
@@ -983,14 +982,14 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
             centre = (row_of_pixel, s["P"], s["NS"], geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx)
         n_extra = int(q.aa_extra * len(epix))
         contrast = np.empty(len(epix)) if n_extra else None
-        sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual, sub_rays,
-                           centre, q.cov_grid, q.borrow, q.own_at_boundary, contrast, traced)
+        sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual,
+                           q.aa_gather_rays, centre, q.cov_grid, q.borrow, q.own_at_boundary, contrast, traced)
         del traced
         if n_extra:
             # the highest contrast first, ties in pixel order; then back in pixel order
             sel = np.sort(np.argsort(-contrast, kind="stable")[:n_extra])
             sub2 = _supersample(ctx, scene, camera, R, t, o_body, geo, epix[sel], q.aa_grid,
-                                int(seed) ^ _AA_SECOND_STREAM, residual, sub_rays, centre, q.cov_grid, q.borrow,
+                                int(seed) ^ _AA_SECOND_STREAM, residual, q.aa_gather_rays, centre, q.cov_grid, q.borrow,
                                 q.own_at_boundary)
             sub[sel] = 0.5 * (sub[sel] + sub2)
         _check_finite("anti-aliasing", sub)
