@@ -23,12 +23,15 @@ Model
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import re
+import signal
 import socket
 import stat
+import threading
 
 import numpy as np
 
@@ -122,11 +125,42 @@ def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False) -> None:
     if path.endswith(".exr"):
         spec.attribute("compression", "zip")
         spec.attribute("DateTime", "")  # no capture date: the same pixels give the same bytes
-    ok = out.open(path, spec) and out.write_image(np.ascontiguousarray(pixels))
-    err = out.geterror()
-    out.close()
+    pixels = np.ascontiguousarray(pixels)
+    with _signals_deferred():
+        ok = out.open(path, spec) and out.write_image(pixels)
+        err = out.geterror()
+        out.close()
     if not ok:
         raise OSError(f"cannot write {path}: {err}")
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """The Python handlers of SIGINT, SIGTERM and SIGHUP held back until the block ends. An
+    OpenImageIO writer interrupted between ``open`` and ``write_image`` (a pool worker's
+    SIGTERM raises there, ``cli._worker_stop``) is closed by its destructor with no pixels
+    written, and libpng then prints "No IDATs written into file" on stderr: a second line
+    beside the CLI's one-line message. Held back, a signal that arrives meanwhile is raised
+    again as the block ends, after ``close`` (the caller then removes the complete temporary
+    file as it would a partial one). Python runs handlers in the main thread only, so
+    elsewhere there is nothing to hold back; nor for a signal without a Python handler (its
+    default action does not run Python code)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending = []
+    held = {}
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+        sig = getattr(signal, name, None)
+        if sig is not None and callable(signal.getsignal(sig)):
+            held[sig] = signal.signal(sig, lambda signum, frame: pending.append(signum))
+    try:
+        yield
+    finally:
+        for sig, handler in held.items():
+            signal.signal(sig, handler)
+        for sig in dict.fromkeys(pending):
+            signal.raise_signal(sig)
 
 
 def read_image(path: str) -> np.ndarray:

@@ -760,6 +760,49 @@ def test_atomic_writes_leave_no_temporary(tmp_path):
     assert not stale.exists() and live.exists()
 
 
+def test_signal_during_an_image_write_is_raised_after_the_file_is_closed(tmp_path, capfd, monkeypatch):
+    """A SIGTERM that reaches a pool worker between OpenImageIO's ``open`` and ``write_image``
+    (its handler raises, ``cli._worker_stop``) is held back until the writer is closed, then
+    raised: the PNG is complete, the temporary is removed, and libpng prints nothing (it said
+    "No IDATs written into file" when the interrupted writer was destroyed unwritten, a second
+    line beside the CLI's one-line message: seen in a fresh-clone CI run)."""
+    import OpenImageIO as oiio
+
+    create = oiio.ImageOutput.create
+
+    class SignalledAfterOpen:
+        """An ImageOutput whose ``open`` is followed at once by a SIGTERM to this process."""
+
+        def __init__(self, path):
+            self._out = create(path)
+
+        def open(self, *args):
+            ok = self._out.open(*args)
+            os.kill(os.getpid(), signal.SIGTERM)  # its handler runs at the next bytecode
+            return ok
+
+        def __getattr__(self, name):
+            return getattr(self._out, name)
+
+    def stop(signum, frame):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(oiio.ImageOutput, "create", staticmethod(SignalledAfterOpen))
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        pixels = np.arange(12, dtype=np.uint8).reshape(2, 2, 3)
+        with pytest.raises(KeyboardInterrupt):
+            F.write_image(str(tmp_path / "a.png"), pixels)
+        with pytest.raises(KeyboardInterrupt):
+            F.atomic_write_image(str(tmp_path / "b.png"), pixels)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    monkeypatch.undo()
+    assert capfd.readouterr().err == ""
+    np.testing.assert_array_equal(F.read_image(str(tmp_path / "a.png")), pixels)  # closed whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png"]  # b's temporary removed
+
+
 def test_stale_process_folders_are_removed_and_others_kept(tmp_path):
     dead = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
                               check=True, capture_output=True, text=True).stdout)
