@@ -23,7 +23,7 @@ import numpy as np
 from ._embree import intersect1, occluded1, ray_buffer
 from ._jit import inline, pjit
 from ._shading import (_cmj_perms, _cmj_point, _owen_sobol2_keyed, _strata, add_lobe_term, disc_direction,
-                       gather_estimate, incoming, incoming_env, mean_estimate)
+                       gather_estimate, gather_start, incoming, incoming_env, mean_estimate)
 from .brdf import cosine_direction, onb, sample_brdf
 from .cache import _hash01, _hash32, glossy_draw, hit_normals
 
@@ -141,14 +141,14 @@ def _traced_indirect(scene, buf, path, ox, oy, oz, dx, dy, dz, g, pr, hu, hv, t,
 
 
 @pjit
-def gather_traced(scene, P, NS, NG, start, first, seed, path_seed, pix, kmul, eps, sx, sy, sz, sun_on, levels,
+def gather_traced(scene, P, NS, NG, start, first, seed, path_seed, pix, share, kmul, eps, sx, sy, sz, sun_on, levels,
                   first_near, near, face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha,
                   glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, E_unocc, alpha, out,
                   out_var, out_hits):
     """Final-gather irradiance per point k from rays start[k] … start[k + 1] − 1, as
     :meth:`raytrace.shade._Context._gather_chunk` computes it from the kernels
     :func:`raytrace._shading.gather_rays` (samples ``first`` … of the pixel's sequence,
-    keyed by ``seed``), the shadow rays of its hits, the paths traced from them
+    keyed by ``seed``; with ``share`` > 0 of the sub-samples' pixels, :func:`raytrace._shading.gather_start`), the shadow rays of its hits, the paths traced from them
     (:func:`_traced_indirect`, keyed by pix·kmul + j and ``path_seed``) and
     :func:`raytrace._shading.gather_sum` (environment control variate with weight ``alpha``;
     ``out_var`` the estimate's luminance variance). ``out_hits[k]`` counts the rays that hit a
@@ -164,7 +164,7 @@ def gather_traced(scene, P, NS, NG, start, first, seed, path_seed, pix, kmul, ep
         buf = ray_buffer()
         path = np.empty((max(levels, 1), 14))
         for k in range(blk * _BLOCK, min(n_pts, (blk + 1) * _BLOCK)):
-            key0 = pix[k] * 1009 + seed
+            key0, first_k = gather_start(pix[k], seed, first, share, kmul)
             h_index, h_x, h_y = _hash32(key0, stream), _hash32(key0, stream + 1), _hash32(key0, stream + 2)
             ox = P[k, 0] + eps * NG[k, 0]
             oy = P[k, 1] + eps * NG[k, 1]
@@ -176,7 +176,7 @@ def gather_traced(scene, P, NS, NG, start, first, seed, path_seed, pix, kmul, ep
             sy2 = 0.0
             hits = 0
             for j in range(n_rays):
-                u1, u2 = _owen_sobol2_keyed(first + j, h_index, h_x, h_y)
+                u1, u2 = _owen_sobol2_keyed(first_k + j, h_index, h_x, h_y)
                 dx, dy, dz = cosine_direction(NS[k, 0], NS[k, 1], NS[k, 2], u1, u2)
                 g, pr, hu32, hv32, t = intersect1(scene, buf, ox, oy, oz, dx, dy, dz)
                 below = dx * NG[k, 0] + dy * NG[k, 1] + dz * NG[k, 2] <= 0.0

@@ -619,22 +619,40 @@ def owen_sobol2(i, key, stream):
     return _owen_sobol2_keyed(i, _hash32(key, stream), _hash32(key, stream + 1), _hash32(key, stream + 2))
 
 
+@jit
+def gather_start(pix, seed, first, share, kmul):
+    """Key of the scrambled Sobol sequence of a final gather's point, and the sample its rays
+    start at (:func:`gather_rays`). ``share`` = 0: each point (pixel) its own sequence from sample
+    ``first``. ``share`` > 0: pix = pixel · share + i, the sub-sample i of a pixel, and sub-sample
+    i's kmul rays are samples first + i · kmul … of the pixel's one sequence, so that the
+    gathers of a pixel's sub-samples are together one stratified set: as Owen scrambling
+    maps every aligned block of 2^m indices onto an aligned block of the Sobol sequence, with
+    kmul a power of two each sub-sample's rays are a (0, m, 2)-net of their own and all S
+    sub-samples' a net of S · kmul (Burley 2020, §5; the padding of a pixel's samples in
+    Pharr, Jakob & Humphreys, *PBRT* 4th ed., §8.7) rather than S independent sets."""
+    if share > 0:
+        return (pix // share) * 1009 + seed, first + (pix % share) * kmul
+    return pix * 1009 + seed, first
+
+
 @pjit
-def gather_rays(P, NS, NG, start, first, seed, pix, eps, out_o, out_d):
+def gather_rays(P, NS, NG, start, first, seed, pix, share, kmul, eps, out_o, out_d):
     """Cosine-weighted directions about the shading normal, rays start[k] … start[k + 1] − 1
     for point k: samples first, first + 1, … of its pixel's Owen-scrambled Sobol
     sequence (:func:`owen_sobol2`, keyed by pixel and seed) in (radius², azimuth). Any 2^m of
     them from sample 0 are a (0, m, 2)-net; a second pass from sample n continues the same
-    sequence, so the two passes together are as well stratified as one."""
+    sequence, so the two passes together are as well stratified as one. With ``share`` > 0 the
+    points are the sub-samples of pixels: pix[k] = pixel · share + number, and the rays of
+    number i are samples first + i · kmul, … of the pixel's one sequence (:func:`gather_start`)."""
     stream = 2 * seed + 15
     for k in numba.prange(P.shape[0]):
-        key = pix[k] * 1009 + seed
+        key, first_k = gather_start(pix[k], seed, first, share, kmul)
         h_index, h_x, h_y = _hash32(key, stream), _hash32(key, stream + 1), _hash32(key, stream + 2)
         ox = P[k, 0] + eps * NG[k, 0]
         oy = P[k, 1] + eps * NG[k, 1]
         oz = P[k, 2] + eps * NG[k, 2]
         for j in range(start[k + 1] - start[k]):
-            u1, u2 = _owen_sobol2_keyed(first + j, h_index, h_x, h_y)
+            u1, u2 = _owen_sobol2_keyed(first_k + j, h_index, h_x, h_y)
             m = start[k] + j
             out_d[m, 0], out_d[m, 1], out_d[m, 2] = cosine_direction(NS[k, 0], NS[k, 1], NS[k, 2], u1, u2)
             out_o[m, 0] = ox

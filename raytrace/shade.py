@@ -136,6 +136,9 @@ _FUSED_CHUNK = 1
 # XORed into the frame's seed for the second sub-sample pattern of the noisiest anti-aliased
 # pixels (Quality.aa_extra)
 _AA_SECOND_STREAM = 0x1B873593
+# the directions of the sub-samples' own final gathers: a sequence per pixel apart from its
+# centre's (_shade_subsamples)
+_SUB_GATHER_STREAM = 0x2545F491
 
 
 # the local-linear residual filter (_filter_residual): coordinates in units of 8 pixels, and a
@@ -442,13 +445,15 @@ class _Context(_Sunlight):
 
     def gather_E(self, s, n_rays: int, pix: np.ndarray, seed: int, var: np.ndarray | None = None,
                  counts: np.ndarray | None = None, hits: np.ndarray | None = None, first: int = 0,
-                 path_seed: int | None = None):
+                 path_seed: int | None = None, share: int = 0):
         """Final-gather irradiance (n, 3) of the points ``s`` from n_rays rays each, or from
         counts[k] rays at point k (≥ 1; then ``n_rays`` is ignored): in one kernel
         (:meth:`_gather_fused`) where Embree can be called from numba, else in chunks of about
         _CHUNK_RAYS rays (every sample is keyed by its pixel, so the result does not depend on
         the chunking); the rays are samples ``first``, ``first`` + 1, … of each pixel's
-        sequence of directions (:func:`raytrace._shading.gather_rays`, keyed by ``seed``), the
+        sequence of directions (:func:`raytrace._shading.gather_rays`, keyed by ``seed``; with
+        ``share`` > 0 ``pix`` holds pixel · share + i for the sub-sample i of a pixel, and the
+        sub-samples of a pixel share its sequence: :func:`raytrace._shading.gather_start`), the
         paths traced from their hits keyed by ``path_seed`` (default ``seed``). ``var`` (n,),
         if given, receives each estimate's luminance variance
         (:func:`raytrace._shading.gather_sum`), ``hits`` (n,) how many of its rays hit a part."""
@@ -464,22 +469,22 @@ class _Context(_Sunlight):
         seeds = (seed, seed if path_seed is None else path_seed)
         direct = self.scene.direct_fast if _FUSED_GATHER else None
         if direct is not None:
-            return self._gather_fused(direct, s, counts, kmul, first, pix, seeds, var, hits)
+            return self._gather_fused(direct, s, counts, kmul, first, pix, seeds, var, hits, share)
         end = np.cumsum(counts)
         # chunk boundaries: every _CHUNK_RAYS rays (at least one point per chunk)
         cuts = np.unique(np.searchsorted(end, np.arange(_CHUNK_RAYS, int(end[-1]) if n else 0, _CHUNK_RAYS),
                                          side="right"))
         bounds = [0, *[int(c) for c in cuts if 0 < c < n], n]
         if len(bounds) == 2:
-            return self._gather_chunk(s, counts, kmul, first, pix, seeds, var, hits)
+            return self._gather_chunk(s, counts, kmul, first, pix, seeds, var, hits, share)
         E = np.empty((n, 3))
         for a, b in zip(bounds[:-1], bounds[1:]):
             E[a:b] = self._gather_chunk({k: v[a:b] for k, v in s.items()}, counts[a:b], kmul, first, pix[a:b],
-                                        seeds, var[a:b], None if hits is None else hits[a:b])
+                                        seeds, var[a:b], None if hits is None else hits[a:b], share)
         return E
 
     def _gather_fused(self, direct, s, counts, kmul: int, first: int, pix: np.ndarray, seeds, var: np.ndarray,
-                      hits: np.ndarray | None):
+                      hits: np.ndarray | None, share: int = 0):
         """:meth:`gather_E` in one kernel that calls Embree itself
         (:func:`raytrace._paths.gather_traced`; ``direct`` the scene's
         :class:`raytrace._embree.DirectScene`): the same estimate, without the arrays of every
@@ -494,7 +499,7 @@ class _Context(_Sunlight):
         sx, sy, sz = (float(x) for x in light.sun_dir_body)
         with parallel_chunksize(_FUSED_CHUNK):
             _paths.gather_traced(direct.handle, s["P"], s["NS"], s["NG"], start, first, seeds[0], seeds[1],
-                                 pix.astype(np.int64), kmul, self.eps, sx, sy, sz,
+                                 pix.astype(np.int64), share, kmul, self.eps, sx, sy, sz,
                                  light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
                                  np.float32(_FIRST_NEAR_SPACINGS * self.cache.spacing_m),
                                  np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(),
@@ -504,7 +509,7 @@ class _Context(_Sunlight):
         return E
 
     def _gather_chunk(self, s, counts, kmul: int, first: int, pix: np.ndarray, seeds, var: np.ndarray,
-                      hits: np.ndarray | None):
+                      hits: np.ndarray | None, share: int = 0):
         n = len(s["P"])
         start = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(counts, out=start[1:])
@@ -512,7 +517,7 @@ class _Context(_Sunlight):
         o = np.empty((m, 3))
         d = np.empty((m, 3))
         seed, path_seed = seeds
-        K.gather_rays(s["P"], s["NS"], s["NG"], start, first, seed, pix, self.eps, o, d)
+        K.gather_rays(s["P"], s["NS"], s["NG"], start, first, seed, pix, share, kmul, self.eps, o, d)
         h = self.scene.intersect(o, d)
         if hits is not None and n:
             hits[:] = np.add.reduceat((h["geomID"] >= 0).astype(np.int64), start[:-1])
@@ -1364,10 +1369,12 @@ def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, se
             # below _MIN_SUB_GATHER rays an unfiltered gather is noisier than the cache is wrong
             j = np.flatnonzero(k == -1)
             if len(j) and gather_rays >= _MIN_SUB_GATHER:
-                sj = {k: v[j] for k, v in s.items()}
+                sj = {k: s[k][j] for k in ("P", "NS", "NG", "WO", "comp")}  # what the gather and lobe read
                 keys = c_idx[j] * S + n_idx[j]  # the samples' keys, distinct per sub-sample
                 Ls[j] += ctx.lobe(sj, gather_rays, keys, seed, lbar[j])  # the lobe replaces the mirror term
-                E[j] = ctx.gather_E(sj, gather_rays, keys, seed)
+                # the gathers of a pixel's sub-samples: one stratified set of its own sequence
+                # (a stream apart from its centre's gather), their paths keyed per sub-sample
+                E[j] = ctx.gather_E(sj, gather_rays, keys, seed ^ _SUB_GATHER_STREAM, path_seed=seed, share=S)
         ctx.add_diffuse(s, E, Ls)
         K.put_rows(idx, Ls, L)
     if tr["miss"] is not None:

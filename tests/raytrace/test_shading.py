@@ -475,7 +475,8 @@ def test_edge_sub_samples_gather_the_presets_own_ray_count(sphere, monkeypatch):
     """``Quality.aa_gather_rays`` is the ray count of an edge sub-sample's own final gather:
     ``balanced``-32 anti-aliases with 8×8 sub-samples whose own gathers have 32 / 8 = 4 rays
     (``raytrace.presets._balanced_aa_gather``), a preset with 6 casts 6, and those are the
-    counts the sub-samples' gathers are called with."""
+    counts the sub-samples' gathers are called with; they share their pixel's sequence of
+    directions (``share`` = 64: keys pixel · 64 + sub-sample)."""
     import dataclasses
 
     from raytrace import shade
@@ -486,9 +487,12 @@ def test_edge_sub_samples_gather_the_presets_own_ray_count(sphere, monkeypatch):
     seen = []
     gather = shade._Context.gather_E
 
-    def record(self, s, n_rays, *args, **kwargs):
-        seen.append((len(s["P"]), n_rays, "counts" in kwargs or "hits" in kwargs))
-        return gather(self, s, n_rays, *args, **kwargs)
+    def record(self, s, n_rays, pix, *args, **kwargs):
+        centres = "counts" in kwargs or "hits" in kwargs
+        seen.append((len(s["P"]), n_rays, centres))
+        if not centres:
+            assert kwargs["share"] == 64 and pix.min() >= 0 and pix.max() < 64 * CAM.width * CAM.height
+        return gather(self, s, n_rays, pix, *args, **kwargs)
 
     monkeypatch.setattr(shade._Context, "gather_E", record)
     R, t = _pose([0.0, -5.0, 0.0])

@@ -62,7 +62,7 @@ def test_final_gather_directions_are_multi_jittered_in_radius_squared_and_azimut
     o = np.empty((n_pts * n_rays, 3))
     d = np.empty((n_pts * n_rays, 3))
     start = np.arange(n_pts + 1, dtype=np.int64) * n_rays
-    K.gather_rays(P, N, N, start, 0, 9, np.arange(100, 100 + n_pts, dtype=np.int64),
+    K.gather_rays(P, N, N, start, 0, 9, np.arange(100, 100 + n_pts, dtype=np.int64), 0, 0,
                   1e-6, o, d)
     np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-12)
     u1 = (1.0 - d[:, 2] ** 2).reshape(n_pts, n_rays)

@@ -83,8 +83,9 @@ def test_same_part_mean_is_the_mean_of_the_other_pixels_of_the_same_part():
             assert out[v, u] == pytest.approx(want, rel=1e-12)
 
 
-def _gather_u(counts, first, seed=9):
-    """(u1, u2) ∈ [0, 1)² of the rays of gather_rays about +z: u1 = 1 − cos²θ, u2 = φ / 2π."""
+def _gather_u(counts, first, seed=9, pix=None, share=0):
+    """(u1, u2) ∈ [0, 1)² of the rays of gather_rays about +z: u1 = 1 − cos²θ, u2 = φ / 2π
+    (points keyed by ``pix``, default 100, 101, …)."""
     counts = np.asarray(counts, dtype=np.int64)
     start = np.concatenate([[0], np.cumsum(counts)])
     n_pts = len(counts)
@@ -92,8 +93,8 @@ def _gather_u(counts, first, seed=9):
     N = np.tile([0.0, 0.0, 1.0], (n_pts, 1))
     o = np.empty((start[-1], 3))
     d = np.empty((start[-1], 3))
-    K.gather_rays(P, N, N, start, first, seed,
-                  np.arange(100, 100 + n_pts, dtype=np.int64), 1e-6, o, d)
+    pix = np.arange(100, 100 + n_pts, dtype=np.int64) if pix is None else np.asarray(pix, dtype=np.int64)
+    K.gather_rays(P, N, N, start, first, seed, pix, share, int(counts.max()), 1e-6, o, d)
     u1 = 1.0 - d[:, 2] ** 2
     u2 = np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi) % 1.0
     return [(u1[start[k]:start[k + 1]], u2[start[k]:start[k + 1]]) for k in range(n_pts)]
@@ -147,6 +148,29 @@ def test_a_second_pass_fills_the_strata_the_first_left(n_pilot, total):
     other = _gather_u([total - n_pilot] * pts, 0, seed=10)
     assert not all(_is_net(np.concatenate([a1, b1]), np.concatenate([a2, b2]))
                    for (a1, a2), (b1, b2) in zip(first, other))
+
+
+@pytest.mark.parametrize("S,rays", [(64, 8), (36, 4), (100, 2)])
+def test_the_sub_samples_of_a_pixel_share_its_sequence(S, rays):
+    """With ``share`` = S, point pixel · S + i (sub-sample i of a pixel) casts samples i · rays …
+    of the pixel's own sequence: each sub-sample's rays are a net, and the sub-samples of a pixel
+    together are one (aligned blocks of the index-shuffled sequence), which S independent
+    sequences are not; pixels keep sequences of their own."""
+    pixels = [7, 8, 1234]
+    pix = [p * S + i for p in pixels for i in range(S)]
+    shared = _gather_u([rays] * len(pix), 0, pix=pix, share=S)
+    for b, p in enumerate(pixels):
+        one = _gather_u([S * rays], 0, pix=[p])[0]  # the pixel's sequence as one point casts it
+        u1 = np.concatenate([shared[b * S + i][0] for i in range(S)])
+        u2 = np.concatenate([shared[b * S + i][1] for i in range(S)])
+        np.testing.assert_array_equal(u1, one[0])
+        np.testing.assert_array_equal(u2, one[1])
+        assert all(_is_net(*shared[b * S + i]) for i in range(S))
+        n = 2 ** int(math.log2(S * rays))  # the first power-of-two prefix of the union
+        assert _is_net(u1[:n], u2[:n])
+    apart = _gather_u([rays] * S, 0, pix=[7 * S + i for i in range(S)])  # a sequence per sub-sample
+    assert not _is_net(np.concatenate([a for a, _ in apart])[:n], np.concatenate([b for _, b in apart])[:n])
+    assert not np.array_equal(shared[0][0], shared[S][0])
 
 
 def test_gather_directions_are_uniform_over_seeds():
