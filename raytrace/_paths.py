@@ -141,11 +141,12 @@ def _traced_indirect(scene, buf, path, ox, oy, oz, dx, dy, dz, g, pr, hu, hv, t,
 
 
 @pjit
-def gather_traced(scene, P, NS, NG, start, first, seed, path_seed, pix, share, kmul, eps, sx, sy, sz, sun_on, levels,
+def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, share, kmul, eps, sx, sy, sz, sun_on, levels,
                   first_near, near, face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha,
                   glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, E_unocc, alpha, out,
                   out_var, out_hits):
-    """Final-gather irradiance per point k from rays start[k] … start[k + 1] − 1, as
+    """Final-gather irradiance per point k (at row rows[k] of P, NS and NG; every other array is
+    per point) from rays start[k] … start[k + 1] − 1, as
     :meth:`raytrace.shade._Context._gather_chunk` computes it from the kernels
     :func:`raytrace._shading.gather_rays` (samples ``first`` … of the pixel's sequence,
     keyed by ``seed``; with ``share`` > 0 of the sub-samples' pixels, :func:`raytrace._shading.gather_start`), the shadow rays of its hits, the paths traced from them
@@ -165,10 +166,11 @@ def gather_traced(scene, P, NS, NG, start, first, seed, path_seed, pix, share, k
         path = np.empty((max(levels, 1), 14))
         for k in range(blk * _BLOCK, min(n_pts, (blk + 1) * _BLOCK)):
             key0, first_k = gather_start(pix[k], seed, first, share, kmul)
+            row = rows[k]
             h_index, h_x, h_y = _hash32(key0, stream), _hash32(key0, stream + 1), _hash32(key0, stream + 2)
-            ox = P[k, 0] + eps * NG[k, 0]
-            oy = P[k, 1] + eps * NG[k, 1]
-            oz = P[k, 2] + eps * NG[k, 2]
+            ox = P[row, 0] + eps * NG[row, 0]
+            oy = P[row, 1] + eps * NG[row, 1]
+            oz = P[row, 2] + eps * NG[row, 2]
             n_rays = start[k + 1] - start[k]
             sr = 0.0
             sg = 0.0
@@ -177,9 +179,9 @@ def gather_traced(scene, P, NS, NG, start, first, seed, path_seed, pix, share, k
             hits = 0
             for j in range(n_rays):
                 u1, u2 = _owen_sobol2_keyed(first_k + j, h_index, h_x, h_y)
-                dx, dy, dz = cosine_direction(NS[k, 0], NS[k, 1], NS[k, 2], u1, u2)
+                dx, dy, dz = cosine_direction(NS[row, 0], NS[row, 1], NS[row, 2], u1, u2)
                 g, pr, hu32, hv32, t = intersect1(scene, buf, ox, oy, oz, dx, dy, dz)
-                below = dx * NG[k, 0] + dy * NG[k, 1] + dz * NG[k, 2] <= 0.0
+                below = dx * NG[row, 0] + dy * NG[row, 1] + dz * NG[row, 2] <= 0.0
                 if g < 0 and not below:
                     if a == 1.0:
                         continue  # exactly what the control variate expects
@@ -217,7 +219,7 @@ def gather_traced(scene, P, NS, NG, start, first, seed, path_seed, pix, share, k
                 sy2 += y * y
             out_hits[k] = hits
             out[k, 0], out[k, 1], out[k, 2], out_var[k] = gather_estimate(sr, sg, sb, sy2, n_rays, a, E_unocc,
-                                                                          NS[k, 0], NS[k, 1], NS[k, 2])
+                                                                          NS[row, 0], NS[row, 1], NS[row, 2])
 
 
 

@@ -445,7 +445,7 @@ class _Context(_Sunlight):
 
     def gather_E(self, s, n_rays: int, pix: np.ndarray, seed: int, var: np.ndarray | None = None,
                  counts: np.ndarray | None = None, hits: np.ndarray | None = None, first: int = 0,
-                 path_seed: int | None = None, share: int = 0):
+                 path_seed: int | None = None, share: int = 0, rows: np.ndarray | None = None):
         """Final-gather irradiance (n, 3) of the points ``s`` from n_rays rays each, or from
         counts[k] rays at point k (≥ 1; then ``n_rays`` is ignored): in one kernel
         (:meth:`_gather_fused`) where Embree can be called from numba, else in chunks of about
@@ -456,8 +456,9 @@ class _Context(_Sunlight):
         sub-samples of a pixel share its sequence: :func:`raytrace._shading.gather_start`), the
         paths traced from their hits keyed by ``path_seed`` (default ``seed``). ``var`` (n,),
         if given, receives each estimate's luminance variance
-        (:func:`raytrace._shading.gather_sum`), ``hits`` (n,) how many of its rays hit a part."""
-        n = len(s["P"])
+        (:func:`raytrace._shading.gather_sum`), ``hits`` (n,) how many of its rays hit a part.
+        ``rows`` (n,), if given, are the rows of ``s`` the n points are (the rest is per point)."""
+        n = len(s["P"]) if rows is None else len(rows)
         if var is None:
             var = np.empty(n)
         if counts is None:
@@ -469,7 +470,10 @@ class _Context(_Sunlight):
         seeds = (seed, seed if path_seed is None else path_seed)
         direct = self.scene.direct_fast if _FUSED_GATHER else None
         if direct is not None:
-            return self._gather_fused(direct, s, counts, kmul, first, pix, seeds, var, hits, share)
+            rows = np.arange(n, dtype=np.int64) if rows is None else np.asarray(rows, dtype=np.int64)
+            return self._gather_fused(direct, s, rows, counts, kmul, first, pix, seeds, var, hits, share)
+        if rows is not None:
+            s = {k: s[k][rows] for k in ("P", "NS", "NG")}
         end = np.cumsum(counts)
         # chunk boundaries: every _CHUNK_RAYS rays (at least one point per chunk)
         cuts = np.unique(np.searchsorted(end, np.arange(_CHUNK_RAYS, int(end[-1]) if n else 0, _CHUNK_RAYS),
@@ -483,14 +487,14 @@ class _Context(_Sunlight):
                                         seeds, var[a:b], None if hits is None else hits[a:b], share)
         return E
 
-    def _gather_fused(self, direct, s, counts, kmul: int, first: int, pix: np.ndarray, seeds, var: np.ndarray,
+    def _gather_fused(self, direct, s, rows, counts, kmul: int, first: int, pix: np.ndarray, seeds, var: np.ndarray,
                       hits: np.ndarray | None, share: int = 0):
         """:meth:`gather_E` in one kernel that calls Embree itself
         (:func:`raytrace._paths.gather_traced`; ``direct`` the scene's
         :class:`raytrace._embree.DirectScene`): the same estimate, without the arrays of every
         ray and bounce. The distances that decide where a path continues are float32, as the
         batched code compares them (NumPy casts the threshold to the hits' float32)."""
-        n = len(s["P"])
+        n = len(rows)
         start = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(counts, out=start[1:])
         E = np.empty((n, 3))
@@ -498,7 +502,7 @@ class _Context(_Sunlight):
         light = self.lighting
         sx, sy, sz = (float(x) for x in light.sun_dir_body)
         with parallel_chunksize(_FUSED_CHUNK):
-            _paths.gather_traced(direct.handle, s["P"], s["NS"], s["NG"], start, first, seeds[0], seeds[1],
+            _paths.gather_traced(direct.handle, s["P"], s["NS"], s["NG"], rows, start, first, seeds[0], seeds[1],
                                  pix.astype(np.int64), share, kmul, self.eps, sx, sy, sz,
                                  light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
                                  np.float32(_FIRST_NEAR_SPACINGS * self.cache.spacing_m),
@@ -716,8 +720,8 @@ def _gather_two_pass(ctx: _Context, s, n_rays: int, n_pilot: int, pix: np.ndarra
         var2 = np.empty(len(more))
         # the same sequences of directions, continued (their pilot rays left strata for these
         # to fill), and paths of their own from the hits
-        E2 = ctx.gather_E({k: v[more] for k, v in s.items()}, 0, pix[more], seed, var2, counts=extra,
-                          first=n_pilot, path_seed=seed ^ _SECOND_PASS_STREAM)
+        E2 = ctx.gather_E(s, 0, pix[more], seed, var2, counts=extra, first=n_pilot,
+                          path_seed=seed ^ _SECOND_PASS_STREAM, rows=more)
         w = n_pilot / total[more]
         E[more] = w[:, None] * E[more] + (1.0 - w)[:, None] * E2
         var[more] = w * w * var[more] + (1.0 - w) ** 2 * var2
@@ -1369,12 +1373,13 @@ def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, se
             # below _MIN_SUB_GATHER rays an unfiltered gather is noisier than the cache is wrong
             j = np.flatnonzero(k == -1)
             if len(j) and gather_rays >= _MIN_SUB_GATHER:
-                sj = {k: s[k][j] for k in ("P", "NS", "NG", "WO", "comp")}  # what the gather and lobe read
                 keys = c_idx[j] * S + n_idx[j]  # the samples' keys, distinct per sub-sample
-                Ls[j] += ctx.lobe(sj, gather_rays, keys, seed, lbar[j])  # the lobe replaces the mirror term
+                if ctx.lobe_sampled[s["comp"][j]].any():  # the lobe replaces the mirror term
+                    sj = {k: s[k][j] for k in ("P", "NS", "NG", "WO", "comp")}
+                    Ls[j] += ctx.lobe(sj, gather_rays, keys, seed, lbar[j])
                 # the gathers of a pixel's sub-samples: one stratified set of its own sequence
                 # (a stream apart from its centre's gather), their paths keyed per sub-sample
-                E[j] = ctx.gather_E(sj, gather_rays, keys, seed ^ _SUB_GATHER_STREAM, path_seed=seed, share=S)
+                E[j] = ctx.gather_E(s, gather_rays, keys, seed ^ _SUB_GATHER_STREAM, path_seed=seed, share=S, rows=j)
         ctx.add_diffuse(s, E, Ls)
         K.put_rows(idx, Ls, L)
     if tr["miss"] is not None:
