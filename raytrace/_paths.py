@@ -141,15 +141,16 @@ def _traced_indirect(scene, buf, path, ox, oy, oz, dx, dy, dz, g, pr, hu, hv, t,
 
 
 @pjit
-def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, share, kmul, eps, sx, sy, sz, sun_on, levels,
-                  first_near, near, face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha,
-                  glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, E_unocc, alpha, out,
-                  out_var, out_hits):
+def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, share, kmul, eps, sx, sy, sz, sun_on,
+                  levels, first_near, near, face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
+                  mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, E_unocc, alpha,
+                  out, out_var, out_hits):
     """Final-gather irradiance per point k (at row rows[k] of P, NS and NG; every other array is
     per point) from rays start[k] … start[k + 1] − 1, as
     :meth:`raytrace.shade._Context._gather_chunk` computes it from the kernels
     :func:`raytrace._shading.gather_rays` (samples ``first`` … of the pixel's sequence,
-    keyed by ``seed``; with ``share`` > 0 of the sub-samples' pixels, :func:`raytrace._shading.gather_start`), the shadow rays of its hits, the paths traced from them
+    keyed by ``seed``; with ``share`` > 0 of the sub-samples' pixels,
+    :func:`raytrace._shading.gather_start`), the shadow rays of its hits, the paths traced from them
     (:func:`_traced_indirect`, keyed by pix·kmul + j and ``path_seed``) and
     :func:`raytrace._shading.gather_sum` (environment control variate with weight ``alpha``;
     ``out_var`` the estimate's luminance variance). ``out_hits[k]`` counts the rays that hit a
