@@ -628,8 +628,8 @@ def gather_start(pix, seed, first, share, kmul):
     gathers of a pixel's sub-samples are together one stratified set: as Owen scrambling
     maps every aligned block of 2^m indices onto an aligned block of the Sobol sequence, with
     kmul a power of two each sub-sample's rays are a (0, m, 2)-net of their own and all S
-    sub-samples' a net of S · kmul (Burley 2020, §5; the padding of a pixel's samples in
-    Pharr, Jakob & Humphreys, *PBRT* 4th ed., §8.7) rather than S independent sets."""
+    sub-samples' a net of S · kmul (Burley 2020, §5), as a path tracer gives a pixel's samples
+    consecutive indices of one sequence, rather than S independent sets."""
     if share > 0:
         return (pix // share) * 1009 + seed, first + (pix % share) * kmul
     return pix * 1009 + seed, first
