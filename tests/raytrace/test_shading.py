@@ -489,7 +489,7 @@ def test_edge_sub_samples_gather_the_presets_own_ray_count(sphere, monkeypatch):
 
     def record(self, s, n_rays, pix, *args, **kwargs):
         centres = "counts" in kwargs or "hits" in kwargs
-        seen.append((len(s["P"]), n_rays, centres))
+        seen.append((len(pix), n_rays, centres))  # points (with rows, s holds every sub-sample)
         if not centres:
             assert kwargs["share"] == 64 and pix.min() >= 0 and pix.max() < 64 * CAM.width * CAM.height
         return gather(self, s, n_rays, pix, *args, **kwargs)
