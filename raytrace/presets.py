@@ -104,6 +104,15 @@ class Quality:
         whose first pattern saw the largest contrast (the range of its sub-samples' R + G + B,
         :func:`raytrace._shading.subsample_contrast`) — a truss, a silhouette against a bright
         part, a penumbra, where the sub-samples' noise sits (:func:`_balanced_aa_extra`) [-].
+    box_grid : int
+        ≥ 2: every target pixel that is not anti-aliased gets box_grid² stratified sub-pixel
+        rays too (:func:`raytrace.shade._supersample`), shaded like the edge sub-samples on
+        their pixel centre's surface (exact Sun with a solar-disc sample each, the cache, the
+        centres' filtered corrections interpolated; no gathers of their own), and takes their
+        mean: the pixel's area mean, which a camera's pixel and the reference's box filter
+        integrate, instead of its centre's value (0: the centre's). They differ where the
+        radiance curves within a pixel: the outer rim of a penumbra, the sky and Earth light
+        falling off towards a contact, a rim seen at a grazing angle (:func:`_box_grid`).
     aa_gather_rays : int
         Rays of the final gather an edge sub-sample casts of its own (off its pixel centre's
         surface, or near that surface's boundary with :attr:`own_at_boundary`;
@@ -134,6 +143,7 @@ class Quality:
     aa_extra: float = 0.0
     cache_divisions: int = 0
     aa_gather_rays: int = 0
+    box_grid: int = 0
 
 
 # coverage grids of edge pixels (Quality.cov_grid), chosen on the scenes of
@@ -353,6 +363,37 @@ def _cache_divisions(samples: int) -> int:
     return 90 if samples >= 12 else 0
 
 
+def _box_grid(samples: int) -> int:
+    """Side of the sub-pixel grid of ``balanced``'s pixels that are not anti-aliased
+    (:attr:`Quality.box_grid`) for N gather rays: 3 from N = 32, else 0 (each pixel its centre).
+
+    The reference path tracer, like a camera, averages each pixel's area; a pixel shaded at its
+    centre differs where the radiance curves within it. At N = 64, a quarter of the median
+    scenes' interior bias² sat one pixel inside the edges: on Tiangong ``earth`` (×10⁻⁴) 0.19 of
+    0.37 at 1–2 px from an edge, 0.08 at 2–3 px, 0.002 beyond 10 px (0.14 of 0.21 even unfiltered,
+    so not the residual filter's). Measured on the 12 scenes of ``benchmarks/bench_time_error.py``
+    at 1280×960 (``benchmarks/bench_bias_noise.py``, median error; time: the settings alternated
+    per scene, fastest of 3, median of the per-scene ratios; fiftieth session):
+
+    * N = 64: 1.00 → 0.95 % (all 12 scenes lower: ICESat ``sunlit`` 0.49 → 0.48 % …
+      Tiangong ``backlit`` 3.17 → 2.82 %, ICESat ``earth`` 0.99 → 0.84 %; interior noise falls
+      too) for 1.052× the time; only the pixels 1 px from the anti-aliased ones: 0.97 % for
+      1.017×, within 2 px: 0.96 % for 1.037×; along the curve of more gather rays (error ∝
+      t^−0.48 from 32 to 64 rays) 1.052× buys 0.976×.
+    * N = 32: 1.19 → 1.10 % for 1.085× (2 × 2: 1.14 %).
+    * N = 16 / 12 / 8: 1.82 → 1.77 %, 1.95 → 1.89 %, 2.68 → 2.63 %; at 12 rays for 1.20× the
+      time (2 × 2: 1.92 % for 1.10×), where the curve (t^−0.73) buys 0.88× the error: not there.
+    * 2 × 2 instead of 3 × 3 with the sub-samples' own gathers near a boundary, as the edge
+      pixels have them: noisier (N = 64, 1 px ring: 0.98 %).
+
+    Not the residual: box-averaging only the filtered correction's bilinear interpolant (weights
+    1/8, 3/4, 1/8 per axis) raised Tiangong ``earth``'s interior bias² 0.37 → 0.48, and adding
+    ΔL/24 of the pixel centres' radiance (the area mean of a quadratic) took it to 0.35 only
+    (with 3 × 3: 0.25): what curves is below the centres' spacing — a penumbra's rim, the light
+    falling off into a contact."""
+    return 3 if samples >= 32 else 0
+
+
 def preset_cache_options(q: Quality, scale_m: float, options: dict | None = None) -> dict:
     """The options of the radiance cache a frame of preset ``q`` uses, for a target whose
     bounding-box diagonal is ``scale_m`` [m]: ``options`` (the caller's, which win), with the
@@ -395,7 +436,8 @@ def quality_preset(name: str, samples: int | None = None) -> Quality:
                        slivers=True, filter_sigma_l=_filter_sigma_l(samples), thin_shadows=True,
                        filter_linear=_filter_linear(samples), own_at_boundary=_own_at_boundary(samples),
                        pilot_rays=_pilot_rays(samples), aa_extra=_balanced_aa_extra(samples),
-                       cache_divisions=_cache_divisions(samples), aa_gather_rays=_balanced_aa_gather(samples))
+                       cache_divisions=_cache_divisions(samples), aa_gather_rays=_balanced_aa_gather(samples),
+                       box_grid=_box_grid(samples))
     if name == "reference":
         return Quality(name, spp=samples)
     aa = max(1, min(samples, 16))

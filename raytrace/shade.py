@@ -139,6 +139,9 @@ _AA_SECOND_STREAM = 0x1B873593
 # the directions of the sub-samples' own final gathers: a sequence per pixel apart from its
 # centre's (_shade_subsamples)
 _SUB_GATHER_STREAM = 0x2545F491
+# XORed into the frame's seed for the sub-pixel rays of the pixels that are not anti-aliased
+# (Quality.box_grid)
+_BOX_STREAM = 0x68E31DA4
 
 
 # the local-linear residual filter (_filter_residual): coordinates in units of 8 pixels, and a
@@ -157,7 +160,8 @@ class RenderFrame:
         Exact per-pixel-centre AOVs (depth, normals, ids, mask).
     radiance : ndarray, shape (H, W, 3), float32
         Linear RGB radiance reaching the camera through each pixel, box-filtered over the
-        pixel where anti-aliased [W/(m²·sr)].
+        pixel where anti-aliased, and elsewhere too with :attr:`raytrace.presets.Quality.box_grid`
+        [W/(m²·sr)].
     quality : Quality
     timings_s : dict
         Seconds per stage, wall clock. ``cache`` is the wait for the frame's lighting context
@@ -981,14 +985,14 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
 
     # ---- anti-aliasing where neighbours disagree (Earth behind the target is drawn above)
     t0 = time.perf_counter() - t_early  # Earth, the edges and their trace count in "antialias"
+    centre = None
+    if residual is not None and (len(epix) or q.box_grid > 1):
+        # the centre's surface (point, normal, footprint; row k of s for pixel pix[k]):
+        # a sub-sample shares its pixel's filtered correction only on that same surface
+        row_of_pixel = np.full(H * W, -1, dtype=np.int32)
+        row_of_pixel[pix] = np.arange(len(pix), dtype=np.int32)
+        centre = (row_of_pixel, s["P"], s["NS"], geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx)
     if len(epix):
-        centre = None
-        if residual is not None:
-            # the centre's surface (point, normal, footprint; row k of s for pixel pix[k]):
-            # a sub-sample shares its pixel's filtered correction only on that same surface
-            row_of_pixel = np.full(H * W, -1, dtype=np.int32)
-            row_of_pixel[pix] = np.arange(len(pix), dtype=np.int32)
-            centre = (row_of_pixel, s["P"], s["NS"], geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx)
         n_extra = int(q.aa_extra * len(epix))
         contrast = np.empty(len(epix)) if n_extra else None
         sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual,
@@ -1003,6 +1007,15 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
             sub[sel] = 0.5 * (sub[sel] + sub2)
         _check_finite("anti-aliasing", sub)
         K.put_rows_nonnegative(epix, sub, rad)
+    if q.box_grid > 1 and len(pix):
+        # every other target pixel: its area mean from box_grid² sub-samples on its own surface,
+        # which take the centres' corrections interpolated (no gathers of their own)
+        rest = np.setdiff1d(pix, epix, assume_unique=True)
+        if len(rest):
+            box = _supersample(ctx, scene, camera, R, t, o_body, geo, rest, q.box_grid, int(seed) ^ _BOX_STREAM,
+                               residual, q.aa_gather_rays, centre, borrow=q.borrow)
+            _check_finite("area means", box)
+            K.put_rows_nonnegative(rest, box, rad)
     timings["antialias"] = time.perf_counter() - t0
     rad = rad.reshape(H, W, 3)
     _stars(rad, scene, camera, R, t, lighting, timings)
