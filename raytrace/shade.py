@@ -169,6 +169,7 @@ class RenderFrame:
         sunlight, the pixels to anti-alias and, when they are one chunk, their sub-samples'
         rays and sunlight): the context is built on a side thread meanwhile
         (``_CONTEXT_ON_SIDE_THREAD``), so its own time is inside the other stages.
+        ``antialias`` includes the area means of the other pixels (``Quality.box_grid``).
     """
 
     geometry: GeometryFrame
