@@ -368,9 +368,9 @@ def _box_grid(samples: int) -> int:
     (:attr:`Quality.box_grid`) for N gather rays: 3 from N = 32, else 0 (each pixel its centre).
 
     The reference path tracer, like a camera, averages each pixel's area; a pixel shaded at its
-    centre differs where the radiance curves within it. At N = 64, a quarter of the median
-    scenes' interior bias² sat one pixel inside the edges: on Tiangong ``earth`` (×10⁻⁴) 0.19 of
-    0.37 at 1–2 px from an edge, 0.08 at 2–3 px, 0.002 beyond 10 px (0.14 of 0.21 even unfiltered,
+    centre differs where the radiance curves within it. At N = 64, much of the median scenes'
+    interior bias² sat one pixel inside the edges: on Tiangong ``earth`` (×10⁻⁴) 0.19 of 0.37 at
+    1–2 px from an edge, 0.08 at 2–3 px, 0.002 beyond 10 px (0.14 of 0.21 even unfiltered,
     so not the residual filter's). Measured on the 12 scenes of ``benchmarks/bench_time_error.py``
     at 1280×960 (``benchmarks/bench_bias_noise.py``, median error; time: the settings alternated
     per scene, fastest of 3, median of the per-scene ratios; fiftieth session):
@@ -383,8 +383,8 @@ def _box_grid(samples: int) -> int:
     * N = 32: 1.19 → 1.10 % for 1.085× (2 × 2: 1.14 %).
     * N = 16 / 12 / 8: 1.82 → 1.77 %, 1.95 → 1.89 %, 2.68 → 2.63 %; at 12 rays for 1.20× the
       time (2 × 2: 1.92 % for 1.10×), where the curve (t^−0.73) buys 0.88× the error: not there.
-    * 2 × 2 instead of 3 × 3 with the sub-samples' own gathers near a boundary, as the edge
-      pixels have them: noisier (N = 64, 1 px ring: 0.98 %).
+    * With the sub-samples' own gathers near a boundary, as the edge pixels have them: noisier
+      (N = 64, 3 × 3 on the 1 px ring: 0.98 % against 0.97 % without).
 
     Not the residual: box-averaging only the filtered correction's bilinear interpolant (weights
     1/8, 3/4, 1/8 per axis) raised Tiangong ``earth``'s interior bias² 0.37 → 0.48, and adding
