@@ -108,8 +108,9 @@ class Quality:
         ≥ 2: every target pixel that is not anti-aliased gets box_grid² stratified sub-pixel
         rays too (:func:`raytrace.shade._supersample`), shaded like the edge sub-samples on
         their pixel centre's surface (exact Sun with a solar-disc sample each, the cache, the
-        centres' filtered corrections interpolated; no gathers of their own), and takes their
-        mean: the pixel's area mean, which a camera's pixel and the reference's box filter
+        centres' filtered corrections interpolated; a gather of its own only where a
+        sub-sample lands on another surface than its centre's, which the anti-aliasing's tests
+        leave rare), and takes their mean: the pixel's area mean, which a camera's pixel and the reference's box filter
         integrate, instead of its centre's value (0: the centre's). They differ where the
         radiance curves within a pixel: the outer rim of a penumbra, the sky and Earth light
         falling off towards a contact, a rim seen at a grazing angle (:func:`_box_grid`).

@@ -1009,8 +1009,9 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         _check_finite("anti-aliasing", sub)
         K.put_rows_nonnegative(epix, sub, rad)
     if q.box_grid > 1 and len(pix):
-        # every other target pixel: its area mean from box_grid² sub-samples on its own surface,
-        # which take the centres' corrections interpolated (no gathers of their own)
+        # every other target pixel: its area mean from box_grid² sub-samples, which take the
+        # centres' corrections interpolated on their surface (none near a boundary casts a gather
+        # of its own; one on another surface than its centre's, rare here, does)
         rest = np.setdiff1d(pix, epix, assume_unique=True)
         if len(rest):
             box = _supersample(ctx, scene, camera, R, t, o_body, geo, rest, q.box_grid, int(seed) ^ _BOX_STREAM,
