@@ -10,7 +10,7 @@ kernels with Embree calls; ``prange`` only on outer pixel/ray loops.
   table, the environment's parameters). Numba inlines them into the caller's IR, where
   they take the caller's flags. A compiled call instead increments and decrements the
   reference count of every array argument, atomically: on two threads contending for the
-  same counters that cost far more than the helper's work (``add_interpolated_rows``,
+  same counters that cost far more than the helper's work (``interpolate_rows_into``,
   ~400 k sub-samples of a Tiangong frame: 46 ms as a call of ``_centre_on_surface``, 34 ms
   with LLVM's forceinline, 13 ms inlined by numba, same output).
 * ``pjit`` / ``jit``: fastmath without ``nnan``/``ninf`` (misses are ``inf`` and must stay

@@ -283,10 +283,10 @@ EXTRA_SIGNATURES = {
         'raytrace._shading._sobol2_y': (0.06, [
             '(int64,)',
         ]),
-        'raytrace._shading.add_interpolated_rows': (1.56, [
+        'raytrace._shading.interpolate_rows_into': (1.56, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(uint16, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._shading.add_rows': (0.9, [
+        'raytrace._shading.take_add_rows': (0.9, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
         'raytrace._shading.allocate_rays': (0.31, [

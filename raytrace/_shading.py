@@ -280,13 +280,14 @@ def put_weighted_rows(idx, X, Wt, out):
 
 
 @pjit_exact
-def add_rows(k, A, B, outA, outB):
-    """outA[i] += A[k[i]] and outB[i] += B[k[i]] where k[i] ≥ 0 (rows of 3)."""
+def take_add_rows(k, A, B, outA, outB):
+    """outA[i] = A[k[i]] and outB[i] += B[k[i]] where k[i] ≥ 0 (rows of 3): a centre's filtered
+    irradiance in place of the cache's, its specular correction added."""
     for i in numba.prange(k.shape[0]):
         j = k[i]
         if j >= 0:
             for a in range(3):
-                outA[i, a] += A[j, a]
+                outA[i, a] = A[j, a]
                 outB[i, a] += B[j, a]
 
 
@@ -1289,14 +1290,16 @@ def donor_rows(centre, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c, foot, bo
 
 
 @pjit_exact
-def add_interpolated_rows(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c,
+def interpolate_rows_into(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c,
                           foot, A, B, min_found, outA, outB, added):
     """For the listed sub-samples i (ray direction D[i], body frame; part ``comp``, point P,
-    shading normal NS): outA[i] += Σ_j w_j A[k_j] (and B into outB), over the (up to) four
+    shading normal NS): outA[i] = Σ_j w_j A[k_j] (in place of what it held: the centres' filtered
+    irradiance instead of the cache's) and outB[i] += Σ_j w_j B[k_j], over the (up to) four
     pixel centres k_j around the sub-sample's image point on its own surface
     (:func:`_centre_on_surface`), w_j their bilinear weights renormalised over those found (pixel
     centres at integer image coordinates). Nothing is added where fewer than ``min_found``
-    (≥ 1) of the four are on its surface; added[t] tells whether sub-sample sel[t] was."""
+    (≥ 1) of the four are on its surface (outA and outB keep their values); added[t] tells
+    whether sub-sample sel[t] was."""
     for t in numba.prange(sel.shape[0]):
         m = sel[t]
         xc = R_cam_from_body[0, 0] * D[m, 0] + R_cam_from_body[0, 1] * D[m, 1] + R_cam_from_body[0, 2] * D[m, 2]
@@ -1330,9 +1333,9 @@ def add_interpolated_rows(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P
             b2 += w * B[k, 2]
         added[t] = found >= min_found and sw > 0.0
         if added[t]:
-            outA[m, 0] += a0 / sw
-            outA[m, 1] += a1 / sw
-            outA[m, 2] += a2 / sw
+            outA[m, 0] = a0 / sw
+            outA[m, 1] = a1 / sw
+            outA[m, 2] = a2 / sw
             outB[m, 0] += b0 / sw
             outB[m, 1] += b1 / sw
             outB[m, 2] += b2 / sw

@@ -28,9 +28,11 @@ class Quality:
     gather_rays : int
         Final-gather rays per pixel (0: the cache alone) [-].
     filter_passes : int
-        À-trous passes on the gathered residual (pass k has holes of 2^k pixels) [-].
+        À-trous passes on the gathered irradiance (pass k has holes of 2^k pixels; up to the
+        fiftieth session on its difference from the cache, in which the measurements below
+        that chose the passes, σ_l and β were made) [-].
     filter_sigma_l : float
-        Edge stopping on the residual itself: a neighbour's weight falls as exp(−z/σ_l), z the
+        Edge stopping on the gathered light itself: a neighbour's weight falls as exp(−z/σ_l), z the
         z-score of the two pixels' difference from their gathers' own variances
         (:func:`raytrace._shading.atrous`); 0: geometry only [-].
     aa_grid : int
@@ -80,7 +82,7 @@ class Quality:
         (:func:`raytrace.shade._thin_shadow_pixels`; needs ``sun_corners``).
     own_at_boundary : bool
         An edge sub-sample on its pixel centre's surface takes the centres' corrections
-        interpolated (:func:`raytrace._shading.add_interpolated_rows`) only where all four
+        interpolated (:func:`raytrace._shading.interpolate_rows_into`) only where all four
         centres around it lie on that surface; nearer than a pixel to where the surface meets
         another part, folds (a crease) or ends, it casts its own final gather
         (:attr:`aa_gather_rays` rays), since the correction there is extrapolated from centres

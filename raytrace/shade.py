@@ -27,12 +27,13 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     environment along each blocked ray, so escaping rays add no noise; where a ray hits
     another part, that part's sunlight is exact (a shadow ray) and its own indirect light a
     traced path (one cosine ray per bounce, exact Sun where each lands, up to 4 bounces where
-    they stay within 2 cache lattice spacings — a gap —, the cache beyond)). The
-    cache's interpolated value serves as a control variate: only the difference
-    (gather − cache) is filtered, by an edge-avoiding à-trous filter guided by the exact id,
-    normal and depth AOVs and by the residual's own noise (a step between two pixels larger
-    than their gathers' spread — a contact shadow, a gap — is kept), so the filter removes
-    noise, not detail. Glossy parts also sample their GGX lobe with N rays, minus the
+    they stay within 2 cache lattice spacings — a gap —, the cache beyond)). The gathered
+    irradiance is filtered by an edge-avoiding à-trous filter guided by the exact id, normal
+    and depth AOVs and by the gathers' own noise (a step between two pixels larger than their
+    gathers' spread — a contact shadow, a gap — is kept), so the filter removes noise, not
+    detail; the cache's value at the pixel is not used (filtering the difference gather −
+    cache instead would pass the kinks of the cache's piecewise-linear lattice into the
+    frame). Glossy parts also sample their GGX lobe with N rays, minus the
     radiance their cheap mirror term reflects (a control variate of known mean, the split-sum
     albedo), filtered with the same weights. Gather and lobe directions are correlated
     multi-jittered per pixel. Edge pixels get 4×4 (N ≤ 8), 6×6 (N < 32) or 8×8 multi-jittered
@@ -40,10 +41,10 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     whose corners disagree with the centre on the Sun's visibility, or that a sliver of a
     triangle — a wire thinner than a pixel — crosses in front of the centre's surface, are edge
     pixels too); a sub-sample on its pixel centre's
-    surface is shaded like ``fast`` plus the filtered gather corrections of the pixel centres
-    around it on that surface, interpolated bilinearly at its position; one on
-    another surface takes the
-    correction of the nearest neighbouring centre on its surface (N ≤ 16) or gets its own
+    surface is shaded like ``fast`` but with the filtered gathered irradiance of the pixel
+    centres around it on that surface, interpolated bilinearly at its position, in place of
+    the cache's (and their filtered lobe corrections); one on another surface takes the
+    filtered irradiance of the nearest neighbouring centre on its surface (N ≤ 16) or gets its own
     N/4-ray gather (N > 16, or no such neighbour and N = 16; below that the cache alone,
     which is less noisy; N/8 rays from N = 32, where sub-samples near their surface's boundary
     gather their own too and the 8×8 grid has more of them). From N = 12 the cache's lattice
@@ -734,7 +735,8 @@ def _gather_two_pass(ctx: _Context, s, n_rays: int, n_pilot: int, pix: np.ndarra
 
 
 def _filter_residual(rows, var, inst, at, guide, passes: int, sigma_l: float, linear: float = 0.0) -> np.ndarray:
-    """The per-pixel rows (n, 3) of a gathered residual, with their luminance variances
+    """The per-pixel rows (n, 3) of a gathered estimate (``balanced``'s gathered irradiance,
+    or its lobe's difference from the mirror term), with their luminance variances
     ``var`` (n,), filtered by ``passes`` à-trous passes (:func:`raytrace._shading.atrous`) on
     the image of ids ``inst`` (pixel k at (at[0][k], at[1][k]); pixels whose id is 0 neither
     take nor give), ``guide`` = (normals, depths, fx, fy, cx, cy) of that image: rows (n, 3).
@@ -941,8 +943,12 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     t0 = time.perf_counter()
     residual = None
     if q.gather_rays > 0 and len(pix):
-        # final gather and glossy lobe sampling; their cache-based counterparts are control
-        # variates, so only the (noisy) differences are filtered
+        # final gather and glossy lobe sampling. The gathered irradiance itself is filtered, not
+        # its difference from the cache's: the cache is piecewise linear on its lattice, with
+        # kinks that the truth has not, and filtering the difference blurs the truth's detail
+        # minus the cache's, which puts the kinks' blur into the frame (BENCHMARKS.md, "The
+        # gather filtered, not its difference from the cache"). The lobe's difference from its
+        # mirror-term counterpart (a control variate of known mean) is filtered as before
         pix64 = pix.astype(np.int64)
         # the target's bounding box, on which the gather's noise is averaged and its residual
         # filtered
@@ -953,10 +959,10 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         at = (pv - v0, pu - u0)
         var = np.empty(len(pix))
         if q.pilot_rays > 0:
-            dE = _gather_two_pass(ctx, s, q.gather_rays, q.pilot_rays, pix64, int(seed), var, inst, at,
-                                  filter_passes=q.filter_passes) - E
+            G = _gather_two_pass(ctx, s, q.gather_rays, q.pilot_rays, pix64, int(seed), var, inst, at,
+                                 filter_passes=q.filter_passes)
         else:
-            dE = ctx.gather_E(s, q.gather_rays, pix64, int(seed), var) - E
+            G = ctx.gather_E(s, q.gather_rays, pix64, int(seed), var)
         var_s = np.empty(len(pix))
         dS = ctx.lobe(s, q.gather_rays, pix64, int(seed), lbar, var_s)
         # each filtered on the target's bounding box with weights from the geometry and, from 8
@@ -965,7 +971,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         guide = (geo.normal_cam[box].astype(np.float64),
                  np.where(np.isfinite(geo.depth_m[box]), geo.depth_m[box], 0.0).astype(np.float64),
                  camera.fx, camera.fy, camera.cx - u0, camera.cy - v0)
-        rows_E = _filter_residual(dE, var, inst, at, guide, q.filter_passes, q.filter_sigma_l, q.filter_linear)
+        rows_E = _filter_residual(G, var, inst, at, guide, q.filter_passes, q.filter_sigma_l, q.filter_linear)
         spec_px = ctx.lobe_sampled[s["comp"]]
         if spec_px.any():
             inst_s = np.zeros_like(inst)
@@ -973,14 +979,15 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
             rows_S = _filter_residual(dS, var_s, inst_s, at, guide, q.filter_passes, q.filter_sigma_l)
         else:
             rows_S = np.zeros((len(pix), 3))
-        # per target pixel (row k of s for pixel pix[k]): the filtered irradiance and specular corrections
+        # per target pixel (row k of s for pixel pix[k]): the filtered gathered irradiance and
+        # the filtered specular correction
         residual = (rows_E, rows_S)
-        E = E + residual[0]
-        L += residual[1]
+        E = rows_E
+        L += rows_S
     ctx.add_diffuse(s, E, L)
     _check_finite("indirect light", L)
-    # the control-variate corrections (gather − cache) may overshoot below zero where the
-    # cache is brighter than the truth; radiance is never negative
+    # the specular corrections (lobe − mirror term) and the local-linear filter's planes may
+    # overshoot below zero; radiance is never negative
     K.put_rows_nonnegative(pix, L, rad)
     timings["indirect"] = time.perf_counter() - t0
 
@@ -989,7 +996,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     centre = None
     if residual is not None and (len(epix) or q.box_grid > 1):
         # the centre's surface (point, normal, footprint; row k of s for pixel pix[k]):
-        # a sub-sample shares its pixel's filtered correction only on that same surface
+        # a sub-sample shares its pixel's filtered light only on that same surface
         row_of_pixel = np.full(H * W, -1, dtype=np.int32)
         row_of_pixel[pix] = np.arange(len(pix), dtype=np.int32)
         centre = (row_of_pixel, s["P"], s["NS"], geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx)
@@ -1010,7 +1017,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         K.put_rows_nonnegative(epix, sub, rad)
     if q.box_grid > 1 and len(pix):
         # every other target pixel: its area mean from box_grid² sub-samples, which take the
-        # centres' corrections interpolated on their surface (none near a boundary casts a gather
+        # centres' filtered light interpolated on their surface (none near a boundary casts a gather
         # of its own; one on another surface than its centre's, rare here, does)
         rest = np.setdiff1d(pix, epix, assume_unique=True)
         if len(rest):
@@ -1178,18 +1185,19 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
                  own_at_boundary: bool = False, contrast_out=None, traced=None):
     """Box-filtered radiance of the listed pixels from n_grid² correlated multi-jittered
     sub-pixel rays (:func:`raytrace._shading.subpixel_rays`). Each sub-sample is shaded like a
-    ``fast`` pixel (exact Sun, cache, mirror term); with ``residual`` (the filtered
-    final-gather and lobe corrections, ``balanced``) a sub-sample on the same surface as its
+    ``fast`` pixel (exact Sun, cache, mirror term); with ``residual`` (the centres' filtered
+    gathered irradiance and filtered lobe corrections, ``balanced``) a sub-sample on the same surface as its
     pixel centre (same part, normals within 25°, within a pixel footprint of the centre's
     tangent plane: ``centre_surface`` = (row of each pixel, −1 off
     the target, and per row the centre's point, normal and footprint; ``residual`` is per row
-    too, and needs it)) also gets the corrections of the (up to) four pixel centres around it
-    on that surface, interpolated bilinearly at its image position,
+    too, and needs it)) takes the irradiance of the (up to) four pixel centres around it
+    on that surface, interpolated bilinearly at its image position, instead of the cache's
+    (and adds their lobe corrections, interpolated the same way),
     so edge pixels carry the same
     indirect light as their neighbours; any other sub-sample (another part, the far side of a
     crease, another rod of a truss) gets its own final gather and lobe samples (the centre's
-    correction there overshot, to black or to twice the light); with ``borrow`` it first
-    tries the filtered correction of the nearest neighbouring centre on its own surface. Misses
+    light there was wrong, black or twice the truth); with ``borrow`` it first
+    tries the filtered irradiance of the nearest neighbouring centre on its own surface. Misses
     see Earth or black space.
 
     With ``cov_grid`` ≥ 2, coverage and shading are estimated apart (as multisample
@@ -1358,8 +1366,8 @@ def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, se
                       centre_surface, borrow, own_at_boundary=False):
     """Radiance along the sub-pixel rays traced by :func:`_trace_subsamples` (of a camera with
     pose R_cam = R_cam_from_body): the cache's light and the mirror term added to the Sun's,
-    and with ``residual`` the filtered final-gather corrections (or the sub-sample's own
-    gather)."""
+    and with ``residual`` the centres' filtered gathered irradiance in place of the cache's and
+    their lobe corrections (or the sub-sample's own gather)."""
     L = np.zeros((tr["n"], 3))
     idx = tr["idx"]
     if len(idx):
@@ -1373,18 +1381,20 @@ def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, se
             H, W = geo.instance.shape
             K.donor_rows(c_idx, W, H, s["comp"], s["P"], s["NS"], row_of_pixel,
                          geo.instance.ravel(), P_c, N_c, foot, borrow, k)
-            # on its own pixel centre's surface: the corrections of the (up to) four centres
-            # around it on that surface, interpolated bilinearly, not the centre's alone (a
-            # contact shadow or the light of a neighbouring part varies within the pixel)
+            # on its own pixel centre's surface: the filtered irradiance (residual[0], in place
+            # of the cache's, which is kept only where no centre's applies) and lobe corrections
+            # of the (up to) four centres around it on that surface, interpolated bilinearly,
+            # not the centre's alone (a contact shadow or the light of a neighbouring part varies
+            # within the pixel)
             own = np.flatnonzero((k >= 0) & (k == row_of_pixel[c_idx]))
             added = np.empty(len(own), dtype=np.bool_)
-            K.add_interpolated_rows(own, Dh, R_cam, camera.fx, camera.fy, camera.cx, camera.cy, W, H, s["comp"],
+            K.interpolate_rows_into(own, Dh, R_cam, camera.fx, camera.fy, camera.cx, camera.cy, W, H, s["comp"],
                                     s["P"], s["NS"], row_of_pixel, geo.instance.ravel(), P_c, N_c, foot,
                                     residual[0], residual[1], 4 if own_at_boundary else 1, E, Ls, added)
             k[own] = -2  # done; −1: none
             if own_at_boundary:
                 k[own[~added]] = -1  # near its surface's boundary: its own gather below
-            K.add_rows(k, residual[0], residual[1], E, Ls)  # where k ≥ 0: a (neighbouring) centre's correction
+            K.take_add_rows(k, residual[0], residual[1], E, Ls)  # where k ≥ 0: a neighbouring centre's
             # below _MIN_SUB_GATHER rays an unfiltered gather is noisier than the cache is wrong
             j = np.flatnonzero(k == -1)
             if len(j) and gather_rays >= _MIN_SUB_GATHER:

@@ -1,5 +1,5 @@
 """Edge sub-samples take the gather corrections of the pixel centres around them on their own
-surface, interpolated bilinearly (raytrace._shading.add_interpolated_rows)."""
+surface, interpolated bilinearly (raytrace._shading.interpolate_rows_into)."""
 
 from __future__ import annotations
 
@@ -34,7 +34,7 @@ def _interp(uf, vf, comp, parts, A, B, min_found=1):
     outA = np.zeros((len(uf), 3))
     outB = np.zeros((len(uf), 3))
     added = np.empty(len(uf), dtype=np.bool_)
-    K.add_interpolated_rows(np.arange(len(uf), dtype=np.int64), D, np.eye(3), FX, FY, CX, CY, W, H, comp, P, NS,
+    K.interpolate_rows_into(np.arange(len(uf), dtype=np.int64), D, np.eye(3), FX, FY, CX, CY, W, H, comp, P, NS,
                             row_of_pixel, inst, P_c, N_c, foot, A, B, min_found, outA, outB, added)
     return outA, outB, added
 
