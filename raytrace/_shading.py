@@ -1254,7 +1254,7 @@ def _centre_on_surface(q, m, row_of_pixel, inst, comp, P, NS, P_c, N_c, foot):
 @pjit_exact
 def donor_rows(centre, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c, foot, borrow, out):
     """For each sub-sample (pixel ``centre``, part ``comp``, point P, shading normal NS): the
-    row of the pixel centre whose filtered correction it takes, −1 for none. Its own pixel's
+    row of the pixel centre whose filtered light it takes, −1 for none. Its own pixel's
     centre if that lies on the same surface (same part, normals within 25°, the point within
     a pixel footprint of the centre's tangent plane); otherwise, with ``borrow``, the nearest
     (in space) of the 8 neighbouring centres on its surface; otherwise none."""

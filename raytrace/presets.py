@@ -110,7 +110,7 @@ class Quality:
         ≥ 2: every target pixel that is not anti-aliased gets box_grid² stratified sub-pixel
         rays too (:func:`raytrace.shade._supersample`), shaded like the edge sub-samples on
         their pixel centre's surface (exact Sun with a solar-disc sample each, the cache, the
-        centres' filtered corrections interpolated; a gather of its own only where a
+        centres' filtered light interpolated; a gather of its own only where a
         sub-sample lands on another surface than its centre's, which the anti-aliasing's tests
         leave rare), and takes their mean: the pixel's area mean, which a camera's pixel and the reference's box filter
         integrate, instead of its centre's value (0: the centre's). They differ where the
@@ -304,7 +304,7 @@ def _filter_linear(samples: int) -> float:
 
 def _borrow(samples: int) -> bool:
     """Whether ``balanced`` edge sub-samples off their centre's surface borrow a neighbour's
-    filtered correction (:attr:`Quality.borrow`). Measured on the 12 scenes of
+    filtered light (:attr:`Quality.borrow`). Measured on the 12 scenes of
     ``benchmarks/bench_time_error.py`` at 1280×960 (median error, bias estimated without the
     reference's noise): N = 8 (no sub-sample gathers, the cache alone there): 4.39 → 4.22 %;
     N = 16 (4-ray gathers): 3.20 → 3.30 % for 90–100 ms less per frame (of ~470); N = 64
