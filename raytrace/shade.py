@@ -31,7 +31,7 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     irradiance is filtered by an edge-avoiding à-trous filter guided by the exact id, normal
     and depth AOVs and by the gathers' own noise (a step between two pixels larger than their
     gathers' spread — a contact shadow, a gap — is kept), so the filter removes noise, not
-    detail; the cache's value at the pixel is not used (filtering the difference gather −
+    detail; the cache's value at the pixel is not used for it (filtering the difference gather −
     cache instead would pass the kinks of the cache's piecewise-linear lattice into the
     frame). Glossy parts also sample their GGX lobe with N rays, minus the
     radiance their cheap mirror term reflects (a control variate of known mean, the split-sum

@@ -1,6 +1,6 @@
 """``balanced``'s diffuse indirect light at a pixel is its filtered final gather, not the
-radiance cache's value there plus a filtered correction: the cache's values at the pixels
-must not reach the frame. The cache is piecewise linear on a lattice of points, with kinks
+radiance cache's value there plus a filtered correction: on a Lambertian part the cache's
+values at the pixels must not reach the frame. The cache is piecewise linear on a lattice of points, with kinks
 the true light has not; had the filter worked on the difference (gather − cache), its blur
 of the kinks would stay in the image (on the 12 benchmark scenes that was most of the
 interior bias, BENCHMARKS.md "The gather filtered, not its difference from the cache").
