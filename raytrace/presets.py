@@ -81,13 +81,13 @@ class Quality:
         triangles that are slivers seen from the Sun, looked up over each pixel's footprint
         (:func:`raytrace.shade._thin_shadow_pixels`; needs ``sun_corners``).
     own_at_boundary : bool
-        An edge sub-sample on its pixel centre's surface takes the centres' corrections
+        An edge sub-sample on its pixel centre's surface takes the centres' filtered light
         interpolated (:func:`raytrace._shading.interpolate_rows_into`) only where all four
         centres around it lie on that surface; nearer than a pixel to where the surface meets
         another part, folds (a crease) or ends, it casts its own final gather
-        (:attr:`aa_gather_rays` rays), since the correction there is extrapolated from centres
+        (:attr:`aa_gather_rays` rays), since the light there is extrapolated from centres
         farther from the contact: a rod lying on a module left a line along the contact too bright, the
-        residual's steep fall towards the contact missed (:func:`_own_at_boundary`).
+        light's steep fall towards the contact missed (:func:`_own_at_boundary`).
     filter_linear : float
         β > 0: the residual filter returns the local-linear estimate (the weighted plane through
         the kernel's neighbours at the pixel, its slope scaled by β) instead of the weighted

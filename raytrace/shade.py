@@ -941,7 +941,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     timings["direct"] = time.perf_counter() - t0
     _check_finite("direct light", L)
     t0 = time.perf_counter()
-    residual = None
+    centre_light = None
     if q.gather_rays > 0 and len(pix):
         # final gather and glossy lobe sampling. The gathered irradiance itself is filtered, not
         # its difference from the cache's: the cache is piecewise linear on its lattice, with
@@ -981,7 +981,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
             rows_S = np.zeros((len(pix), 3))
         # per target pixel (row k of s for pixel pix[k]): the filtered gathered irradiance and
         # the filtered specular correction
-        residual = (rows_E, rows_S)
+        centre_light = (rows_E, rows_S)
         E = rows_E
         L += rows_S
     ctx.add_diffuse(s, E, L)
@@ -994,7 +994,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     # ---- anti-aliasing where neighbours disagree (Earth behind the target is drawn above)
     t0 = time.perf_counter() - t_early  # Earth, the edges and their trace count in "antialias"
     centre = None
-    if residual is not None and (len(epix) or q.box_grid > 1):
+    if centre_light is not None and (len(epix) or q.box_grid > 1):
         # the centre's surface (point, normal, footprint; row k of s for pixel pix[k]):
         # a sub-sample shares its pixel's filtered light only on that same surface
         row_of_pixel = np.full(H * W, -1, dtype=np.int32)
@@ -1003,15 +1003,15 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     if len(epix):
         n_extra = int(q.aa_extra * len(epix))
         contrast = np.empty(len(epix)) if n_extra else None
-        sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), residual,
+        sub = _supersample(ctx, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed), centre_light,
                            q.aa_gather_rays, centre, q.cov_grid, q.borrow, q.own_at_boundary, contrast, traced)
         del traced
         if n_extra:
             # the highest contrast first, ties in pixel order; then back in pixel order
             sel = np.sort(np.argsort(-contrast, kind="stable")[:n_extra])
             sub2 = _supersample(ctx, scene, camera, R, t, o_body, geo, epix[sel], q.aa_grid,
-                                int(seed) ^ _AA_SECOND_STREAM, residual, q.aa_gather_rays, centre, q.cov_grid, q.borrow,
-                                q.own_at_boundary)
+                                int(seed) ^ _AA_SECOND_STREAM, centre_light, q.aa_gather_rays, centre, q.cov_grid,
+                                q.borrow, q.own_at_boundary)
             sub[sel] = 0.5 * (sub[sel] + sub2)
         _check_finite("anti-aliasing", sub)
         K.put_rows_nonnegative(epix, sub, rad)
@@ -1022,7 +1022,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         rest = np.setdiff1d(pix, epix, assume_unique=True)
         if len(rest):
             box = _supersample(ctx, scene, camera, R, t, o_body, geo, rest, q.box_grid, int(seed) ^ _BOX_STREAM,
-                               residual, q.aa_gather_rays, centre, borrow=q.borrow)
+                               centre_light, q.aa_gather_rays, centre, borrow=q.borrow)
             _check_finite("area means", box)
             K.put_rows_nonnegative(rest, box, rad)
     timings["antialias"] = time.perf_counter() - t0
@@ -1181,15 +1181,15 @@ def _corner_edges(scene: Scene, geo, corners, lit=None, sun_dir=None, eps: float
 
 
 def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,
-                 residual=None, gather_rays: int = 0, centre_surface=None, cov_grid: int = 0, borrow: bool = False,
+                 centre_light=None, gather_rays: int = 0, centre_surface=None, cov_grid: int = 0, borrow: bool = False,
                  own_at_boundary: bool = False, contrast_out=None, traced=None):
     """Box-filtered radiance of the listed pixels from n_grid² correlated multi-jittered
     sub-pixel rays (:func:`raytrace._shading.subpixel_rays`). Each sub-sample is shaded like a
-    ``fast`` pixel (exact Sun, cache, mirror term); with ``residual`` (the centres' filtered
+    ``fast`` pixel (exact Sun, cache, mirror term); with ``centre_light`` (the centres' filtered
     gathered irradiance and filtered lobe corrections, ``balanced``) a sub-sample on the same surface as its
     pixel centre (same part, normals within 25°, within a pixel footprint of the centre's
     tangent plane: ``centre_surface`` = (row of each pixel, −1 off
-    the target, and per row the centre's point, normal and footprint; ``residual`` is per row
+    the target, and per row the centre's point, normal and footprint; ``centre_light`` is per row
     too, and needs it)) takes the irradiance of the (up to) four pixel centres around it
     on that surface, interpolated bilinearly at its image position, instead of the cache's
     (and adds their lobe corrections, interpolated the same way),
@@ -1221,11 +1221,11 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     if len(epix) <= per:
         if traced is None:
             traced = _trace_chunk(ctx, scene, camera, R, t, o_body, geo, epix, n_grid, seed, cov_grid)
-        return _shade_chunk(ctx, camera, geo, traced, seed, residual, gather_rays, centre_surface, borrow,
+        return _shade_chunk(ctx, camera, geo, traced, seed, centre_light, gather_rays, centre_surface, borrow,
                             own_at_boundary, contrast_out)
     def chunk(i):
         tr = _trace_chunk(ctx, scene, camera, R, t, o_body, geo, epix[i:i + per], n_grid, seed, cov_grid)
-        return _shade_chunk(ctx, camera, geo, tr, seed, residual, gather_rays, centre_surface, borrow,
+        return _shade_chunk(ctx, camera, geo, tr, seed, centre_light, gather_rays, centre_surface, borrow,
                             own_at_boundary, None if contrast_out is None else contrast_out[i:i + per])
 
     starts = range(0, len(epix), per)
@@ -1291,13 +1291,13 @@ def _trace_chunk(sunl: _Sunlight, scene: Scene, camera: Camera, R, t, o_body, ge
     return tr
 
 
-def _shade_chunk(ctx: _Context, camera: Camera, geo, tr: dict, seed: int, residual, gather_rays: int,
+def _shade_chunk(ctx: _Context, camera: Camera, geo, tr: dict, seed: int, centre_light, gather_rays: int,
                  centre_surface, borrow: bool, own_at_boundary: bool, contrast_out=None):
     """:func:`_supersample` of one chunk of pixels traced by :func:`_trace_chunk`
     (``contrast_out``: a view of its rows)."""
     epix, S, R_cam = tr["epix"], tr["S"], tr["R_cam"]
-    L = _shade_subsamples(ctx, geo, camera, R_cam, tr["sub"], S, seed, residual, gather_rays, centre_surface, borrow,
-                          own_at_boundary)
+    L = _shade_subsamples(ctx, geo, camera, R_cam, tr["sub"], S, seed, centre_light, gather_rays, centre_surface,
+                          borrow, own_at_boundary)
     out = np.empty((len(epix), 3))
     K.group_means(L, S, out)
     if contrast_out is not None:
@@ -1308,7 +1308,7 @@ def _shade_chunk(ctx: _Context, camera: Camera, geo, tr: dict, seed: int, residu
     C, first = tr["C"], tr["first"]
     L_c = np.zeros((len(mixed) * C, 3))
     if len(first):
-        L_c[first] = _shade_subsamples(ctx, geo, camera, R_cam, tr["cov"], S + C, seed, residual, gather_rays,
+        L_c[first] = _shade_subsamples(ctx, geo, camera, R_cam, tr["cov"], S + C, seed, centre_light, gather_rays,
                                        centre_surface, borrow, own_at_boundary)
     res = np.empty((len(mixed), 3))
     K.coverage_combine(tr["g_m"], np.ascontiguousarray(L.reshape(len(epix), S, 3)[mixed]), tr["g_c"], tr["first_of"],
@@ -1362,11 +1362,11 @@ def _trace_subsamples(sunl: _Sunlight, scene: Scene, o_body, D, h, centre, numbe
     return tr
 
 
-def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, seed, residual, gather_rays,
+def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, seed, centre_light, gather_rays,
                       centre_surface, borrow, own_at_boundary=False):
     """Radiance along the sub-pixel rays traced by :func:`_trace_subsamples` (of a camera with
     pose R_cam = R_cam_from_body): the cache's light and the mirror term added to the Sun's,
-    and with ``residual`` the centres' filtered gathered irradiance in place of the cache's and
+    and with ``centre_light`` the centres' filtered gathered irradiance in place of the cache's and
     their lobe corrections (or the sub-sample's own gather)."""
     L = np.zeros((tr["n"], 3))
     idx = tr["idx"]
@@ -1375,13 +1375,13 @@ def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, se
         E = ctx.cache_E(s)
         lbar = np.zeros((len(idx), 3))
         ctx.add_mirror(s, E, Ls, tr["mirror"], lbar)
-        if residual is not None:
+        if centre_light is not None:
             row_of_pixel, P_c, N_c, foot = centre_surface
             k = np.empty(len(idx), dtype=np.int64)
             H, W = geo.instance.shape
             K.donor_rows(c_idx, W, H, s["comp"], s["P"], s["NS"], row_of_pixel,
                          geo.instance.ravel(), P_c, N_c, foot, borrow, k)
-            # on its own pixel centre's surface: the filtered irradiance (residual[0], in place
+            # on its own pixel centre's surface: the filtered irradiance (centre_light[0], in place
             # of the cache's, which is kept only where no centre's applies) and lobe corrections
             # of the (up to) four centres around it on that surface, interpolated bilinearly,
             # not the centre's alone (a contact shadow or the light of a neighbouring part varies
@@ -1390,11 +1390,11 @@ def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, se
             added = np.empty(len(own), dtype=np.bool_)
             K.interpolate_rows_into(own, Dh, R_cam, camera.fx, camera.fy, camera.cx, camera.cy, W, H, s["comp"],
                                     s["P"], s["NS"], row_of_pixel, geo.instance.ravel(), P_c, N_c, foot,
-                                    residual[0], residual[1], 4 if own_at_boundary else 1, E, Ls, added)
+                                    centre_light[0], centre_light[1], 4 if own_at_boundary else 1, E, Ls, added)
             k[own] = -2  # done; −1: none
             if own_at_boundary:
                 k[own[~added]] = -1  # near its surface's boundary: its own gather below
-            K.take_add_rows(k, residual[0], residual[1], E, Ls)  # where k ≥ 0: a neighbouring centre's
+            K.take_add_rows(k, centre_light[0], centre_light[1], E, Ls)  # where k ≥ 0: a neighbouring centre's
             # below _MIN_SUB_GATHER rays an unfiltered gather is noisier than the cache is wrong
             j = np.flatnonzero(k == -1)
             if len(j) and gather_rays >= _MIN_SUB_GATHER:
