@@ -49,11 +49,16 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 
 from orbit.attitude import ATTITUDE_MODES
-from orbit.epoch import DEFAULT_EPOCH_UTC
 from orbit.patterns import PATTERNS
 from raytrace.targets import BUILTIN_TARGETS as TARGETS
 
 PROG = "cli.py"
+
+DEFAULT_EPOCH_UTC = "2026-06-21T12:00:00Z"
+"""The main job's epoch: the June solstice, when the Sun stands 23.4° off the equator, so that for
+the default 51.6° orbit a plane exists whose whole period is sunlit (|β| > 70°, needed by the
+elliptical pattern's one-period window); the default phase (:mod:`orbit.viewing`) then keeps
+every frame of every pattern lit and in view."""
 
 DEFAULT_FRAMES = 48
 """Frames of the main job: it finishes in under a minute on 2 cores at 1280×960 (README)."""
@@ -78,7 +83,12 @@ class CLIError(Exception):
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors (no usage dump) and exit status 2."""
+    """argparse with one-line errors (no usage dump) and exit status 2; a flag must be spelled
+    out (``--frame 3`` is an error, not ``--frames 3``)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):
         self.exit(2, f"{PROG}: error: {message}\n")
@@ -134,18 +144,30 @@ def _choice(allowed):
         if text not in allowed:
             raise argparse.ArgumentTypeError(f"must be one of {', '.join(allowed)}; got {text!r}")
         return text
+    parse.choices = tuple(allowed)
     return parse
 
 
-def _subset(allowed):
+def _subset(allowed, *, keep_order: bool = False):
+    """A comma-separated list of names from ``allowed``, without repeats: in the canonical order
+    of ``allowed``, or with ``keep_order`` in the order given."""
     def parse(text: str) -> list:
         items = [s.strip() for s in str(text).split(",") if s.strip()]
         bad = [s for s in items if s not in allowed]
         if not items or bad:
             raise argparse.ArgumentTypeError(f"must be a comma-separated list of {', '.join(allowed)}; "
                                              f"got {text!r}")
-        return [a for a in allowed if a in items]  # canonical order, no repeats
+        return list(dict.fromkeys(items)) if keep_order else [a for a in allowed if a in items]
+    parse.choices = tuple(allowed)
     return parse
+
+
+def _choices_metavar(parse, many: bool = False) -> str | None:
+    """``{a,b,c}`` (one of) or ``{a,b,c}[,..]`` (a list) for a parser of names."""
+    choices = getattr(parse, "choices", None)
+    if choices is None:
+        return None
+    return "{" + ",".join(choices) + "}" + ("[,...]" if many else "")
 
 
 def _bool(text: str) -> bool:
@@ -163,6 +185,20 @@ def _path(text: str) -> str:
     if not str(text):
         raise argparse.ArgumentTypeError("must be a file path, got ''")
     return str(text)
+
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
+def _out_path(text: str) -> str:
+    """A path to write to: not blank (``--out " "`` made a folder named by a space) and free of
+    control characters (a pasted newline or tab)."""
+    text = str(text)
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"must name a folder or file, got {text!r}")
+    if _CONTROL.search(text):
+        raise argparse.ArgumentTypeError(f"must be a path without control characters (newline, tab, ...), got {text!r}")
+    return text
 
 
 def _utc(text: str) -> str:
@@ -239,8 +275,12 @@ def _options() -> tuple:
         # [orbit]
         O("--altitude-km", "orbit", _float_in(100.0, 1e6, unit="km"), 400.0, "altitude above the equatorial radius [km]"),
         O("--inclination-deg", "orbit", _float_in(0.0, 180.0, unit=deg), 51.6, "inclination [deg]"),
-        O("--raan-deg", "orbit", _float_in(-360.0, 360.0, unit=deg), 0.0, "right ascension of the ascending node [deg]"),
-        O("--arg-lat-deg", "orbit", _float_in(-360.0, 360.0, unit=deg), 0.0, "argument of latitude at the epoch [deg]"),
+        O("--raan-deg", "orbit", _float_in(-360.0, 360.0, unit=deg), None,
+          "right ascension of the ascending node [deg] (default: 0, or where no --arg-lat-deg alone keeps every "
+          "frame lit and in view, the orbit plane that does best)"),
+        O("--arg-lat-deg", "orbit", _float_in(-360.0, 360.0, unit=deg), None,
+          "argument of latitude of the target at the epoch [deg] (default: the phase that keeps the target fully "
+          "sunlit and in view in the most frames; give one to set it: 180 flies the default spiral through Earth's shadow)"),
         O("--epoch", "orbit", _utc, DEFAULT_EPOCH_UTC, "UTC epoch of frame 0, ISO 8601"),
         O("--sun-margin-deg", "orbit", _float_in(0.0, 90.0, unit=deg), 20.0,
           "stray-light margin added to the Sun's radius for the Sun-in-lens test [deg]"),
@@ -261,7 +301,7 @@ def _options() -> tuple:
         O("--focal-length-mm", "camera", _float_in(1e-3, 1e4, unit="mm"), 4.0, "focal length [mm]"),
         O("--pixel-pitch-um", "camera", _float_in(0.1, 1e3, unit="um"), 3.45, "pixel pitch [um]"),
         O("--roll-deg", "camera", _float_in(-360.0, 360.0, unit="deg"), 0.0,
-          "camera roll about its boresight, applied after the look-at pointing (SPEC §9) [deg]"),
+          "camera roll about its boresight, applied after the look-at pointing [deg]"),
         # [render]
         O("--quality", "render", _choice(QUALITIES), "fast", "shading preset (raytrace.shade)"),
         O("--samples", "render", _int_in(1, 1 << 20), None, "overrides the preset's sample count"),
@@ -278,14 +318,15 @@ def _options() -> tuple:
           "sky", "FILE.csv"),
         # [degrade]
         O("--degrade", "degrade", _choice(DEGRADE_PRESETS), "physical",
-          "degradation of rgb_degraded: none, paper (SPEC §10 groups) or physical (optics + sensor chain)"),
+          "degradation of rgb_degraded: none, paper (the source paper's groups D1-D4) or physical (optics + sensor "
+          "chain)"),
         O("--paper-group", "degrade", _choice(PAPER_GROUP_NAMES), "D4", "paper preset: D1 blur ... D4 blur+Poisson+Gaussian"),
         O("--paper-blur-px", "degrade", _float_in(0.0, 1000.0, unit="px"), 15.0,
-          "paper preset: motion-blur length L [px] (SPEC §10: 15)"),
+          "paper preset: motion-blur length L [px] (the paper's value: 15)"),
         O("--paper-angle-deg", "degrade", _float_in(-360.0, 360.0, unit="deg"), 30.0,
-          "paper preset: motion-blur angle θ [deg] (SPEC §10: 30)"),
+          "paper preset: motion-blur angle θ [deg] (the paper's value: 30)"),
         O("--paper-gaussian-var", "degrade", _float_in(0.0, 1.0), 0.01,
-          "paper preset: variance of the Gaussian noise on [0, 1] values (SPEC §10: 0.01)"),
+          "paper preset: variance of the Gaussian noise on [0, 1] values (the paper's value: 0.01)"),
         O("--f-number", "degrade", _float_in(0.5, 64.0), 4.0, "physical preset: f-number N (aperture = f / N)"),
         O("--exposure-us", "degrade", _float_in(0.0, 1e7, lo_open=True, unit="us"), 20.0,
           "physical preset: exposure time [us]"),
@@ -313,7 +354,7 @@ def _options() -> tuple:
           "each frame's blur from the target's own image motion during the exposure"),
         # [output]
         O("--modalities", "output", _subset(MODALITIES), None,
-          f"files per frame, from {','.join(MODALITIES)} (default: all but hdr; no rgb_degraded with --degrade none)",
+          "files per frame, comma-separated (default: all but hdr; no rgb_degraded with --degrade none)",
           "LIST"),
         O("--only-visible", "output", _bool, False,
           "drop frames whose flags say the target cannot be seen (default: render them, flags in labels)",
@@ -333,11 +374,14 @@ def _add_options(p: argparse.ArgumentParser, defaults: dict, skip=()) -> None:
             continue
         g = groups.get(o.section) or groups.setdefault(o.section, p.add_argument_group(f"[{o.section}]"))
         d = defaults.get(o.key, o.default)
-        shown = "" if o.switch else f" (default: {_show(d)})"
+        # the default once: from the help text where it says what an unset option does, else shown here
+        shown = "" if o.switch or d is None or "(default" in o.help else f" (default: {_show(d)})"
         if o.switch:
             g.add_argument(o.flag, dest=o.key, action="store_true", default=None, help=o.help)
         else:
-            g.add_argument(o.flag, dest=o.key, type=o.parse, default=None, metavar=o.metavar, help=o.help + shown)
+            metavar = o.metavar if o.metavar and getattr(o.parse, "choices", None) is None else (
+                _choices_metavar(o.parse, many=o.metavar == "LIST") or o.metavar)
+            g.add_argument(o.flag, dest=o.key, type=o.parse, default=None, metavar=metavar, help=o.help + shown)
 
 
 def _show(value) -> str:
@@ -352,7 +396,7 @@ def _add_exec(p: argparse.ArgumentParser, *, out_help: str) -> None:
     g = p.add_argument_group("execution (not part of the scenario)")
     g.add_argument("--config", type=_path, default=None, metavar="FILE.toml",
                    help="options as TOML tables (as in a sequence's config.toml); flags override")
-    g.add_argument("--out", type=_path, default=None, metavar="DIR", help=out_help)
+    g.add_argument("--out", type=_out_path, default=None, metavar="DIR", help=out_help)
     g.add_argument("--workers", type=_int_in(1, 4096), default=None,
                    help="worker processes (default: all cores of this machine)")
     g.add_argument("--shard", type=_shard, default=None, metavar="K/N",
@@ -410,6 +454,11 @@ def _toml_type_ok(kind: str | None, value) -> bool:
     return isinstance(value, list) and all(number(v) for v in value)  # an array of n numbers
 
 
+CONFIG_LIMIT_BYTES = 1 << 20
+"""Largest ``--config`` file read [bytes]: a configuration is a few kB; anything else (a device,
+a pipe, a wrong file) is refused instead of read without end."""
+
+
 def read_config(path: str) -> dict:
     """Read a TOML configuration; returns {section: {key: value}} validated like the flags.
 
@@ -419,11 +468,14 @@ def read_config(path: str) -> dict:
         Unreadable or invalid TOML, an unknown table or key, or a value a flag would reject.
     """
     import tomllib
+
+    from raytrace.files import read_regular_file
     try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except OSError as exc:
-        raise CLIError(f"--config: cannot read {path} ({exc.strerror})") from None
+        raw = read_regular_file(path, limit_bytes=CONFIG_LIMIT_BYTES, what=f"--config {path}")
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise CLIError(f"--config: {path} is not valid TOML ({exc})") from None
     out = {}
@@ -478,6 +530,12 @@ def resolve_config(args: argparse.Namespace, defaults: dict | None = None) -> tu
         out["modalities"] = [m for m in mods if not (m == "rgb_degraded" and d["degrade"] == "none")]
     elif "rgb_degraded" in out["modalities"] and d["degrade"] == "none":
         raise CLIError("argument --modalities: rgb_degraded needs --degrade paper or physical, got --degrade none")
+    if d["degrade"] == "physical":
+        full_scale = 2 ** d["bit_depth"] - 1
+        if d["offset_dn"] > full_scale / 2:
+            raise CLIError(f"argument --offset-dn: must be at most half the ADC's full scale, {full_scale / 2:g} DN at "
+                           f"--bit-depth {d['bit_depth']} (a black level above it leaves the signal no room), got "
+                           f"{d['offset_dn']:g}")
     if cfg["sequence"]["mesh"] is not None:
         cfg["sequence"]["mesh"] = os.path.abspath(cfg["sequence"]["mesh"])
     return cfg, given
@@ -524,6 +582,41 @@ def _load_model(spec: tuple, warn: bool = False):
     if warn and report.non_finite_note():
         sys.stderr.write(f"{PROG}: warning: --mesh {report.non_finite_note()}\n")
     return model
+
+
+_ATTITUDE_FLAGS = {"spin_axis_body": "--spin-axis", "omega0_body_rad_s": "--omega0-deg-s",
+                   "inertia_body_kg_m2": "--inertia-kg-m2", "R0_lvlh_from_body": "--attitude-ypr-deg",
+                   "spin_rate_rad_s": "--spin-rate-deg-s", "yaw_deg": "--attitude-ypr-deg",
+                   "pitch_deg": "--attitude-ypr-deg", "roll_deg": "--attitude-ypr-deg"}
+
+
+def _attitude_error(message: str) -> str:
+    """An error of :class:`orbit.attitude.TargetAttitude` in the words of the command line: the
+    field it names becomes the flag that set it."""
+    for field, flag in _ATTITUDE_FLAGS.items():
+        if message.startswith(field):
+            return f"argument {flag}: {message[len(field):].strip()}"
+    return f"argument --attitude: {message}"
+
+
+MESH_RADIUS_PLAUSIBLE_M = (0.02, 200.0)
+"""Bounding radii of real spacecraft [m]: from a 1U CubeSat's 0.087 m to the ISS's ~55 m, with room
+on both sides. A user mesh outside the range was probably read in the wrong unit."""
+
+
+def _mesh_unit_warning(radius_m: float, path: str) -> str | None:
+    """A one-line warning when a mesh loaded with the default ``--mesh-unit-m 1`` has a size
+    (``radius_m``: half its bounding-box diagonal) no spacecraft has (a 1 m cube drawn in
+    millimetres reads as 866 m), naming the flag."""
+    lo, hi = MESH_RADIUS_PLAUSIBLE_M
+    if radius_m > hi:
+        guess = "millimetres: --mesh-unit-m 0.001" if radius_m > 1000 * lo else "centimetres: --mesh-unit-m 0.01"
+        return (f"--mesh {path}: it is {2 * radius_m:.4g} m across (a radius of {radius_m:.4g} m), larger than any "
+                f"spacecraft, read as metres (--mesh-unit-m 1); if the file is in {guess}")
+    if radius_m < lo:
+        return (f"--mesh {path}: it is {2 * radius_m:.3g} m across, smaller than any spacecraft, read as metres "
+                "(--mesh-unit-m 1); if the file is in kilometres: --mesh-unit-m 1000")
+    return None
 
 
 def _unit_rows(v: np.ndarray) -> np.ndarray:
@@ -610,11 +703,13 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
         raise CLIError(f"argument --mesh: {exc}") from None
     _star_field(cfg)  # validates the star catalogue before anything is written
     radius_m = model.bounding_radius_m
+    if seq["mesh"] is not None and "mesh_unit_m" not in given:
+        lo, hi = model.bounds_m  # the mesh's own size, wherever its origin lies
+        note = _mesh_unit_warning(0.5 * float(np.linalg.norm(hi - lo)), seq["mesh"])
+        if note:
+            sys.stderr.write(f"{PROG}: warning: {note}\n")
     camera = Camera.from_focal(cam["focal_length_mm"] * 1e-3, cam["pixel_pitch_um"] * 1e-6, cam["width"], cam["height"])
-    ref = ReferenceOrbit(altitude_m=orb["altitude_km"] * 1e3, inclination_rad=math.radians(orb["inclination_deg"]),
-                         raan_rad=math.radians(orb["raan_deg"]), arg_lat_rad=math.radians(orb["arg_lat_deg"]),
-                         epoch_utc=orb["epoch"])
-    n = ref.n_rad_s
+    n = ReferenceOrbit(altitude_m=orb["altitude_km"] * 1e3).n_rad_s
     band = range_band(radius_m)
     explicit = cfg["pattern"]["amplitude_m"] is not None or cfg["pattern"]["kappa"] is not None
     if explicit:
@@ -625,21 +720,26 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
                                 rng=seq["seed"], window_s=seq["window_s"])
         s0, t_s, window_s, params = sample.s0_lvlh, np.asarray(sample.t_s), sample.window_s, sample.params
         draws, attempts, range_m, pattern = dict(sample.draws), sample.attempts, sample.range_m, seq["pattern"]
+    from orbit.epoch import to_unix_seconds
+    from orbit.sun import VALID_UTC_RANGE_S
+    if len(t_s) and to_unix_seconds(orb["epoch"]) + float(np.max(t_s)) > VALID_UTC_RANGE_S[1]:
+        raise CLIError(f"argument --epoch: the sequence ends {float(np.max(t_s)):.0f} s after {orb['epoch']}, past "
+                       "2051-01-01T00:00:00Z (the validity of the solar formulae); choose an earlier --epoch")
     s_lvlh = cw.propagate(s0, n, t_s)
+    ref, chosen = _reference_orbit(orb, s_lvlh, t_s)
     r_obs_eci, _ = ref.observer_state_eci(s_lvlh, t_s)
     r_tgt_eci, _ = ref.target_state_eci(t_s)
     unix_s = ref.unix_s(t_s)
-    from orbit.sun import VALID_UTC_RANGE_S
-    if len(unix_s) and float(np.max(unix_s)) > VALID_UTC_RANGE_S[1]:
-        raise CLIError(f"argument --epoch: the sequence ends {float(np.max(t_s)):.0f} s after {orb['epoch']}, past "
-                       "2051-01-01T00:00:00Z (the validity of the solar formulae); choose an earlier --epoch")
     r_sun_eci = sun_position_eci(unix_s)
     vis = visibility.visibility(r_obs_eci, r_tgt_eci, r_sun_eci, sun_margin_rad=math.radians(orb["sun_margin_deg"]))
 
-    attitude = TargetAttitude.from_euler_zyx_deg(
-        att["attitude"], *att["attitude_ypr_deg"], spin_axis_body=att["spin_axis"],
-        spin_rate_rad_s=math.radians(att["spin_rate_deg_s"]), omega0_body_rad_s=np.radians(att["omega0_deg_s"]),
-        inertia_body_kg_m2=np.diag(att["inertia_kg_m2"]))
+    try:
+        attitude = TargetAttitude.from_euler_zyx_deg(
+            att["attitude"], *att["attitude_ypr_deg"], spin_axis_body=att["spin_axis"],
+            spin_rate_rad_s=math.radians(att["spin_rate_deg_s"]), omega0_body_rad_s=np.radians(att["omega0_deg_s"]),
+            inertia_body_kg_m2=np.diag(att["inertia_kg_m2"]))
+    except ValueError as exc:
+        raise CLIError(_attitude_error(str(exc))) from None
     R_lvlh_from_body = attitude.R_lvlh_from_body(t_s, n)
     R_cam_from_lvlh = pose.look_at(s_lvlh[:, :3], roll_rad=math.radians(cam["roll_deg"]))
     R_cam_from_body, t_cam_m = pose.pose_from_relative(s_lvlh[:, :3], R_lvlh_from_body, R_cam_from_lvlh)
@@ -685,14 +785,19 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
             "shadow": ("sunlit", "penumbra", "umbra")[int(vis.shadow[i])],
             "shadow_fraction": float(vis.illuminated_fraction[i]),
             "visible": bool(visible[i]),
+            "not_visible_because": [why for why, bad in (
+                ("earth_blocks_line_of_sight", not vis.line_of_sight[i]), ("sun_in_lens", not vis.sun_clear[i]),
+                ("earth_shadow", not vis.illuminated_fraction[i] > 0.0)) if bad],
         })
         lights.append({"sun_dir_body": sun_dir_body[i].tolist(), "shadow_fraction": float(vis.illuminated_fraction[i]),
                        "earth_dir_body": earth_dir_body[i].tolist(), "earth_distance_m": float(earth_distance_m[i]),
                        "R_body_from_earth": R_body_from_earth[i].tolist(),
                        "R_body_from_eci": R_body_from_eci[i].tolist()})
         if motion is not None:
-            lights[-1]["motion"] = [float(motion[0][i]), float(motion[1][i])]
+            lights[-1]["motion"] = [float(motion["length_px"][i]), float(motion["angle_deg"][i])]
             frames[-1]["motion_blur_px"], frames[-1]["motion_angle_deg"] = lights[-1]["motion"]
+            frames[-1]["motion_path_px"] = float(motion["path_px"][i])
+            frames[-1]["motion_blur_bounded"] = bool(motion["bounded"][i])
     result = {
         "target": target,
         "target_bounding_radius_m": radius_m,
@@ -700,7 +805,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
         "seed": seq["seed"],
         "reference_orbit": {"altitude_m": ref.altitude_m, "inclination_rad": ref.inclination_rad,
                             "raan_rad": ref.raan_rad, "arg_lat_rad": ref.arg_lat_rad, "epoch_utc": ref.epoch_utc,
-                            "a_m": ref.a_m, "period_s": ref.period_s},
+                            "a_m": ref.a_m, "period_s": ref.period_s, "chosen": chosen},
         "n": n,
         "s0_lvlh": [float(v) for v in s0],
         "window_s": float(window_s),
@@ -717,16 +822,64 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
             "cfg": cfg, "name": f"{target}_{pattern}"}
 
 
-def _image_motion(model, camera, exposure_s: float, s0, n: float, t_s, attitude, roll_rad: float = 0.0) -> tuple:
-    """Per frame, the blur (L [px], θ [deg]) the target's own image motion makes during an
-    exposure of ``exposure_s`` centred on the frame time: the poses at t ∓ exposure/2 (same
-    CW state, attitude law and look-at pointing as the frame) project the target's convex-hull
-    vertices; their displacements d_k [px] give L = √λ_max and θ along the principal axis of
-    Σ d_k d_kᵀ / K (the straight-line blur that best matches the image motion; a target turning
-    about the line of sight blurs most at its rim, which this averages)."""
+MOTION_SAMPLES = (16, 4096)
+"""Instants per exposure at which ``--motion-blur auto`` samples the image path: doubled from the
+first until the blur changes by less than :data:`MOTION_TOL_PX` or :data:`MOTION_TOL_REL` of it,
+at most the second."""
+MOTION_TOL_PX = 1e-3
+MOTION_TOL_REL = 1e-5
+
+
+def _reference_orbit(orb: dict, s_lvlh: np.ndarray, t_s: np.ndarray) -> tuple:
+    """(the sequence's :class:`orbit.reference.ReferenceOrbit`, the names of the options chosen
+    for it): ``--raan-deg`` and ``--arg-lat-deg`` as given, or where unset the geometry of
+    :func:`orbit.viewing.sunlit_geometry` (target fully sunlit and in view in the most frames)."""
+    from orbit.reference import ReferenceOrbit
+    from orbit.viewing import sunlit_geometry
+    raan = None if orb["raan_deg"] is None else math.radians(orb["raan_deg"])
+    u0 = None if orb["arg_lat_deg"] is None else math.radians(orb["arg_lat_deg"])
+    chosen = []
+    if u0 is None:
+        g = sunlit_geometry(s_lvlh, t_s, altitude_m=orb["altitude_km"] * 1e3,
+                            inclination_rad=math.radians(orb["inclination_deg"]), epoch_utc=orb["epoch"],
+                            raan_rad=raan, sun_margin_rad=math.radians(orb["sun_margin_deg"]))
+        chosen = ["arg_lat_deg"] + (["raan_deg"] if raan is None and g.plane_searched else [])
+        raan, u0 = g.raan_rad, g.arg_lat_rad
+    ref = ReferenceOrbit(altitude_m=orb["altitude_km"] * 1e3, inclination_rad=math.radians(orb["inclination_deg"]),
+                         raan_rad=0.0 if raan is None else raan, arg_lat_rad=u0, epoch_utc=orb["epoch"])
+    return ref, chosen
+
+
+def _image_motion(model, camera, exposure_s: float, s0, n: float, t_s, attitude, roll_rad: float = 0.0) -> dict:
+    """Per frame, the straight-line blur that the target's own image motion makes during an
+    exposure of ``exposure_s`` centred on the frame time (``--motion-blur auto``).
+
+    The target's convex-hull vertices are projected at instants spread over the exposure (same
+    CW state, attitude law and look-at pointing as the frame; doubled until the blur settles,
+    :data:`MOTION_SAMPLES`), so the path each vertex sweeps is followed however it turns; each
+    is taken as moving uniformly along straight pieces between instants. A camera integrates
+    the image along those paths. The blur applied is a straight segment along the principal
+    axis v of the vertices' positions about their own means (the larger eigenvector of their
+    mean covariance), as long as the paths' spread along v allows: L = min(√(12 λ), E), with λ
+    the mean variance of the positions along v (a uniform segment of length L has L²/12) and E
+    the RMS over the vertices of each path's extent along v (a point that slows at the ends of
+    its swing would otherwise be given a blur longer than the swing). For a straight path at
+    constant speed both are its length; a target that turns a whole revolution in the
+    exposure blurs over its ring instead of (comparing the end poses alone) not at all. The
+    largest L of any centred part of the exposure is taken, so the blur never shrinks as the
+    exposure grows (a path that turns back on itself spreads less over a longer time). L is at
+    most the image diagonal (``bounded``).
+
+    Returns
+    -------
+    dict of ndarray, shape (N,)
+        ``length_px`` and ``angle_deg`` (the blur applied; angle counter-clockwise from +column
+        as :func:`degrade.psf.motion_from_velocity` reports it), ``path_px`` (RMS over the hull
+        vertices of the image path length swept during the exposure), ``bounded`` (bool: L
+        capped) and ``samples`` (instants used).
+    """
     from scipy.spatial import ConvexHull
 
-    from degrade.psf import motion_from_velocity
     from orbit import cw, pose
     pts = np.concatenate([np.asarray(c.mesh.vertices, dtype=np.float64) for c in model.components])
     try:
@@ -734,26 +887,73 @@ def _image_motion(model, camera, exposure_s: float, s0, n: float, t_s, attitude,
     except Exception:  # noqa: BLE001 - flat or tiny point sets: use every vertex
         hull = np.arange(len(pts))
     pts = pts[hull]
-    half = 0.5 * exposure_s
-    uv = []
-    for dt in (-half, half):
-        tt = np.asarray(t_s, dtype=np.float64) + dt
+    t_s = np.asarray(t_s, dtype=np.float64)
+    nf = t_s.size
+    out = {"length_px": np.zeros(nf), "angle_deg": np.zeros(nf), "path_px": np.zeros(nf),
+           "bounded": np.zeros(nf, dtype=bool), "samples": np.zeros(nf, dtype=np.int64)}
+    if not exposure_s > 0 or nf == 0:
+        return out
+    diagonal = math.hypot(camera.width, camera.height)
+
+    def blur(frames: np.ndarray, m: int) -> tuple:
+        """(L, θ, path) of ``frames`` from m + 1 instants (m even) over the exposure."""
+        tau = np.linspace(-0.5 * exposure_s, 0.5 * exposure_s, m + 1)
+        tt = (t_s[frames, None] + tau[None, :]).ravel()
         s = cw.propagate(s0, n, tt)
         R, t = pose.pose_from_relative(s[:, :3], attitude.R_lvlh_from_body(tt, n),
                                        pose.look_at(s[:, :3], roll_rad=roll_rad))
-        p = pts[None] @ np.swapaxes(R, -1, -2) + t[:, None, :]
+        p = pts[None] @ np.swapaxes(R, -1, -2) + t[:, None, :]          # (F·(m+1), K, 3)
         z = np.where(p[..., 2] > 1e-9, p[..., 2], np.nan)
-        uv.append(np.stack([camera.fx * p[..., 0] / z + camera.cx, camera.fy * p[..., 1] / z + camera.cy], -1))
-    d = uv[1] - uv[0]                                            # (frames, K, 2) [px]
-    lengths, angles = np.zeros(len(t_s)), np.zeros(len(t_s))
-    for i in range(len(t_s)):
-        di = d[i][np.all(np.isfinite(d[i]), axis=1)]
-        if exposure_s <= 0 or not len(di):
-            continue
-        w, v = np.linalg.eigh(di.T @ di / len(di))
-        if w[-1] > 0:
-            lengths[i], angles[i] = motion_from_velocity(v[:, -1] * math.sqrt(w[-1]) / exposure_s, exposure_s)
-    return lengths, angles
+        uv = np.stack([camera.fx * p[..., 0] / z, camera.fy * p[..., 1] / z], -1)
+        uv = uv.reshape(len(frames), m + 1, len(pts), 2)               # (F, instants, K, 2)
+        seen = np.all(np.isfinite(uv), axis=(1, 3))                     # in front all along
+        uv = np.where(seen[:, None, :, None], uv, 0.0)
+        w = seen / np.maximum(seen.sum(axis=1, keepdims=True), 1)       # (F, K): mean over the seen vertices
+        a, b = uv[:, :-1], uv[:, 1:]                                    # the m straight pieces
+        path = np.sqrt(np.einsum("fk,fk->f", w, np.linalg.norm(b - a, axis=-1).sum(axis=1) ** 2))
+        # the whole exposure's covariance (uniform motion on each piece) gives the axis v
+        m1 = 0.5 * (a + b).mean(axis=1)                                 # (F, K, 2)
+        m2 = ((a[..., :, None] * a[..., None, :] + b[..., :, None] * b[..., None, :]) / 3.0
+              + (a[..., :, None] * b[..., None, :] + b[..., :, None] * a[..., None, :]) / 6.0).mean(axis=1)
+        cov = np.einsum("fk,fkij->fij", w, m2 - m1[..., :, None] * m1[..., None, :])
+        v = np.linalg.eigh(cov)[1][..., -1]                             # (F, 2)
+        q = np.einsum("fikc,fc->fik", uv, v)                            # positions along v
+        # centred parts j = 1 .. m/2 of the exposure: the pieces c-j .. c+j-1 about the centre c
+        c = m // 2
+        qa, qb = q[:, :-1], q[:, 1:]
+        e1 = 0.5 * (qa + qb)
+        e2 = (qa * qa + qb * qb + qa * qb) / 3.0
+        j = np.arange(1, c + 1, dtype=np.float64)[None, :, None]
+        s1 = (np.cumsum(e1[:, c - 1::-1] + e1[:, c:], axis=1)) / (2 * j)  # (F, m/2, K)
+        s2 = (np.cumsum(e2[:, c - 1::-1] + e2[:, c:], axis=1)) / (2 * j)
+        lam = np.einsum("fk,fjk->fj", w, np.maximum(s2 - s1 * s1, 0.0))
+        hi = np.maximum(np.maximum.accumulate(q[:, c - 1::-1], axis=1), np.maximum.accumulate(q[:, c + 1:], axis=1))
+        lo = np.minimum(np.minimum.accumulate(q[:, c - 1::-1], axis=1), np.minimum.accumulate(q[:, c + 1:], axis=1))
+        ext = np.maximum(hi, q[:, c:c + 1]) - np.minimum(lo, q[:, c:c + 1])
+        E = np.sqrt(np.einsum("fk,fjk->fj", w, ext * ext))
+        L = np.minimum(np.sqrt(12.0 * lam), E).max(axis=1)
+        theta = np.degrees(np.arctan2(-v[:, 1], v[:, 0]))             # rows grow downward
+        theta = np.where(theta <= -90.0, theta + 180.0, np.where(theta > 90.0, theta - 180.0, theta))
+        return L, theta, path
+
+    chunk = max(1, int(4_000_000 // (len(pts) * (MOTION_SAMPLES[1] + 1))))
+    for a0 in range(0, nf, chunk):
+        frames = np.arange(a0, min(nf, a0 + chunk))
+        m = MOTION_SAMPLES[0]
+        L, theta, path = blur(frames, m)
+        while m < MOTION_SAMPLES[1]:
+            L2, theta2, path2 = blur(frames, 2 * m)
+            m *= 2
+            settled = np.all(np.abs(L2 - L) <= np.maximum(MOTION_TOL_PX, MOTION_TOL_REL * L2))
+            L, theta, path = L2, theta2, path2
+            if settled:
+                break
+        out["length_px"][frames] = np.minimum(L, diagonal)
+        out["bounded"][frames] = L > diagonal
+        out["angle_deg"][frames] = np.where(L > 0, theta, 0.0)
+        out["path_px"][frames] = path
+        out["samples"][frames] = m + 1
+    return out
 
 
 def _num(value) -> str:
@@ -1159,6 +1359,12 @@ def _scenario(plan: dict) -> dict:
     scen["exposure"] = ("fixed: linear = radiance * pi / 1361 W/m2 (a white Lambertian surface facing the Sun "
                         "is 1.0), sRGB 8-bit" if cfg["render"]["exposure"] == "fixed" else
                         "auto: per frame, 99.5th luminance percentile of the target -> 0.9 (exposure_scale in labels)")
+    if cfg["degrade"]["degrade"] == "physical" and cfg["degrade"]["motion_blur"] == "auto":
+        scen["motion_blur"] = ("auto: per frame, a straight line along the principal axis v of the target's hull "
+                               "vertices' image positions over the exposure, of length min(sqrt(12 lambda), E) (lambda: "
+                               "their mean variance along v; E: the RMS of their paths' extents along v), the largest "
+                               "over centred parts of the exposure, at most the image diagonal; motion_blur_px and "
+                               "motion_angle_deg in labels")
     scen["random_streams"] = ("frame i: SeedSequence(seed).spawn(n)[i]; render seed = generate_state(1)[0] mod 2^31, "
                               "degradation rng = its first spawned child")
     return scen
@@ -1185,59 +1391,238 @@ def _read_bytes(path: str) -> bytes:
         return fh.read()
 
 
-def prepare_sequence(plan: dict, seq_dir: str) -> None:
-    """Create the sequence folder with scenario.json, camera.json, config.toml and model/,
-    or check that an existing one holds the same scenario (then it is resumed).
-    On failure, removes whatever it created."""
-    import shutil
+SCENARIO_FORMAT = "orbitsynth sequence 1"
+_SCENARIO_LIMIT = 256 << 20  # bytes; a million frames' scenario.json is ~30 MB
 
+
+def _own_entry(name: str, path: str) -> bool:
+    """Whether ``name`` in a folder without ``scenario.json`` may be left by this tool: its lock
+    file, a temporary file of an interrupted write, or one of its sub-folders, empty."""
+    from raytrace import files as F
+    if name == F.LOCK_NAME or F._TMP_RE.match(name):
+        return True
+    if name in MODALITIES or name in ("model", F.MANIFEST_DIR):
+        try:
+            return os.path.isdir(path) and not os.path.islink(path) and not os.listdir(path)
+        except OSError:
+            return False
+    return False
+
+
+def judge_sequence_folder(seq_dir: str, scenario: str) -> bool:
+    """Decide, before anything is written, whether the main job may write the sequence whose
+    ``scenario.json`` text is ``scenario`` into ``seq_dir``: True if the folder holds that very
+    sequence (it is resumed), False if it is missing or empty (or holds only this tool's
+    leftovers of an interrupted start).
+
+    Raises
+    ------
+    CLIError
+        The path is not a writable folder; the folder holds another sequence, a
+        ``scenario.json`` that is not one of this tool's, or other files.
+    """
+    from raytrace import files as F
+    if not os.path.lexists(seq_dir):
+        return False
+    if not os.path.isdir(seq_dir):
+        raise CLIError(f"--out: {seq_dir} exists and is not a folder")
+    if not os.access(seq_dir, os.W_OK | os.X_OK):
+        raise CLIError(f"--out: {seq_dir} is not writable")
+    scen_path = os.path.join(seq_dir, "scenario.json")
+    foreign = f"--out: {seq_dir} holds something that is not a sequence of this tool"
+    if os.path.lexists(scen_path):
+        try:
+            data = F.read_regular_file(scen_path, limit_bytes=_SCENARIO_LIMIT, what="scenario.json")
+        except ValueError as exc:
+            raise CLIError(f"{foreign} ({exc}); choose another --out") from None
+        try:
+            doc = json.loads(data.decode("utf-8"))
+        except ValueError:  # UnicodeDecodeError too
+            doc = None
+        if not isinstance(doc, dict) or doc.get("format") != SCENARIO_FORMAT:
+            raise CLIError(f"{foreign} (its scenario.json is not an orbitsynth scenario); choose another --out")
+        if data.decode("utf-8") != scenario:
+            raise CLIError(f"--out: {seq_dir} holds another sequence (its scenario.json differs from these "
+                           "options); choose another --out or delete it")
+        return True
+    try:
+        names = sorted(os.listdir(seq_dir))
+    except OSError as exc:
+        raise CLIError(f"--out: cannot read {seq_dir} ({exc.strerror or exc})") from None
+    other = [n for n in names if not _own_entry(n, os.path.join(seq_dir, n))]
+    if other:
+        shown = ", ".join(other[:3]) + (f" and {len(other) - 3} more" if len(other) > 3 else "")
+        raise CLIError(f"--out: {seq_dir} is not empty and holds no sequence of this tool ({shown}); give a new or "
+                       "empty folder, or a sequence folder this tool wrote")
+    return False
+
+
+class SequenceClaim:
+    """A sequence folder this run writes into: its lock (:class:`raytrace.files.FolderLock`,
+    held until :meth:`release`) and what this run created in preparing it, which
+    :meth:`undo` removes when the run is refused or fails before any frame."""
+
+    def __init__(self, seq_dir: str, lock, created_dir: str | None):
+        self.seq_dir = seq_dir
+        self.lock = lock
+        self.created_dir = created_dir  # the outermost folder this run made (the sequence folder or a parent)
+        self.created: list = []  # files and folders this run made inside an existing sequence folder
+
+    def undo(self) -> None:
+        """Remove what this run created, where no other run shares the folder (a shard of the
+        same sequence may have started on it), and release the lock: a refused run leaves the
+        folder as it found it."""
+        import shutil
+        alone = self.lock.fd is None or not self.lock.shared or _try_exclusive(self.lock)
+        if alone:
+            for path in reversed(self.created):
+                try:
+                    os.rmdir(path) if os.path.isdir(path) and not os.path.islink(path) else os.unlink(path)
+                except OSError:
+                    pass
+        self.lock.release(remove=alone and self.lock.created)
+        if alone and self.created_dir is not None:
+            shutil.rmtree(self.created_dir, ignore_errors=True)
+
+    def release(self) -> None:
+        """Release the lock at the end of the run; its file goes with it where no other run
+        holds it."""
+        self.lock.release(remove=True)
+
+
+def _try_exclusive(lock) -> bool:
+    """Whether a shared :class:`raytrace.files.FolderLock` could be made exclusive at once (no
+    other run holds it). If not, the lock may be lost (flock converts by releasing first):
+    only for a run that is about to end."""
+    import fcntl
+    try:
+        fcntl.flock(lock.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        lock.shared = False
+        return True
+    except OSError:
+        return False
+
+
+def prepare_sequence(plan: dict, seq_dir: str, *, shared: bool = False) -> SequenceClaim:
+    """Claim the sequence folder: judge it before writing anything
+    (:func:`judge_sequence_folder`), take its lock (exclusive for a whole run, ``shared`` for a
+    shard), then create ``scenario.json`` (atomically: of shards starting at once, one creates
+    it and the others must find the same text), ``camera.json``, ``config.toml``, ``model/``
+    and the modality folders. Returns the claim; the caller releases it when the run ends.
+
+    Raises
+    ------
+    CLIError
+        The folder is refused (another sequence, foreign files, in use by another run, not
+        writable); whatever this call created is removed first.
+    """
     from raytrace import files as F
     scenario = _json(_scenario(plan))
-    scen_path = os.path.join(seq_dir, "scenario.json")
-    if os.path.isfile(scen_path):
-        with open(scen_path, encoding="utf-8") as fh:
-            if fh.read() != scenario:
-                raise CLIError(f"--out: {seq_dir} holds another sequence (its scenario.json differs from these "
-                               "options); choose another --out or delete it")
-    created = _first_missing(seq_dir)
+    judge_sequence_folder(seq_dir, scenario)
+    created_dir = _first_missing(seq_dir)
     try:
-        if os.path.exists(seq_dir) and not os.path.isdir(seq_dir):
-            raise CLIError(f"--out: {seq_dir} exists and is not a folder")
         os.makedirs(seq_dir, exist_ok=True)
-        if not os.access(seq_dir, os.W_OK | os.X_OK):
-            raise CLIError(f"--out: {seq_dir} is not writable")
+    except OSError as exc:
+        if created_dir is not None and os.path.isdir(created_dir):
+            import shutil
+            shutil.rmtree(created_dir, ignore_errors=True)
+        raise CLIError(f"--out: cannot create {seq_dir} ({exc.strerror or exc})") from None
+    lock = F.FolderLock(seq_dir, shared=shared)
+    try:
+        lock.acquire()
+    except F.FolderLockBusy:
+        # another run owns the folder now (even if this one made it a moment ago): touch nothing
+        raise CLIError(f"--out: {seq_dir} is in use by another run writing into it (it holds the folder's lock "
+                       f"{F.LOCK_NAME}); wait for it to end or choose another --out") from None
+    except OSError as exc:
+        if created_dir is not None:
+            import shutil
+            shutil.rmtree(created_dir, ignore_errors=True)
+        raise CLIError(f"--out: cannot write into {seq_dir} ({exc.strerror or exc})") from None
+    if lock.unsupported:
+        sys.stderr.write(f"{PROG}: warning: --out: {seq_dir} cannot be locked ({lock.unsupported}); another run "
+                         "writing into it at the same time would not be refused\n")
+    claim = SequenceClaim(seq_dir, lock, created_dir)
+    try:
+        judge_sequence_folder(seq_dir, scenario)  # again, under the lock: another run may have prepared it
         F.remove_stale_temporaries(seq_dir)
-        for m in plan["cfg"]["output"]["modalities"]:
-            os.makedirs(os.path.join(seq_dir, m), exist_ok=True)
-        os.makedirs(os.path.join(seq_dir, "model"), exist_ok=True)
-        texts = {"camera.json": _json(_camera_json(plan["camera"], plan["cfg"])),
-                 "config.toml": config_toml(plan["cfg"])}
+
+        def made(path: str) -> None:
+            if created_dir is None:
+                claim.created.append(path)
+
+        scen_path = os.path.join(seq_dir, "scenario.json")
+        if not os.path.exists(scen_path):
+            if F.create_new_text(scen_path, scenario):
+                made(scen_path)
+            else:  # a shard of another run created it first: it must be this sequence
+                judge_sequence_folder(seq_dir, scenario)
+        for rel in [*plan["cfg"]["output"]["modalities"], "model"]:
+            path = os.path.join(seq_dir, rel)
+            if not os.path.isdir(path):
+                os.makedirs(path, exist_ok=True)
+                made(path)
         scen = json.loads(scenario)
-        blobs = {scen["target_model"]["file"]: F.model_ply_bytes(plan["model"])}
-        blobs.update({k: v.encode("utf-8") for k, v in texts.items()})
+        blobs = {scen["target_model"]["file"]: F.model_ply_bytes(plan["model"]),
+                 "camera.json": _json(_camera_json(plan["camera"], plan["cfg"])).encode("utf-8"),
+                 "config.toml": config_toml(plan["cfg"]).encode("utf-8")}
         for rel, data in blobs.items():
             path = os.path.join(seq_dir, rel)
             if not (os.path.isfile(path) and _read_bytes(path) == data):
+                existed = os.path.lexists(path)
                 F.atomic_write_bytes(path, data)
-        if not os.path.isfile(scen_path):
-            F.atomic_write_text(scen_path, scenario)  # last: its presence marks a prepared folder
+                if not existed:
+                    made(path)
     except BaseException as exc:
-        if created is not None:
-            shutil.rmtree(created, ignore_errors=True)
+        claim.undo()
         if isinstance(exc, OSError):
             raise CLIError(f"--out: cannot write into {seq_dir} ({exc.strerror or exc})") from None
         raise
+    return claim
 
 
-def finish_sequence(plan: dict, seq_dir: str) -> dict:
+def _frame_files(seq_dir: str, frame: int, modalities) -> list:
+    return [os.path.join(seq_dir, m, f"{frame:06d}{_EXT[m]}") for m in modalities]
+
+
+def remove_incomplete_frames(tasks: list) -> int:
+    """After a failed or interrupted run: delete the image files of this run's frames that have
+    no manifest record (written before the failure; a rerun renders them again), so that no
+    half-written frame stays. Returns how many files were removed."""
+    from raytrace import files as F
+    removed = 0
+    for task in tasks:
+        if not task.get("write", True) or F.read_frame_record(task["out"], task["frame"]) is not None:
+            continue
+        for path in _frame_files(task["out"], task["frame"], task["modalities"]):
+            try:
+                os.unlink(path)
+                removed += 1
+            except OSError:
+                pass
+    return removed
+
+
+def finish_sequence(plan: dict, seq_dir: str, verified=frozenset()) -> dict:
     """Write labels.json and manifest.json if every frame of the sequence is complete (from
-    any run or shard); returns counts."""
+    any run or shard). Frames not in ``verified`` (those this run neither rendered nor checked
+    before skipping: other shards') are checked against their records' SHA-256 first; a frame
+    whose files do not match is not complete. Where the sequence is not complete, a
+    labels.json and manifest.json left from an earlier state are removed: they would disagree
+    with the files. Returns counts and the frames found corrupt."""
     from raytrace import files as F
     wanted = _frames_to_write(plan)
-    records = {}
+    records, corrupt = {}, []
     for i in wanted:
-        rec = F.frame_complete(seq_dir, i, verify=False)
-        if rec is not None:
+        rec = F.read_frame_record(seq_dir, i)
+        if rec is None:
+            continue
+        bad = [rel for rel, digest in rec["files"].items()
+               if not os.path.isfile(os.path.join(seq_dir, rel))
+               or (i not in verified and F.sha256_file(os.path.join(seq_dir, rel)) != digest)]
+        if bad:
+            corrupt.append((i, bad[0]))
+        else:
             records[i] = rec
     done = len(records) == len(wanted)
     if done:
@@ -1252,7 +1637,13 @@ def finish_sequence(plan: dict, seq_dir: str) -> dict:
         files["labels.json"] = F.sha256_file(os.path.join(seq_dir, "labels.json"))
         F.atomic_write_text(os.path.join(seq_dir, "manifest.json"),
                             _json({"format": "orbitsynth manifest 1", "algorithm": "sha256", "files": files}))
-    return {"complete": done, "present": len(records), "wanted": len(wanted)}
+    else:
+        for rel in ("manifest.json", "labels.json"):
+            try:
+                os.unlink(os.path.join(seq_dir, rel))
+            except FileNotFoundError:
+                pass
+    return {"complete": done, "present": len(records), "wanted": len(wanted), "corrupt": corrupt}
 
 
 def _tasks_for(plan: dict, seq_dir: str, shard: tuple | None, *, write: bool = True, frames=None) -> tuple:
@@ -1334,9 +1725,8 @@ def execute(tasks: list, *, workers: int, progress=None, client=None):
         ready = [pool.submit(_worker_ready, tasks[0]["cfg"]["render"]["quality"]) for _ in range(n)]
         if _PREBUILD_SCENES:
             import pickle
-            from raytrace.files import process_folder, remove_stale_process_folders
+            from raytrace.files import process_folder
             try:
-                remove_stale_process_folders(_SCENES_FOLDER)  # of runs killed before their clean-up
                 folder = process_folder(_SCENES_FOLDER)
                 prebuilt = _prebuild_scenes(tasks, folder)
             except (OSError, pickle.PicklingError) as exc:  # e.g. no room in the temporary folder
@@ -1364,6 +1754,17 @@ def execute(tasks: list, *, workers: int, progress=None, client=None):
 
 
 _SCENES_FOLDER = "orbitsynth-scenes-"  # + host.pid-XXXXXXXX in the temporary directory
+
+
+def _remove_stale_scene_folders() -> None:
+    """Delete the pools' scene folders (:func:`execute`) of runs that were killed before they
+    could (SIGKILL, a crash): every run does it as it starts, whatever it renders and on how
+    many workers, so a killed run's ~100 MB never outlive the next run."""
+    try:
+        from raytrace.files import remove_stale_process_folders
+        remove_stale_process_folders(_SCENES_FOLDER)
+    except OSError:
+        pass
 
 
 def _stop_workers(pool) -> None:
@@ -1450,11 +1851,67 @@ def _compile_kernels(groups: list, quiet: bool) -> None:
         pass
 
 
+FRAME_BYTES_PER_PIXEL = 160
+"""Peak memory of one worker per pixel of its frame [bytes]: measured 137–139 B/px (peak RSS of a
+one-frame run with one worker, 320×240 to 2560×1920, ``fast`` and ``balanced``, default
+modalities and ``physical`` degradation), with room on top."""
+WORKER_BASE_BYTES = 700 << 20
+"""Peak memory of one worker besides its frame's pixels (libraries, scene, radiance cache) [bytes]."""
+
+
+def memory_bytes() -> tuple:
+    """(physical memory, memory available now) of this machine [bytes], from /proc/meminfo or
+    sysconf; (None, None) where neither tells."""
+    try:
+        info = {}
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                key, _, rest = line.partition(":")
+                info[key] = int(rest.split()[0]) * 1024
+        return info["MemTotal"], info.get("MemAvailable", info["MemTotal"])
+    except (OSError, KeyError, ValueError, IndexError):
+        pass
+    try:
+        page = os.sysconf("SC_PAGE_SIZE")
+        total = os.sysconf("SC_PHYS_PAGES") * page
+        try:
+            return total, os.sysconf("SC_AVPHYS_PAGES") * page
+        except (ValueError, OSError):
+            return total, total
+    except (ValueError, OSError, AttributeError):
+        return None, None
+
+
+def fit_workers(cameras: list, workers: int) -> int:
+    """The worker count whose frames (of the largest of ``cameras``) fit in this machine's
+    memory: refuses up front (one line naming --width/--height) a frame that one worker could
+    not render in all of it, and lowers ``workers`` (with a warning) where their frames would
+    not fit in the memory available now. Frames are byte-identical whatever the worker count."""
+    total, available = memory_bytes()
+    if total is None or not cameras:
+        return workers
+    cam = max(cameras, key=lambda c: c.width * c.height)
+    need = WORKER_BASE_BYTES + FRAME_BYTES_PER_PIXEL * cam.width * cam.height
+    if need > total:
+        raise CLIError(f"argument --width/--height: a {cam.width}x{cam.height} frame needs about {need / 2**30:.1f} GiB "
+                       f"of memory to render, more than this machine's {total / 2**30:.1f} GiB; render a smaller image "
+                       "(or crop it: a longer --focal-length-mm at a smaller size)")
+    fit = max(1, int(available // need))
+    if fit < workers:
+        sys.stderr.write(f"{PROG}: warning: rendering on {fit} worker{'s' if fit > 1 else ''} instead of {workers}: "
+                         f"each needs about {need / 2**30:.1f} GiB for a {cam.width}x{cam.height} frame and "
+                         f"{available / 2**30:.1f} GiB is available\n")
+        return fit
+    return workers
+
+
 def run_plans(jobs: list, args: argparse.Namespace, *, desc: str | None = None) -> list:
     """Render the (plan, sequence folder) pairs: prepare folders, run every missing frame of
     this shard on the chosen backend (one progress bar), then assemble labels and manifests.
     Returns one stats dict per sequence."""
     workers = args.workers or default_workers()
+    if args.scheduler is None:
+        workers = fit_workers([plan["camera"] for plan, _ in jobs], workers)
     client = connect_scheduler(args.scheduler) if args.scheduler is not None else None
     try:
         return _run_plans(jobs, args, desc, workers, client)
@@ -1464,8 +1921,27 @@ def run_plans(jobs: list, args: argparse.Namespace, *, desc: str | None = None) 
 
 
 def _run_plans(jobs: list, args: argparse.Namespace, desc: str | None, workers: int, client) -> list:
-    for plan, seq_dir in jobs:
-        prepare_sequence(plan, seq_dir)
+    claims = []
+    try:
+        for plan, seq_dir in jobs:
+            claims.append(prepare_sequence(plan, seq_dir, shared=args.shard is not None))
+    except BaseException:
+        for claim in reversed(claims):  # a refused dataset leaves none of its other folders behind
+            claim.undo()
+        raise
+    try:
+        return _render_claimed(jobs, args, desc, workers, client)
+    finally:
+        for claim in claims:
+            claim.release()
+
+
+def _shard_frames(plan: dict, shard: tuple | None) -> set:
+    wanted = _frames_to_write(plan)
+    return set(wanted) if shard is None else {i for i in wanted if i % shard[1] == shard[0] - 1}
+
+
+def _render_claimed(jobs: list, args: argparse.Namespace, desc: str | None, workers: int, client) -> list:
     all_tasks, stats = [], []
     for plan, seq_dir in jobs:
         tasks, skipped = _tasks_for(plan, seq_dir, args.shard)
@@ -1482,20 +1958,32 @@ def _run_plans(jobs: list, args: argparse.Namespace, desc: str | None, workers: 
     try:
         for _ in execute(all_tasks, workers=workers, client=client, progress=bar):
             pass
+    except BaseException:
+        remove_incomplete_frames(all_tasks)  # the workers have stopped: no frame is written any more
+        raise
     finally:
         bar.close()
     elapsed = time.perf_counter() - t0
     for (plan, seq_dir), s in zip(jobs, stats):
-        s.update(finish_sequence(plan, seq_dir))
+        # this run rendered its frames or checked their files before skipping them
+        s.update(finish_sequence(plan, seq_dir, verified=_shard_frames(plan, args.shard)))
         s["seconds"] = elapsed
+        s["shard"] = args.shard
     return stats
 
 
 def _summary_line(s: dict, elapsed: float) -> str:
     rate = f", {s['rendered'] / elapsed:.2f} frames/s" if s["rendered"] and elapsed > 0 else ""
-    state = ("labels.json and manifest.json written" if s["complete"] else
-             f"{s['present']} of {s['wanted']} frames present; labels.json is written when all are "
-             "(run the other shards, or rerun without --shard)")
+    if s["complete"]:
+        state = "labels.json and manifest.json written"
+    elif s.get("corrupt"):
+        frame, rel = s["corrupt"][0]
+        more = f" and {len(s['corrupt']) - 1} more" if len(s["corrupt"]) > 1 else ""
+        state = (f"{s['present']} of {s['wanted']} frames complete; frame {frame}{more} does not match its manifest "
+                 f"record ({rel}): rerun without --shard, or its shard, to render it again")
+    else:
+        state = (f"{s['present']} of {s['wanted']} frames present; labels.json is written when all are "
+                 "(run the other shards, or rerun without --shard)")
     return (f"{s['name']}: {s['frames']} frames, {s['visible']} visible; rendered {s['rendered']}, "
             f"skipped {s['skipped']} complete, in {elapsed:.1f} s{rate} -> {s['dir']}/ ({state})\n")
 
@@ -1621,8 +2109,9 @@ def dataset_main(argv: list) -> int:
     """``cli.py dataset``: the paper's dataset (targets × patterns) in one command."""
     p = _Parser(prog=f"{PROG} dataset", description="Render the paper's dataset: every target (and with --patterns "
                 "every pattern) as one sequence folder each, with one progress bar and a final table of counts.")
-    p.add_argument("--targets", type=_subset(TARGETS), default=list(TARGETS), metavar="LIST",
-                   help=f"built-in targets (default: {','.join(TARGETS)})")
+    p.add_argument("--targets", type=_subset(TARGETS, keep_order=True), default=list(TARGETS),
+                   metavar=_choices_metavar(_subset(TARGETS), many=True),
+                   help="built-in targets, comma-separated, in the order of the table (default: all)")
     p.add_argument("--patterns", action="store_true", help="all four patterns per target (default: --pattern only)")
     defaults = {"frames": DATASET_FRAMES, "degrade": "none", "modalities": list(DATASET_MODALITIES)}
     _add_options(p, defaults, skip=("target", "mesh", "mesh_unit_m"))
@@ -1671,26 +2160,31 @@ def ablation_main(argv: list) -> int:
     """``cli.py ablation``: degradation ablation (degrade.ablation) on clean renders."""
     p = _Parser(prog=f"{PROG} ablation", description="Render N clean frames per target through the pipeline and "
                 "measure what each degradation costs (PSNR, SSIM; LPIPS when installed).")
-    p.add_argument("--target", type=_subset(TARGETS), default=["cassini"], metavar="T[,T..]",
-                   help="built-in targets (default: cassini)")
+    p.add_argument("--targets", type=_subset(TARGETS, keep_order=True), default=["cassini"],
+                   metavar=_choices_metavar(_subset(TARGETS), many=True),
+                   help="built-in targets, comma-separated (default: cassini)")
     p.add_argument("--frames", type=_int_in(1, 10_000), default=4, help="clean frames per target (default: 4)")
     p.add_argument("--mode", type=_choice(("paper", "physical", "both")), default="both",
+                   metavar=_choices_metavar(_choice(("paper", "physical", "both"))),
                    help="which study to report (default: both)")
-    p.add_argument("--pattern", type=_choice(PATTERNS), default="spiral", help="pattern (default: spiral)")
+    p.add_argument("--pattern", type=_choice(PATTERNS), default="spiral", metavar=_choices_metavar(_choice(PATTERNS)),
+                   help="pattern (default: spiral)")
     # SSIM's 7 × 7 window (skimage.metrics.structural_similarity) needs images of at least 7 px a side
     p.add_argument("--width", type=_int_in(7, 65535), default=640, help="image width [px], >= 7 (default: 640)")
     p.add_argument("--height", type=_int_in(7, 65535), default=480, help="image height [px], >= 7 (default: 480)")
     p.add_argument("--focal-length-mm", type=_float_in(1e-3, 1e4, unit="mm"), default=2.0,
                    help="focal length [mm] (default: 2, the field of view of the full-size default camera)")
-    p.add_argument("--quality", type=_choice(QUALITIES), default="fast", help="shading preset (default: fast)")
+    p.add_argument("--quality", type=_choice(QUALITIES), default="fast", metavar=_choices_metavar(_choice(QUALITIES)),
+                   help="shading preset (default: fast)")
     p.add_argument("--seed", type=_int_in(0, 2**63 - 1), default=0, help="seed (default: 0)")
     p.add_argument("--workers", type=_int_in(1, 4096), default=None, help="worker processes (default: all cores)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
     from degrade.ablation import format_ablation, run_ablation
+    from raytrace.camera import Camera
     try:
         tasks, labels = [], []
-        for target in args.target:
+        for target in args.targets:
             ns = argparse.Namespace(**{o.key: None for o in OPTIONS})
             ns.target, ns.pattern, ns.seed, ns.quality = target, args.pattern, args.seed, args.quality
             ns.width, ns.height, ns.focal_length_mm = args.width, args.height, args.focal_length_mm
@@ -1704,10 +2198,11 @@ def ablation_main(argv: list) -> int:
                 task["index"] = len(tasks)
                 tasks.append(task)
             labels += [target] * len(t)
+        workers = fit_workers([Camera(*tasks[0]["camera"])], args.workers or default_workers())
         bar = _progress(len(tasks), 0, "ablation", args.quiet)
         rgb = [None] * len(tasks)
         try:
-            for res in execute(tasks, workers=args.workers or default_workers(), progress=bar):
+            for res in execute(tasks, workers=workers, progress=bar):
                 rgb[res["index"]] = res["images"]["rgb"]  # results arrive as they complete
         finally:
             bar.close()
@@ -1833,9 +2328,9 @@ def render_scene_main(argv: list[str]) -> int:
     parser = _Parser(prog=f"{PROG} render-scene",
                      description="Render one frame of the scene described by a JSON file (schema in README).")
     parser.add_argument("scene", help="scene file (JSON)")
-    parser.add_argument("--out", required=True, help="output folder (created if missing)")
-    parser.add_argument("--quality", choices=("fast", "balanced", "reference"), default=None,
-                        help="overrides the file's quality preset")
+    parser.add_argument("--out", type=_out_path, required=True, help="output folder (created if missing)")
+    parser.add_argument("--quality", type=_choice(QUALITIES), default=None, metavar=_choices_metavar(_choice(QUALITIES)),
+                        help="overrides the file's quality preset (default: the file's)")
     parser.add_argument("--samples", type=_int_in(1, 1 << 20), default=None,
                         help="overrides the preset's sample count")
     parser.add_argument("--seed", type=_int_in(0, 2**31 - 1), default=None, help="overrides the file's seed")
@@ -1845,6 +2340,7 @@ def render_scene_main(argv: list[str]) -> int:
     from raytrace.shade import render
     try:
         spec = load_scene_file(args.scene)
+        fit_workers([spec.camera], 1)
         check_out_folder(args.out)
         check_scene_out(args.out)
         for note in spec.notes:
@@ -1958,7 +2454,7 @@ def preview_main(argv: list) -> int:
     g = p.add_argument_group("preview (not part of the scenario)")
     g.add_argument("--config", type=_path, default=None, metavar="FILE.toml",
                    help="options as TOML tables (a sequence's config.toml previews that sequence); flags override")
-    g.add_argument("--out", type=_path, default=None, metavar="FILE.png",
+    g.add_argument("--out", type=_out_path, default=None, metavar="FILE.png",
                    help="PNG to write (default: output/TARGET_PATTERN_preview.png, "
                         "output/TARGET_all-patterns_preview.png)")
     g.add_argument("--all-patterns", action="store_true", help="the four patterns side by side for one target")
@@ -1968,7 +2464,7 @@ def preview_main(argv: list) -> int:
     g.add_argument("--frusta-every", type=_int_in(1, 1_000_000), default=None, metavar="K",
                    help="a camera frustum every K frames (default: about 12 per sequence)")
     g.add_argument("--interactive", action="store_true", help="also open a window (needs a display)")
-    g.add_argument("--html", type=_path, default=None, metavar="FILE.html",
+    g.add_argument("--html", type=_out_path, default=None, metavar="FILE.html",
                    help="also export an interactive scene (needs pyvista's exporter: "
                         "pip install trame-pyvista nest_asyncio2)")
     args = p.parse_args(argv)
@@ -2036,11 +2532,13 @@ SNAPSHOT_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "tests",
 SNAPSHOT_SETTINGS = {
     "width": 160, "height": 120, "focal_length_mm": 1.0, "pixel_pitch_um": 3.45,
     "frames": 5, "kept_frames": [1, 2, 3], "quality": "fast", "seed": 0, "degrade_presets": ["paper", "physical"],
+    "epoch": "2026-03-20T12:00:00Z", "raan_deg": 0.0, "arg_lat_deg": 0.0,
 }
 """What a snapshot renders: for each target × pattern, frames 1-3 of a 5-frame sequence at 160×120
 (the default 3.45 µm pixels, so the physical exposure is the main job's, and a 1 mm lens: half
 the default camera's field of view), clean RGB, mask, depth, normals and RGB degraded by both
-presets (paper D4, physical)."""
+presets (paper D4, physical), on a fixed orbit geometry (the equinox epoch, Ω = u₀ = 0: the
+main job's automatic phase would move the references with any change to its search)."""
 SNAPSHOT_MODALITIES = ("rgb", "rgb_paper", "rgb_physical", "mask", "depth", "normal")
 SNAPSHOT_PSNR_DB = 45.0
 """RGB passes when its PSNR, over every frame and over the target's window in it, is at least this [dB]."""
@@ -2070,6 +2568,7 @@ def _snapshot_plan(name: str) -> tuple:
     ns.target, ns.pattern, ns.frames, ns.seed, ns.quality = target, pattern, s["frames"], s["seed"], s["quality"]
     ns.width, ns.height = s["width"], s["height"]
     ns.focal_length_mm, ns.pixel_pitch_um = s["focal_length_mm"], s["pixel_pitch_um"]
+    ns.epoch, ns.raan_deg, ns.arg_lat_deg = s["epoch"], s["raan_deg"], s["arg_lat_deg"]  # a fixed orbit geometry
     cfg, given = resolve_config(ns)
     plan = plan_sequence(cfg, given)
     tasks, _ = _tasks_for(plan, "", None, write=False, frames=s["kept_frames"])
@@ -2421,13 +2920,13 @@ def snapshots_main(argv: list) -> int:
                 "in tests/snapshots/: masks exactly, depth and normals within tight tolerances, RGB by PSNR >= 45 dB. "
                 "Exit status 1 when something moved (a diff image per failure). --update rewrites the references.")
     p.add_argument("--update", action="store_true", help="rewrite the references instead of comparing (deliberate)")
-    p.add_argument("--targets", type=_subset(TARGETS), default=None, metavar="LIST",
-                   help=f"only these targets (default: {','.join(TARGETS)})")
-    p.add_argument("--patterns", type=_subset(PATTERNS), default=None, metavar="LIST",
-                   help=f"only these patterns (default: {','.join(PATTERNS)})")
-    p.add_argument("--dir", type=_path, default=SNAPSHOT_DIR, metavar="DIR",
+    p.add_argument("--targets", type=_subset(TARGETS), default=None, metavar=_choices_metavar(_subset(TARGETS), True),
+                   help="only these targets, comma-separated (default: all)")
+    p.add_argument("--patterns", type=_subset(PATTERNS), default=None, metavar=_choices_metavar(_subset(PATTERNS), True),
+                   help="only these patterns, comma-separated (default: all)")
+    p.add_argument("--dir", type=_out_path, default=SNAPSHOT_DIR, metavar="DIR",
                    help="reference folder (default: tests/snapshots)")
-    p.add_argument("--diff-dir", type=_path, default=None, metavar="DIR",
+    p.add_argument("--diff-dir", type=_out_path, default=None, metavar="DIR",
                    help="where diff images go (default: a new temporary folder)")
     args = p.parse_args(argv)
     names = snapshot_cases(args.targets, args.patterns)
@@ -2495,6 +2994,17 @@ COMMANDS = {"render-scene": render_scene_main, "dataset": dataset_main, "ablatio
             "preview": preview_main, "snapshots": snapshots_main}
 
 
+def _unknown_command(word: str) -> int:
+    """One line for ``cli.py WORD`` where WORD is no command: the nearest command, if any, and
+    the list (the main job takes options only)."""
+    import difflib
+    near = difflib.get_close_matches(word, list(COMMANDS), n=1, cutoff=0.6)
+    hint = f"; did you mean {near[0]!r}?" if near else ""
+    sys.stderr.write(f"{PROG}: error: unknown command {word!r}{hint} (commands: {', '.join(COMMANDS)}; the main job "
+                     "takes options only, e.g. --target cassini --pattern spiral)\n")
+    return 2
+
+
 _NEGATIVE_VALUE = re.compile(r"-(?:\d|\.\d|inf|nan)", re.IGNORECASE)
 
 
@@ -2516,9 +3026,12 @@ def _attach_negative_values(argv: list) -> list:
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the process exit status."""
     argv = _attach_negative_values(sys.argv[1:] if argv is None else list(argv))
+    _remove_stale_scene_folders()
     try:
         if argv and argv[0] in COMMANDS:
             return COMMANDS[argv[0]](argv[1:])
+        if argv and not str(argv[0]).startswith("-"):
+            return _unknown_command(str(argv[0]))
         return main_job(argv)
     except KeyboardInterrupt as exc:  # a command without its own message (render-scene, preview, …)
         return _interrupted(exc, "nothing half-written is left")

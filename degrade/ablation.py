@@ -178,7 +178,8 @@ def run_ablation(images, targets=None, *, seed: int = 0, paper: PaperConfig = _P
     images : sequence of array_like, each (H, W, 3)
         Clean renders, sRGB-encoded float in [0, 1] (8-bit renders divided by 255) [1].
     targets : sequence of str, optional
-        Target label per image; adds per-target rows next to ``"all"``.
+        Target label per image; with two or more targets, adds per-target rows next to
+        ``"all"``; with one, its rows are labelled with it instead of ``"all"``.
     seed : int, keyword-only
         Root of all random streams (see the module docstring).
     paper : PaperConfig, optional
@@ -230,7 +231,9 @@ def run_ablation(images, targets=None, *, seed: int = 0, paper: PaperConfig = _P
             rng = np.random.default_rng(seeds["physical", stage][i])
             results["physical", stage].append(_metrics(img, degrade(linear, cfg, rng=rng), lpips_fn))
 
-    order = ["all"] + list(dict.fromkeys(t for t in labels if t is not None))
+    distinct = list(dict.fromkeys(t for t in labels if t is not None))
+    # "all" beside per-target rows only where it differs from each: with one target it is that target's row
+    order = distinct if len(distinct) == 1 else ["all"] + distinct
     rows = []
     for (mode, group), per_image in results.items():
         for target in order:

@@ -14,6 +14,15 @@ Manifest
     altered) is simply rendered again. Records hold the frame's label as well, so the
     sequence's ``labels.json`` and ``manifest.json`` can be assembled from them by whichever
     run (or shard) finds the sequence complete.
+Ownership
+    :class:`FolderLock` is an advisory lock (``flock``) on ``.orbitsynth.lock`` in a sequence
+    folder, held by every run that writes into it and released by the kernel when the process
+    ends however it ends: exclusive for a whole run, shared for shards of one sequence. A run
+    that cannot take it is refused before it writes anything.
+User files
+    :func:`read_regular_file` and :func:`check_regular_file` accept only regular files of a
+    bounded size, so that ``/dev/zero``, a FIFO or a terminal given as an input file is refused
+    in one line instead of read without end.
 Model
     :func:`write_model_ply` writes the rendered mesh as one binary little-endian PLY: float64
     vertices in metres (body frame), triangles, and a per-face ``ushort component`` property
@@ -36,14 +45,20 @@ import threading
 import numpy as np
 
 __all__ = [
+    "LOCK_NAME",
     "MANIFEST_DIR",
+    "FolderLock",
+    "FolderLockBusy",
     "atomic_write_bytes",
     "atomic_write_image",
     "atomic_write_text",
+    "check_regular_file",
+    "create_new_text",
     "frame_complete",
     "model_ply_bytes",
     "read_frame_record",
     "read_image",
+    "read_regular_file",
     "read_model_ply",
     "process_folder",
     "remove_stale_process_folders",
@@ -56,6 +71,8 @@ __all__ = [
 
 MANIFEST_DIR = ".manifest"
 """Sub-folder of a sequence holding one JSON record per complete frame."""
+LOCK_NAME = ".orbitsynth.lock"
+"""The lock file of a sequence folder (:class:`FolderLock`)."""
 
 _HOST = re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname()) or "host"
 _PARTIAL = ".partial-"  # write_files_atomically's temporary folders: .partial-{host}.{pid}-XXXXXXXX
@@ -230,6 +247,49 @@ def atomic_write_text(path: str, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def create_new_text(path: str, text: str) -> bool:
+    """Create ``path`` holding the UTF-8 ``text`` only if no file of that name exists, in one
+    step: written (and fsynced) under a temporary name, then hard-linked into place, which fails
+    if the name is taken, so of several processes creating it at once exactly one does and the
+    others find its complete content. Returns True if this call created it, False if it
+    existed. Where the file system has no hard links, ``O_EXCL`` creation decides instead.
+
+    Raises
+    ------
+    OSError
+        If the file cannot be written.
+    """
+    data = text.encode("utf-8")
+    tmp = _temporary(path)
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        try:
+            os.link(tmp, path)
+            return True
+        except FileExistsError:
+            return False
+        except OSError:  # no hard links here
+            pass
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            return False
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+        except BaseException:
+            _unlink(path)
+            raise
+        return True
+    finally:
+        _unlink(tmp)
+
+
 def remove_stale_temporaries(folder: str) -> int:
     """Delete temporary files left under ``folder`` (recursively) by writers on this host that
     are no longer running; returns how many were removed. Temporaries of live processes and
@@ -358,6 +418,170 @@ def write_files_atomically(out_dir: str, files: dict, texts: dict) -> None:
         raise OSError(f"cannot write into {out_dir} ({exc})") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- user files
+_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def _kind(mode: int) -> str:
+    return next((name for test, name in _KINDS if test(mode)), "not a regular file")
+
+
+def _size_text(n: int) -> str:
+    return f"{n / 2**20:g} MiB" if n < 2**30 else f"{n / 2**30:g} GiB"
+
+
+def check_regular_file(path, *, limit_bytes: int, what: str) -> int:
+    """Check that ``path`` is a regular file (a symbolic link to one is fine) of at most
+    ``limit_bytes``, without opening it (a FIFO would block); returns its size.
+
+    Raises
+    ------
+    ValueError
+        One line starting with ``what`` (e.g. ``"--config /dev/zero"``): missing, unreadable,
+        not a regular file, or too large.
+    """
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        raise ValueError(f"{what}: cannot read it ({exc.strerror or exc})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise ValueError(f"{what}: must be a regular file, but it is {_kind(st.st_mode)}")
+    if st.st_size > limit_bytes:
+        raise ValueError(f"{what}: must be at most {_size_text(limit_bytes)}, but it holds {st.st_size} bytes")
+    return int(st.st_size)
+
+
+def read_regular_file(path, *, limit_bytes: int, what: str) -> bytes:
+    """The bytes of ``path`` if it is a regular file of at most ``limit_bytes`` (checked on the
+    open file too, and no more than ``limit_bytes + 1`` bytes are read: a file that grows, or
+    a path swapped for a device after :func:`check_regular_file`, cannot make it read without
+    end). Opened non-blocking, so a FIFO without a writer does not hang the caller.
+
+    Raises
+    ------
+    ValueError
+        One line starting with ``what``, as :func:`check_regular_file`.
+    """
+    check_regular_file(path, limit_bytes=limit_bytes, what=what)
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0))
+    except OSError as exc:
+        raise ValueError(f"{what}: cannot read it ({exc.strerror or exc})") from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise ValueError(f"{what}: must be a regular file, but it is {_kind(mode)}")
+        chunks, size = [], 0
+        while size <= limit_bytes:
+            block = os.read(fd, min(1 << 20, limit_bytes + 1 - size))
+            if not block:
+                break
+            chunks.append(block)
+            size += len(block)
+    except OSError as exc:
+        raise ValueError(f"{what}: cannot read it ({exc.strerror or exc})") from None
+    finally:
+        os.close(fd)
+    if size > limit_bytes:
+        raise ValueError(f"{what}: must be at most {_size_text(limit_bytes)}, but it holds more")
+    return b"".join(chunks)
+
+
+# --------------------------------------------------------------------------- folder ownership
+class FolderLockBusy(Exception):
+    """Another process holds the lock of the folder."""
+
+
+class FolderLock:
+    """An advisory lock on ``folder/.orbitsynth.lock`` (``fcntl.flock``): the kernel releases
+    it when the process ends, however it ends (SIGKILL included), so it never goes stale.
+
+    ``shared=False`` (a whole run): no other holder at all. ``shared=True`` (one shard of a
+    sequence): other shared holders are allowed, an exclusive one is not.
+
+    The lock file is created if missing. :meth:`release` with ``remove=True`` deletes it where
+    this process can hold the lock alone (never from under another holder); a process that
+    locked the file just before it was deleted sees that the path no longer names the file it
+    locked and locks the new one instead (:meth:`acquire`), so a deleted lock file cannot let
+    two runs in.
+
+    On file systems without ``flock`` (some cluster file systems mount without it) the lock
+    cannot be taken: :attr:`unsupported` then holds the reason and the run goes on unguarded.
+    NFS clients on Linux map ``flock`` to the server's byte-range locks, which hold across
+    hosts.
+    """
+
+    def __init__(self, folder: str, *, shared: bool):
+        self.path = os.path.join(folder, LOCK_NAME)
+        self.shared = bool(shared)
+        self.fd: int | None = None
+        self.created = False
+        self.unsupported: str | None = None
+
+    def acquire(self) -> None:
+        """Take the lock without waiting.
+
+        Raises
+        ------
+        FolderLockBusy
+            Another process holds it (exclusively, or at all when this one is exclusive).
+        OSError
+            The lock file cannot be created or opened.
+        """
+        import errno
+        import fcntl
+        mode = (fcntl.LOCK_SH if self.shared else fcntl.LOCK_EX) | fcntl.LOCK_NB
+        for _ in range(100):  # the file replaced between open and lock: open the new one
+            created = False
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o644)
+                created = True
+            except FileExistsError:
+                fd = os.open(self.path, os.O_RDWR)
+            try:
+                fcntl.flock(fd, mode)
+            except OSError as exc:
+                os.close(fd)  # a file this process created stays: another may have opened it since
+                if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                    raise FolderLockBusy(self.path) from None
+                if exc.errno in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL):
+                    if created:  # nobody can hold it: leave no file behind
+                        _unlink(self.path)
+                    self.unsupported = exc.strerror or str(exc)
+                    return
+                raise
+            try:
+                same = os.stat(self.path).st_ino == os.fstat(fd).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                self.fd, self.created = fd, created
+                return
+            os.close(fd)  # deleted by its last holder after this process opened it
+        raise FolderLockBusy(self.path)
+
+    def release(self, *, remove: bool = False) -> None:
+        """Release the lock; with ``remove``, delete the lock file first if no other process
+        holds it (a shared holder tries to take it alone, without waiting). Idempotent."""
+        import fcntl
+        if self.fd is None:
+            return
+        fd, self.fd = self.fd, None
+        try:
+            if remove:
+                alone = True
+                if self.shared:
+                    try:
+                        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    except OSError:
+                        alone = False
+                if alone:
+                    _unlink(self.path)
+        finally:
+            os.close(fd)  # releases the lock
 
 
 # --------------------------------------------------------------------------- checksums and manifest

@@ -276,6 +276,10 @@ def _match(rules, *texts) -> str | None:
     return None
 
 
+MESH_FILE_LIMIT_BYTES = 8 << 30
+"""Largest mesh file read [bytes]; a device or pipe is refused before trimesh opens it."""
+
+
 def _check_path(path) -> tuple[Path, str]:
     try:
         p = Path(os.fspath(path))
@@ -285,6 +289,8 @@ def _check_path(path) -> tuple[Path, str]:
         raise ValueError(f"mesh file {p}: does not exist")
     if p.is_dir():
         raise ValueError(f"mesh file {p}: is a directory, expected a file")
+    from .files import check_regular_file
+    check_regular_file(p, limit_bytes=MESH_FILE_LIMIT_BYTES, what=f"mesh file {p}")
     formats = sorted(trimesh.available_formats(), key=len, reverse=True)
     lower = p.name.lower()
     for fmt in formats:

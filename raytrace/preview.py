@@ -46,8 +46,6 @@ AXIS_TITLES = ("x radial [m]", "y along-track [m]", "z orbit normal [m]")
 _TRAJ_CMAP = "viridis"
 _HIDDEN_RGB = (0.85, 0.1, 0.1)
 _FRUSTUM_RGB = (0.25, 0.25, 0.25)
-_START_RGB = (0.0, 0.6, 0.0)
-_END_RGB = (0.45, 0.0, 0.7)
 _SUN_RGB = (1.0, 0.6, 0.0)
 _EARTH_RGB = (0.1, 0.35, 0.9)
 _ARROW_FRACTION = 0.4
@@ -294,6 +292,15 @@ def _draw_xy(pl, pv, track: PreviewTrack, k: int, scale_m: float, title_size: in
     pl.camera.zoom(0.95)
 
 
+def time_colour(t_s: float, clim: tuple) -> tuple:
+    """The trajectory's colour (RGB in [0, 1]) at time ``t_s`` [s] on its colour bar ``clim``
+    = (t_min, t_max) [s]."""
+    from matplotlib import colormaps
+    lo, hi = float(clim[0]), float(clim[1])
+    frac = 0.0 if hi <= lo else min(max((float(t_s) - lo) / (hi - lo), 0.0), 1.0)
+    return tuple(float(c) for c in colormaps[_TRAJ_CMAP](frac)[:3])
+
+
 def _draw_common(pl, pv, track: PreviewTrack, k: int, scale_m: float, clim: tuple, *, flat: bool) -> None:
     r = track.r_lvlh_m * (np.array([1.0, 1.0, 0.0]) if flat else np.ones(3))
     line = _polyline(pv, r, track.t_s)
@@ -302,9 +309,11 @@ def _draw_common(pl, pv, track: PreviewTrack, k: int, scale_m: float, clim: tupl
                                                     "position_x": 0.9, "position_y": 0.25, "height": 0.5,
                                                     "width": 0.05, "fmt": "%.0f"})
     marker_r = 0.025 * scale_m
-    pl.add_mesh(pv.Sphere(radius=marker_r, center=r[0]), color=_START_RGB, name="start", label="start")
+    # the markers take the colour bar's colours at their times, so the legend and the bar agree
+    start_rgb, end_rgb = time_colour(track.t_s[0], clim), time_colour(track.t_s[-1], clim)
+    pl.add_mesh(pv.Sphere(radius=marker_r, center=r[0]), color=start_rgb, name="start", label="start")
     pl.add_mesh(pv.Cube(center=r[-1], x_length=1.6 * marker_r, y_length=1.6 * marker_r, z_length=1.6 * marker_r),
-                color=_END_RGB, name="end", label="end")
+                color=end_rgb, name="end", label="end")
     hidden = np.flatnonzero(~track.visible)
     if hidden.size:
         pl.add_mesh(pv.PolyData(r[hidden]), color=_HIDDEN_RGB, point_size=11, render_points_as_spheres=True,

@@ -110,6 +110,10 @@ def _recentred(model: TargetModel, R: np.ndarray, t: np.ndarray, lighting: Light
     return replace(model, components=tuple(comps)), t + R @ c, replace(lighting, earth=earth), c
 
 
+SCENE_FILE_LIMIT_BYTES = 64 << 20
+"""Largest scene file read [bytes] (a scene file is a few kB; a device or pipe is refused)."""
+
+
 def _err(msg: str) -> ValueError:
     return ValueError(f"scene file: {msg}")
 
@@ -322,11 +326,13 @@ def load_scene_file(path) -> SceneSpec:
         or an unreadable file.
     """
     path = os.fspath(path)
+    from .files import read_regular_file
     try:
-        with open(path, encoding="utf-8") as fh:
-            data = json.load(fh)
-    except OSError as exc:
-        raise _err(f"cannot read {path}: {exc.strerror}") from None
+        raw = read_regular_file(path, limit_bytes=SCENE_FILE_LIMIT_BYTES, what=path)
+    except ValueError as exc:  # missing, not a regular file, too large
+        raise _err(str(exc)) from None
+    try:
+        data = json.loads(raw.decode("utf-8"))
     except json.JSONDecodeError as exc:
         raise _err(f"{path} is not valid JSON ({exc.msg} at line {exc.lineno})") from None
     except UnicodeDecodeError as exc:

@@ -39,6 +39,8 @@ MAG_BRIGHTEST = -1.5
 """Brightest star of a procedural sky (Sirius: V = −1.46) [mag]."""
 MAG_FAINTEST = 9.0
 """Faintest allowed magnitude limit of a procedural sky (~150 000 stars) [mag]."""
+CATALOGUE_LIMIT_BYTES = 1 << 30
+"""Largest star catalogue read [bytes] (Hipparcos as CSV is ~10 MB; a device or pipe is refused)."""
 _N_AT_6 = 4800.0  # stars brighter than V = 6 over the whole sky
 
 
@@ -114,11 +116,12 @@ class StarField:
         """A catalogue in CSV with a header naming the columns ``ra_deg``, ``dec_deg`` and
         ``v_mag`` (ICRS / J2000; other columns ignored); stars fainter than ``limit_mag`` are
         dropped."""
+        import io
+
+        from .files import read_regular_file
+        data = read_regular_file(path, limit_bytes=CATALOGUE_LIMIT_BYTES, what=f"star catalogue {path}")
         try:
-            with open(path, newline="", encoding="utf-8") as f:
-                rows = list(csv.DictReader(f))
-        except OSError as exc:
-            raise ValueError(f"star catalogue {path}: cannot read ({exc.strerror or exc})") from None
+            rows = list(csv.DictReader(io.StringIO(data.decode("utf-8"), newline="")))
         except (UnicodeDecodeError, csv.Error) as exc:
             raise ValueError(f"star catalogue {path}: not a CSV text file ({exc})") from None
         need = ("ra_deg", "dec_deg", "v_mag")

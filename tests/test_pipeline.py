@@ -25,7 +25,7 @@ from tests.raytrace.oracles import png_chunks
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--target", "icesat", "--pattern", "spiral", "--frames", "8", "--width", "160", "--height", "120",
-         "--focal-length-mm", "0.5", "--quiet"]
+         "--focal-length-mm", "0.5", "--quiet", "--arg-lat-deg", "90"]  # a phase whose last frames are in shadow
 MODS = ["--modalities", "rgb,rgb_degraded,mask,depth,normal,hdr"]
 
 
@@ -428,7 +428,8 @@ def _gone(pids: list, timeout: float = 20.0) -> bool:
 
 
 def _no_temporaries(seq: Path) -> None:
-    hidden = [p for p in seq.rglob(".*") if p.name != ".manifest"]
+    # the folder's lock file stays where its run was killed (the lock itself died with the run)
+    hidden = [p for p in seq.rglob(".*") if p.name not in (".manifest", F.LOCK_NAME)]
     assert hidden == [] or all(p.parent.name == ".manifest" and p.suffix == ".json" for p in hidden), hidden
 
 
@@ -580,7 +581,7 @@ def test_dataset_of_all_patterns_refuses_one_explicit_pattern_and_writes_nothing
 
 
 def test_ablation_command_prints_the_table(capsys):
-    argv = ["ablation", "--target", "icesat", "--frames", "2", "--width", "64", "--height", "48",
+    argv = ["ablation", "--targets", "icesat", "--frames", "2", "--width", "64", "--height", "48",
             "--focal-length-mm", "0.2", "--workers", "1", "--quiet"]
     assert run_main(*argv) == 0
     out = capsys.readouterr().out

@@ -19,7 +19,7 @@ from raytrace import preview
 from raytrace.camera import Camera
 
 ROOT = Path(__file__).resolve().parents[1]
-OPTS = ["--target", "icesat", "--pattern", "drift", "--frames", "20", "--seed", "3"]
+OPTS = ["--target", "icesat", "--pattern", "drift", "--frames", "20", "--seed", "3", "--arg-lat-deg", "90"]  # some frames in shadow
 
 
 def plan_for(argv: list) -> dict:
@@ -232,3 +232,18 @@ def test_preview_module_does_not_import_orbit():
     code = ("import sys; import raytrace.preview; "
             "assert not any(m == 'orbit' or m.startswith('orbit.') for m in sys.modules), 'orbit imported'")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, env=headless_env(), timeout=60)
+
+
+def test_start_and_end_markers_have_the_colour_bar_s_colours_at_their_times(scene):
+    """The legend's start and end markers agree with the trajectory's colour bar: each has the
+    colour the bar's lookup table gives the first and the last frame's time."""
+    _plan, track, pl = scene
+    for ren in pl.renderers:
+        actors = ren.actors
+        if "trajectory" not in actors:
+            continue
+        lut = actors["trajectory"].mapper.lookup_table
+        for name, t in (("start", track.t_s[0]), ("end", track.t_s[-1])):
+            want = np.array(lut.map_value(float(t))[:3])
+            got = np.array(actors[name].prop.color.float_rgb)
+            np.testing.assert_allclose(got, want, atol=1.5 / 255, err_msg=name)

@@ -93,8 +93,10 @@ def test_format_table():
     lines = text.splitlines()
     assert lines[2] == "| mode | group / stage | target | n | PSNR [dB] | SSIM | LPIPS |"
     assert any(line.startswith("| paper | D4 blur + Poisson + Gaussian | x | 1 |") for line in lines)
-    assert any(line.startswith("| physical | + demosaic | all | 1 |") for line in lines)
-    assert len(lines) == 4 + (4 + 5) * 2
+    assert any(line.startswith("| physical | + demosaic | x | 1 |") for line in lines)
+    assert len(lines) == 4 + 4 + 5  # one target: its rows once, not again as "all"
+    two = format_ablation(run_ablation([target_on_black(5, shape=(64, 96))] * 2, ["x", "y"], seed=0, lpips=None))
+    assert len(two.splitlines()) == 4 + (4 + 5) * 3  # all, x, y
 
 
 def test_bad_arguments():
