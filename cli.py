@@ -1399,7 +1399,7 @@ def _own_entry(name: str, path: str) -> bool:
     """Whether ``name`` in a folder without ``scenario.json`` may be left by this tool: its lock
     file, a temporary file of an interrupted write, or one of its sub-folders, empty."""
     from raytrace import files as F
-    if name == F.LOCK_NAME or F._TMP_RE.match(name):
+    if name == F.LOCK_NAME or F.is_temporary(name):
         return True
     if name in MODALITIES or name in ("model", F.MANIFEST_DIR):
         try:
@@ -1473,7 +1473,7 @@ class SequenceClaim:
         same sequence may have started on it), and release the lock: a refused run leaves the
         folder as it found it."""
         import shutil
-        alone = self.lock.fd is None or not self.lock.shared or _try_exclusive(self.lock)
+        alone = self.lock.fd is None or self.lock.try_exclusive()
         if alone:
             for path in reversed(self.created):
                 try:
@@ -1488,19 +1488,6 @@ class SequenceClaim:
         """Release the lock at the end of the run; its file goes with it where no other run
         holds it."""
         self.lock.release(remove=True)
-
-
-def _try_exclusive(lock) -> bool:
-    """Whether a shared :class:`raytrace.files.FolderLock` could be made exclusive at once (no
-    other run holds it). If not, the lock may be lost (flock converts by releasing first):
-    only for a run that is about to end."""
-    import fcntl
-    try:
-        fcntl.flock(lock.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        lock.shared = False
-        return True
-    except OSError:
-        return False
 
 
 def prepare_sequence(plan: dict, seq_dir: str, *, shared: bool = False) -> SequenceClaim:

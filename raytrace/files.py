@@ -55,6 +55,7 @@ __all__ = [
     "check_regular_file",
     "create_new_text",
     "frame_complete",
+    "is_temporary",
     "model_ply_bytes",
     "read_frame_record",
     "read_image",
@@ -288,6 +289,11 @@ def create_new_text(path: str, text: str) -> bool:
         return True
     finally:
         _unlink(tmp)
+
+
+def is_temporary(name: str) -> bool:
+    """Whether a file name is one of this module's temporary names (``.NAME.HOST.PID.tmpEXT``)."""
+    return _TMP_RE.match(name) is not None
 
 
 def remove_stale_temporaries(folder: str) -> int:
@@ -563,25 +569,33 @@ class FolderLock:
             os.close(fd)  # deleted by its last holder after this process opened it
         raise FolderLockBusy(self.path)
 
+    def try_exclusive(self) -> bool:
+        """Whether this shared lock could be made exclusive at once (no other process holds
+        it); True if already exclusive. If not, the lock may be lost (``flock`` converts by
+        releasing first), so only for a process about to let go of the folder."""
+        import fcntl
+        if self.fd is None:
+            return False
+        if not self.shared:
+            return True
+        try:
+            fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            return False
+        self.shared = False
+        return True
+
     def release(self, *, remove: bool = False) -> None:
         """Release the lock; with ``remove``, delete the lock file first if no other process
         holds it (a shared holder tries to take it alone, without waiting). Idempotent."""
-        import fcntl
         if self.fd is None:
             return
-        fd, self.fd = self.fd, None
         try:
-            if remove:
-                alone = True
-                if self.shared:
-                    try:
-                        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                    except OSError:
-                        alone = False
-                if alone:
-                    _unlink(self.path)
+            if remove and self.try_exclusive():
+                _unlink(self.path)
         finally:
-            os.close(fd)  # releases the lock
+            os.close(self.fd)  # releases the lock
+            self.fd = None
 
 
 # --------------------------------------------------------------------------- checksums and manifest

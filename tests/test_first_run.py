@@ -106,14 +106,6 @@ def test_quick_start_is_two_commands_that_leave_the_venv_active():
     assert cmds[1].strip() in ci  # CI runs the same test command
 
 
-def test_readme_commands_use_the_activated_python():
-    """Every ``python cli.py`` line of the README runs with the venv the Quick start activated:
-    none asks for a python that the Quick start did not set up."""
-    text = (ROOT / "README.md").read_text()
-    assert "python3 cli.py" not in text
-    assert re.search(r"^\s*python cli\.py --help", text, flags=re.M) or "python cli.py --help" in text
-
-
 # --------------------------------------------------------------------------- --help and commands
 def _help(*command) -> str:
     r = subprocess.run([sys.executable, str(ROOT / "cli.py"), *command, "--help"], capture_output=True, text=True,
