@@ -1816,26 +1816,35 @@ def _kernels_not_compiled(quality: str = "fast") -> list:
 
 def _compile_kernels(groups: list, quiet: bool) -> None:
     """A fresh install (or a preset's first run): compile the numba kernels of ``groups`` into
-    numba's cache on all cores at once (raytrace._precompile), before the workers start and
-    would each compile all of them. A kernel this misses compiles on its first call, as it
-    would anyway."""
-    cores = default_workers()
+    numba's cache on all cores at once (:func:`raytrace._precompile.precompile`), before the
+    workers start and would each compile all of them, under a progress bar: its unit is the
+    kernels' recorded compile time, so its rate and remaining time are measured on this
+    machine as it goes. A kernel this misses compiles on its first call, as it would anyway."""
+    processes = max(1, min(default_workers(), 4))
+    try:
+        from raytrace._precompile import group_signatures
+        total = float(sum(c for c, _ in group_signatures(groups).values()))
+    except Exception:  # noqa: BLE001 (the estimate only)
+        total = 0.0
     if not quiet:
-        try:
-            from raytrace._precompile import group_signatures
-            seconds = sum(c for c, _ in group_signatures(groups).values()) / min(cores, 4)
-            about = f"about {5 * max(1, round(seconds / 5))} s"
-        except Exception:  # noqa: BLE001 (the estimate only)
-            about = "a minute or two"
-        print(f"first run: compiling the ray-tracing kernels ({', '.join(groups)}) into numba's cache on {cores} "
-              f"core{'s' if cores > 1 else ''} (once; {about})", file=sys.stderr)
-    if cores < 2:
-        return  # one core: the first frame compiles them, in the same time
+        about = f"about {5 * max(1, round(total / processes / 5))} s on idle cores" if total else "a minute or two"
+        print(f"first run: compiling the ray-tracing kernels ({', '.join(groups)}) into numba's cache, once, on "
+              f"{processes} core{'s' if processes > 1 else ''} ({about}; the bar measures it as it goes)",
+              file=sys.stderr)
+    from tqdm import tqdm
+    bar = tqdm(total=total or None, desc="compiling", disable=quiet, file=sys.stderr, dynamic_ncols=True,
+               mininterval=0.5, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed} elapsed, {remaining} left")
+
+    def progress(done: float, _total: float) -> None:
+        bar.update(done - bar.n)
+
     try:
         from raytrace._precompile import precompile
-        precompile(min(cores, 4), groups)
+        precompile(processes, groups, progress=progress)
     except Exception:  # noqa: BLE001 (an optimisation: without it the kernels compile lazily)
         pass
+    finally:
+        bar.close()
 
 
 FRAME_BYTES_PER_PIXEL = 160

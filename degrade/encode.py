@@ -85,7 +85,9 @@ def _bucket_codes8() -> np.ndarray:
     n = (_ONE_BITS >> _BUCKET_SHIFT) + 1
     starts = (np.arange(n, dtype=np.uint32) << np.uint32(_BUCKET_SHIFT)).view(np.float32)  # last: 1.0
     enc = np.empty_like(starts)
-    _encode(starts, _level_lut(8), enc)
+    # as a (1, 1, n) image: the signature the frames' images use, not a 1-D one that numba would
+    # compile (and cache) only for this table (~0.5 s on one core)
+    _encode(starts.reshape(1, 1, -1), _level_lut(8), enc.reshape(1, 1, -1))
     codes = np.rint(enc.astype(np.float64) * 255.0).astype(np.int16)
     table = np.where(codes[:-1] == codes[1:], codes[:-1], np.int16(-1)).astype(np.int16)
     table.flags.writeable = False

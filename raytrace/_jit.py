@@ -18,6 +18,9 @@ kernels with Embree calls; ``prange`` only on outer pixel/ray loops.
   feeds thresholds that amplify the last bit (the residual filter's edge-stopping weights):
   under fastmath the code numba caches can round differently from the code it has just
   compiled, and the first render after an install then differs from every later one.
+
+Importing this module also makes numba's compiler-flag comparison cheap
+(:func:`fast_flag_comparison`: the same results, a shorter compile).
 """
 
 from __future__ import annotations
@@ -131,6 +134,62 @@ def tune_allocator() -> bool:
 
 
 ALLOCATOR_TUNED = tune_allocator()
+
+
+def fast_flag_comparison() -> bool:
+    """Make numba's comparison and hashing of compiler flags (``TargetConfig``) cheap, with the
+    same results; True if it did (False where numba's internals are not the expected ones, and
+    nothing changes).
+
+    Why: numba keys the implementations of every ``@overload`` it has typed by the call's
+    flags, and each lookup compares two flag objects through ``values()``, a dict of all ~20
+    options read one property at a time (~13 µs a comparison). Compiling the ``fast`` group
+    does ~470 k such comparisons: ~3.8 s of a ~70 s compile on one core (one process,
+    ``raytrace._precompile``'s entries, two runs each; numba 0.68). Here ``values()`` merges
+    the options' defaults (computed once per class) with the values set; ``==`` first compares
+    the values set, and falls back to ``values()`` only where they differ (an option may be
+    set to its default); ``hash`` is numba's own: the hash of the sorted option names, the same
+    for every instance of a class. The machine code numba emits is the same (every cached
+    kernel of the group compared)."""
+    try:
+        from numba.core.targetconfig import Option, TargetConfig
+        if not (hasattr(TargetConfig, "values") and hasattr(TargetConfig, "options")
+                and "_values" in getattr(TargetConfig, "__slots__", ()) and isinstance(Option.default, property)):
+            return False
+    except ImportError:
+        return False
+    if getattr(TargetConfig, "_orbitsynth_fast", False):
+        return True
+    defaults = {}
+
+    def class_defaults(cls):
+        d = defaults.get(cls)
+        if d is None:
+            d = defaults[cls] = ({k: o.default for k, o in cls.options.items()}, hash(tuple(sorted(cls.options))))
+        return d
+
+    def values(self):
+        # the same keys, in the same (declaration) order, as numba's
+        return {**class_defaults(type(self))[0], **self._values}
+
+    def __eq__(self, other):
+        if not isinstance(other, TargetConfig):
+            return NotImplemented
+        if type(self) is type(other) and self._values == other._values:
+            return True
+        return values(self) == values(other)
+
+    def __hash__(self):
+        return class_defaults(type(self))[1]
+
+    TargetConfig.values = values
+    TargetConfig.__eq__ = __eq__
+    TargetConfig.__hash__ = __hash__
+    TargetConfig._orbitsynth_fast = True
+    return True
+
+
+FAST_FLAG_COMPARISON = fast_flag_comparison()
 
 FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 

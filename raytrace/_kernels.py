@@ -168,6 +168,48 @@ def _cross(xs, ys, o, a, b):
     return (xs[a] - xs[o]) * (ys[b] - ys[o]) - (ys[a] - ys[o]) * (xs[b] - xs[o])
 
 
+@inline
+def _xy_order(xs, ys):
+    """The indices that sort the points (xs, ys) by x, then y, then index: what a stable sort
+    by y followed by a stable sort by x gives (``np.argsort(kind="mergesort")`` twice), by a
+    bottom-up merge sort of its own. numba's argsort compiles a generic merge sort, uncached,
+    in every process that compiles a caller: with this one :func:`cull_mask` compiles in ~1 s
+    less on one core (2.2 → 1.3 s). The points are finite (vertices in front of the camera)."""
+    n = xs.shape[0]
+    a = np.empty(n, np.int64)
+    for i in range(n):
+        a[i] = i
+    b = np.empty(n, np.int64)
+    width = 1
+    while width < n:
+        for lo in range(0, n, 2 * width):
+            mid = min(lo + width, n)
+            hi = min(lo + 2 * width, n)
+            i = lo
+            j = mid
+            k = lo
+            while i < mid and j < hi:
+                # the right run's point first only if it sorts strictly before: stable
+                if xs[a[j]] < xs[a[i]] or (xs[a[j]] == xs[a[i]] and ys[a[j]] < ys[a[i]]):
+                    b[k] = a[j]
+                    j += 1
+                else:
+                    b[k] = a[i]
+                    i += 1
+                k += 1
+            while i < mid:
+                b[k] = a[i]
+                i += 1
+                k += 1
+            while j < hi:
+                b[k] = a[j]
+                j += 1
+                k += 1
+        a, b = b, a
+        width *= 2
+    return a
+
+
 @jit_exact
 def cull_mask(P_cam, ptr, fx, fy, cx, cy, u0, v0, w, h, z_min, cast):
     """The pixels of the rectangle (u0, v0, w, h) whose rays may hit a part: ``cast[r, c]`` = 1
@@ -206,8 +248,7 @@ def cull_mask(P_cam, ptr, fx, fy, cx, cy, u0, v0, w, h, z_min, cast):
             xs[i] = fx * P_cam[a + i, 0] / z + cx
             ys[i] = fy * P_cam[a + i, 1] / z + cy
         # lexicographic order (x, then y), then the lower and upper chains
-        order = np.argsort(ys, kind="mergesort")
-        order = order[np.argsort(xs[order], kind="mergesort")]
+        order = _xy_order(xs, ys)
         hull = np.empty(2 * n + 1, np.int64)
         k = 0
         for j in range(n):  # lower chain

@@ -1,16 +1,30 @@
 """Compile the numba kernels into numba's on-disk cache on several processes at once.
 
 On a fresh install the first frame of ``python cli.py --target … --pattern …`` waits for numba
-to compile some fifty kernels, ~40 s on one core, and every worker process compiles all of
-them; ``--quality balanced`` adds ~110 s of kernels on one core (the fused final gather and
-lobe paths ~80 s of it), ``reference`` ~15 s (a 2-core AMD EPYC, 2026-11-27). :func:`precompile` splits the kernels of the requested groups over
-``processes`` spawned processes, each calling ``Dispatcher.compile`` on its share with
-``cache=True``, so the cache is written once, in parallel; the workers then load every kernel
-from it. A kernel whose recorded signature no longer matches the code is skipped (it compiles
-on first call, as without this step).
+to compile some eighty kernels, ~60 s on one core, and every worker process compiles all of
+them; ``--quality balanced`` adds ~55 s of kernels on one core (the fused final gather and
+lobe paths most of it), ``reference`` ~6 s (a 2-core AMD EPYC). :func:`precompile` compiles
+the kernels of the requested groups on ``processes`` spawned processes, one entry per task,
+each calling ``Dispatcher.compile`` with ``cache=True``, so the cache is written once, in
+parallel; the workers then load every kernel from it. No two processes compile the same
+helper (:func:`dependencies`), and a caller can follow the progress (``progress``). A kernel
+whose recorded signature no longer matches the code is skipped (it compiles on first call, as
+without this step).
 
-The groups (``raytrace/_jit_signatures.py``): ``fast``, the kernels one frame of the main job
-calls (:data:`SIGNATURES`); then, each holding only what the one before did not compile,
+Where the time goes (``fast``, one process, cold cache; BENCHMARKS.md, "Compiling the main
+job's kernels on a fresh install"): ~40 % in LLVM (optimising and generating code: numba links
+every callee's code into each caller and optimises and generates it again there, and a
+``parallel=True`` loop goes through four such libraries: the loop body, two wrappers and the
+kernel), ~a third in the parfor passes and the loop bodies typed and lowered a second time as
+gufuncs, the rest in numba's other passes. Without ``parallel=True`` the group would compile
+in about half the time, but the pixel loops need their threads. Measured and removed:
+numba's comparison of compiler flags (``raytrace._jit.fast_flag_comparison``), parallel loops
+that numba made of array initialisations (``np.zeros``, slice assignment) and reductions
+inside kernels, numba's uncached generic sort in ``raytrace._kernels.cull_mask``, and
+signatures compiled twice for one kernel.
+
+The groups (``raytrace/_jit_signatures.py``): ``fast``, the kernels the frames of the main job
+call (:data:`SIGNATURES`); then, each holding only what the one before did not compile,
 ``balanced`` (a ``--quality balanced`` frame), ``batched`` (the same frame through the
 batched fallback, :data:`raytrace.shade._FUSED_GATHER` and
 :data:`raytrace.scene._CAST_IN_ONE_KERNEL` False: what a machine whose embreex wheel has no
@@ -19,8 +33,9 @@ kernel's arguments::
 
     python -m raytrace._precompile --record
 
-which runs the four frames in a fresh process with an empty numba cache and writes each
-kernel's signatures and compile time (the time balances the shares).
+which runs the groups' frames in a fresh process with an empty numba cache and writes each
+kernel's signatures and its own compile time in CPU seconds (the time orders the compile and
+measures its progress).
 """
 
 from __future__ import annotations
@@ -32,10 +47,12 @@ import subprocess
 import sys
 import tempfile
 import time
+import types
 from pathlib import Path
 
 _ROOT = Path(__file__).resolve().parents[1]
 _OUT = Path(__file__).with_name("_jit_signatures.py")
+_PACKAGES = ("raytrace", "degrade", "orbit")  # whose kernels are recorded
 
 
 def _namespace() -> dict:
@@ -60,6 +77,7 @@ def dispatcher(qualname: str):
 def _compile_share(items: list) -> list:
     """Compile (into the on-disk cache) the recorded signatures of ``items`` = [(qualname,
     signatures)]; returns the entries that could not be compiled, with the reason."""
+    from . import _jit  # noqa: F401 (numba's faster flag comparison, also for degrade's kernels)
     failed = []
     for qualname, sigs in items:
         for sig in sigs:
@@ -70,16 +88,47 @@ def _compile_share(items: list) -> list:
     return failed
 
 
-def shares(signatures: dict, processes: int) -> list:
-    """The entries split into ``processes`` shares of about equal recorded compile time
-    (longest first, each to the least loaded share)."""
-    out = [[] for _ in range(max(1, processes))]
-    load = [0.0] * len(out)
-    for qualname, (cost, sigs) in sorted(signatures.items(), key=lambda kv: (-kv[1][0], kv[0])):
-        k = load.index(min(load))
-        out[k].append((qualname, sigs))
-        load[k] += cost
-    return [s for s in out if s]
+def _code_objects(code):
+    """``code`` and the code objects nested in it (comprehensions, closures)."""
+    yield code
+    for c in code.co_consts:
+        if isinstance(c, types.CodeType):
+            yield from _code_objects(c)
+
+
+def _named_dispatchers(disp, seen: set) -> set:
+    """qualnames of the numba dispatchers the Python source of ``disp`` names (as globals or
+    as attributes of modules it names), and recursively those they name: what compiling
+    ``disp`` compiles too (or loads from the cache), the inlined helpers' callees included. A
+    static reading (a name that is never called counts too): good enough for a schedule."""
+    from numba.core.registry import CPUDispatcher
+    out = set()
+    glob = disp.py_func.__globals__
+    names = {n for code in _code_objects(disp.py_func.__code__) for n in code.co_names}
+    found = [glob[n] for n in names if n in glob]
+    found += [getattr(m, n) for m in found if isinstance(m, types.ModuleType) for n in names
+              if isinstance(getattr(m, n, None), CPUDispatcher)]
+    for obj in found:
+        if isinstance(obj, CPUDispatcher) and id(obj) not in seen:
+            seen.add(id(obj))
+            out.add(f"{obj.py_func.__module__}.{obj.py_func.__name__}")
+            out |= _named_dispatchers(obj, seen)
+    return out
+
+
+def dependencies(entries: dict) -> dict:
+    """{qualname: the other entries of ``entries`` that compiling it would compile too}: the
+    helpers (``brdf_cos``, ``procedural_albedo`` …) that kernels call. :func:`precompile` keeps
+    two processes from compiling the same helper at once: shares fixed ahead had both compile
+    the helpers their kernels call, ~2 s of the ``fast`` group twice over."""
+    deps = {}
+    for qualname in entries:
+        try:
+            named = _named_dispatchers(dispatcher(qualname), set())
+        except (ImportError, AttributeError):  # a stale entry: it fails in its worker
+            named = set()
+        deps[qualname] = named & set(entries) - {qualname}
+    return deps
 
 
 GROUPS = ("fast", "balanced", "batched", "reference")
@@ -132,21 +181,71 @@ def load_here(groups=("fast",)) -> list:
     on-disk cache where it holds them (compiled where not); returns the entries that failed.
     What a first call would do, done ahead (the CLI's pool workers, while their scenes are
     built)."""
-    return _compile_share(list(entries_to_compile(groups).items()))
+    return _compile_share([(qualname, sigs) for qualname, (_, sigs) in entries_to_compile(groups).items()])
 
 
-def precompile(processes: int, groups=("fast",)) -> list:
+def _next_tasks(waiting: list, deps: dict, compiled: set, busy: set, free: int) -> list:
+    """[(entry, the entries its task compiles)] to start now, at most ``free``: the first of
+    ``waiting`` (in order) none of whose uncompiled entries (itself and what it calls,
+    ``deps``) is ``busy`` in a running task, nor taken by one started before it here."""
+    out, taken = [], set(busy)
+    for q in waiting:
+        if len(out) >= free:
+            break
+        need = ({q} | deps[q]) - compiled
+        if not need & taken:
+            out.append((q, need))
+            taken |= need
+    return out
+
+
+def precompile(processes: int, groups=("fast",), progress=None) -> list:
     """Compile the kernels of ``groups`` (see the module notes; :func:`entries_to_compile`) on
     ``processes`` spawned processes; returns the entries that failed (empty when all
-    compiled)."""
-    from concurrent.futures import ProcessPoolExecutor
+    compiled).
+
+    One entry per task, the longest first (recorded seconds), as a process frees up; an entry
+    waits while a running task compiles one of the helpers it calls (:func:`dependencies`), so
+    that each helper is compiled once, within the first kernel that calls it, and the other
+    kernels read it from the cache. Within its caller, as a first call compiles it, not on its
+    own: numba compiles a helper under flags it partly takes from the kernel calling it (a
+    parallel loop's body sets NumPy's error model), and a helper compiled on its own first
+    made other code, which gave one pixel of a ``balanced`` frame another last bit.
+
+    ``progress``, if given, is called in this process as each entry finishes, compiled or not,
+    with ``(done, total)``: the recorded compile seconds (:mod:`raytrace._jit_signatures`) of
+    the entries compiled so far, the helpers a kernel compiled counted with it, and of all of
+    them; the last call has ``done == total``."""
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     import multiprocessing
     from ._threads import exit_with_parent, pool_processes
-    parts = shares(entries_to_compile(groups), processes)
-    pool = ProcessPoolExecutor(max_workers=len(parts), mp_context=multiprocessing.get_context("spawn"),
+    entries = entries_to_compile(groups)
+    if not entries:
+        return []
+    deps = dependencies(entries)
+    total = sum(cost for cost, _ in entries.values())
+    workers = max(1, min(processes, len(entries)))
+    waiting = sorted(entries, key=lambda q: (-entries[q][0], q))
+    compiled, busy, running, failed = set(), set(), {}, []  # running: {future: entries it compiles}
+    done_s = 0.0
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=exit_with_parent, initargs=(os.getpid(),))
     try:
-        return [f for failed in pool.map(_compile_share, parts) for f in failed]
+        while waiting or running:
+            for q, need in _next_tasks(waiting, deps, compiled, busy, workers - len(running)):
+                waiting.remove(q)
+                running[pool.submit(_compile_share, [(q, entries[q][1])])] = need
+                busy |= need
+            finished, _ = wait(running, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                need = running.pop(fut)
+                failed += fut.result()
+                busy -= need
+                compiled |= need
+                done_s += sum(entries[q][0] for q in need)
+                if progress is not None:
+                    progress(total if not (waiting or running) else min(done_s, total), total)
+        return failed
     except KeyboardInterrupt:  # Ctrl-C, or the CLI's SIGTERM: stop compiling now, not in a minute
         # numba writes each cache file under a temporary name and renames it: a compiler killed
         # mid-write leaves no broken entry
@@ -163,7 +262,7 @@ def _dispatchers() -> dict:
     from numba.core.registry import CPUDispatcher
     out = {}
     for name, mod in sorted(sys.modules.items()):
-        if name.split(".")[0] not in ("raytrace", "degrade", "orbit"):
+        if name.split(".")[0] not in _PACKAGES:
             continue
         for attr, obj in sorted(vars(mod).items()):
             if isinstance(obj, CPUDispatcher) and obj.__module__ == name and obj.signatures:
@@ -174,18 +273,51 @@ def _dispatchers() -> dict:
 
 
 # the frames each group is recorded from (after the main job's, group "fast"): full-size
-# frames, so that every stage of the preset runs (edge pixels, coverage, Earth behind)
+# frames, so that every stage of the preset runs (edge pixels, coverage, Earth behind). The
+# main job's from two frames: the first has no penumbra to sample (no solar-disc shadow rays,
+# raytrace._shading.sun_disc_dirs), the second has, as most frames of the job do
 _RECORD_ARGS = {
-    "fast": [],
-    "balanced": ["--quality", "balanced", "--samples", "16"],
-    "batched": ["--quality", "balanced", "--samples", "16"],
-    "reference": ["--quality", "reference", "--samples", "2"],
+    "fast": ["--frames", "2"],
+    "balanced": ["--frames", "1", "--quality", "balanced", "--samples", "16"],
+    "batched": ["--frames", "1", "--quality", "balanced", "--samples", "16"],
+    "reference": ["--frames", "1", "--quality", "reference", "--samples", "2"],
 }
 
 
+def _compile_time_recorder():
+    """A numba ``numba:compile`` listener whose ``spent`` collects {qualname: seconds}: each of
+    our dispatchers' own compile time, the CPU seconds of the compiling thread between the
+    event's start and end less those of the compiles of our other dispatchers nested in it (a
+    kernel's first call compiles the helpers it calls, which are entries of their own; numba's
+    internal overloads stay with the kernel that needed them first). Own times add up to the
+    whole compile's, the total that :func:`precompile`'s ``progress`` and the CLI's estimate
+    count in; CPU seconds, so that a busy machine does not inflate them."""
+    from numba.core.event import Listener
+
+    class CompileTimes(Listener):
+        def __init__(self):
+            self.spent: dict = {}
+            self._stack: list = []
+
+        def on_start(self, event) -> None:
+            d = event.data["dispatcher"]
+            self._stack.append([f"{d.py_func.__module__}.{d.py_func.__name__}", time.thread_time(), 0.0])
+
+        def on_end(self, event) -> None:
+            qualname, t0, nested = self._stack.pop()
+            seconds = time.thread_time() - t0
+            if self._stack and qualname.split(".")[0] in _PACKAGES:
+                self._stack[-1][2] += seconds
+            self.spent[qualname] = self.spent.get(qualname, 0.0) + seconds - nested
+
+    return CompileTimes()
+
+
 def _record_here(out_dir: str) -> dict:
-    """One frame per group (:data:`GROUPS`) in this process (numba's cache empty), with every
-    kernel's compile time: {group: {qualname: (seconds, [signature reprs new in the group])}}."""
+    """The frames of each group (:data:`GROUPS`, :data:`_RECORD_ARGS`) in this process (numba's
+    cache empty), with every
+    kernel's own compile time (:func:`_compile_time_recorder`): {group: {qualname: (seconds,
+    [signature reprs new in the group])}}."""
     from numba.core import event
     sys.path.insert(0, str(_ROOT))
     import cli
@@ -196,24 +328,17 @@ def _record_here(out_dir: str) -> dict:
     for group in GROUPS:
         shade._FUSED_GATHER = group != "batched"
         scene._CAST_IN_ONE_KERNEL = group != "batched"  # the geometry pass's fallback too
-        with event.install_recorder("numba:compile") as rec:
-            status = cli.main(["--target", "cassini", "--pattern", "spiral", "--frames", "1", "--workers", "1",
+        times = _compile_time_recorder()
+        with event.install_listener("numba:compile", times):
+            status = cli.main(["--target", "cassini", "--pattern", "spiral", "--workers", "1",
                                "--out", str(Path(out_dir) / group), "--quiet", *_RECORD_ARGS[group]])
         if status != 0:
             raise RuntimeError(f"the {group} frame failed (exit {status})")
-        spent, start = {}, {}
-        for ts, ev in rec.buffer:
-            d = ev.data["dispatcher"]
-            key = (f"{d.py_func.__module__}.{d.py_func.__name__}", str(ev.data.get("args")))
-            if ev.is_start:
-                start[key] = ts
-            elif key in start:
-                spent[key[0]] = spent.get(key[0], 0.0) + ts - start.pop(key)
         out = {}
         for qualname, sigs in _dispatchers().items():
             new = [x for x in sigs if x not in seen.get(qualname, ())]
             if new:
-                out[qualname] = (round(spent.get(qualname, 0.0), 2), new)
+                out[qualname] = (round(times.spent.get(qualname, 0.0), 2), new)
                 seen.setdefault(qualname, set()).update(new)
         result[group] = out
     shade._FUSED_GATHER = True
@@ -230,13 +355,13 @@ def _entries(sig: dict, indent: str) -> list:
 
 
 def record() -> None:
-    """Write ``raytrace/_jit_signatures.py`` from one frame per group in a fresh process."""
+    """Write ``raytrace/_jit_signatures.py`` from the frames of each group in a fresh process."""
     with tempfile.TemporaryDirectory() as tmp:
         env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "numba"))
         res = subprocess.run([sys.executable, "-m", "raytrace._precompile", "--record-here", str(Path(tmp) / "o")],
                              cwd=_ROOT, env=env, capture_output=True, text=True, check=True)
     groups = json.loads(res.stdout.strip().splitlines()[-1])
-    lines = ['"""Signatures and compile times [s] of the numba kernels one frame of the main job calls',
+    lines = ['"""Signatures and own compile times [CPU s] of the numba kernels the main job\'s frames call',
              "(SIGNATURES, group ``fast``), and those a ``balanced``, a batched ``balanced`` and a",
              "``reference`` frame add (EXTRA_SIGNATURES); generated by",
              '``python -m raytrace._precompile --record`` (see raytrace._precompile)."""', "",

@@ -208,7 +208,7 @@ def env_cells(p, texture, n, sub):
     """Mean environment radiance (RGB) over each of the n×n octahedral cells, from sub×sub
     directions per cell, seen from the body origin (Earth's parallax over a target is
     < 1e-5 rad), shape (n·n, 3)."""
-    out = np.zeros((n * n, 3))
+    out = np.empty((n * n, 3))  # every row is written (np.zeros: a parallel loop more to compile)
     for c in numba.prange(n * n):
         i = c % n
         j = c // n

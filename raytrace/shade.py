@@ -182,7 +182,7 @@ class RenderFrame:
 def _surfaces(scene: Scene, O, D, face) -> dict:
     """The surface points where rays O + t D hit triangles ``face`` of ``scene``: point,
     shading and geometric normals, direction to the viewer, barycentrics, side, part
-    (:func:`raytrace._shading.surfaces`)."""
+    (:func:`raytrace._shading.surfaces`; ``O`` a row per ray, or one row for all)."""
     n = len(D)
     out = {k: np.empty((n, 3)) for k in ("P", "NS", "NG", "WO")}
     out["B"] = np.empty((n, 2))
@@ -1345,7 +1345,7 @@ def _trace_subsamples(sunl: _Sunlight, scene: Scene, o_body, D, h, centre, numbe
         n_idx = np.empty(len(idx), np.int64)  # and its number there
         K.subsample_hits(idx, h["geomID"], h["primID"], scene.face_offset, D, np.asarray(centre, np.int64),
                          np.asarray(number, np.int64), face, Dh, c_idx, n_idx)
-        s = _surfaces(scene, np.broadcast_to(o_body, Dh.shape), Dh, face)  # (one origin: no copy per row)
+        s = _surfaces(scene, np.asarray(o_body, np.float64).reshape(1, 3), Dh, face)  # one origin for all
         disc = None
         if sunl.lighting.sun_angular_diameter_rad > 0.0 and S > 1:
             # one solar-disc sample per sub-sample, stratified over the pixel's S sub-samples in

@@ -196,3 +196,28 @@ def test_a_mesh_whose_size_suggests_millimetres_gets_a_warning_naming_the_flag(t
     assert err.count("\n") == 1 and "--mesh-unit-m 0.001" in err and "1732 m across" in err
     assert run_main("--mesh", path, "--mesh-unit-m", "0.001", "--dry-run", "--frames", "2") == 0
     assert capsys.readouterr().err == ""
+
+
+# --------------------------------------------------------------------------- the compile step
+def test_the_first_run_compile_shows_a_progress_bar_to_its_end(monkeypatch, capsys):
+    """The first run's compile says what it does and how long it should take, then draws a bar
+    that the compiling processes advance (here a stand-in that reports three steps) to 100 %."""
+    from raytrace import _precompile
+    calls = []
+
+    def fake_precompile(processes, groups, progress=None):
+        total = sum(c for c, _ in _precompile.group_signatures(groups).values())
+        for done in (0.25 * total, 0.5 * total, total):
+            progress(done, total)
+        calls.append((processes, tuple(groups)))
+        return []
+
+    monkeypatch.setattr(_precompile, "precompile", fake_precompile)
+    cli._compile_kernels(["fast"], quiet=False)
+    err = capsys.readouterr().err
+    assert calls and calls[0][1] == ("fast",)
+    assert "compiling the ray-tracing kernels (fast)" in err and "about" in err
+    frames = [f for f in err.replace("\r", "\n").splitlines() if f.startswith("compiling:")]
+    assert frames and "100%" in frames[-1], err
+    cli._compile_kernels(["fast"], quiet=True)  # --quiet: nothing
+    assert capsys.readouterr().err == ""

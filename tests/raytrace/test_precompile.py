@@ -1,7 +1,7 @@
 """raytrace._precompile: the recorded signatures of every group's kernels still match the code
 (regenerate with ``python -m raytrace._precompile --record`` when this fails), the groups merge
-without losing a signature, the shares are balanced, and compiling a share reports stale
-entries instead of failing."""
+without losing a signature, each helper compiles once, within the first kernel that calls it,
+compiling reports stale entries instead of failing, and its progress as each entry finishes."""
 import os
 import sys
 from pathlib import Path
@@ -31,15 +31,25 @@ def test_every_recorded_kernel_exists_and_takes_its_recorded_arguments(group):
             assert all(isinstance(t, types.Type) for t in tys)
 
 
-def test_shares_hold_every_entry_once_and_balance_the_compile_time():
-    parts = P.shares(SIGNATURES, 2)
-    names = [q for part in parts for q, _ in part]
-    assert sorted(names) == sorted(SIGNATURES)
-    load = [sum(SIGNATURES[q][0] for q, _ in part) for part in parts]
-    biggest = max(c for c, _ in SIGNATURES.values())
-    assert abs(load[0] - load[1]) <= biggest + 1e-9  # greedy longest-first: within one entry
-    assert P.shares(SIGNATURES, 1) == [sorted(((q, s) for q, (c, s) in SIGNATURES.items()),
-                                              key=lambda e: (-SIGNATURES[e[0]][0], e[0]))]
+def test_each_helper_is_compiled_once_within_the_first_kernel_that_calls_it():
+    """raytrace._precompile.dependencies reads which entries a kernel's code calls (also through
+    inlined helpers and module attributes such as ``env.earth_albedo``); the schedule starts
+    the longest entries first but never two tasks that would compile the same helper, so each
+    helper is compiled once, within its first caller (as a first call compiles it), and read
+    from the cache by the others."""
+    deps = P.dependencies(SIGNATURES)
+    assert set(deps) == set(SIGNATURES)
+    assert {"raytrace.brdf.brdf_cos", "raytrace.brdf._lambda"} <= deps["raytrace._shading.add_mirror"]
+    assert "raytrace.environment.procedural_albedo" in deps["raytrace._shading.earth_background"]
+    assert "raytrace.environment._hash3" in deps["raytrace.environment.procedural_albedo"]
+    assert deps["raytrace.brdf._lambda"] == set()
+    d = {"k1": {"h", "g"}, "k2": {"h"}, "k3": set(), "h": {"g"}, "g": set()}
+    waiting = ["k1", "k2", "k3", "h", "g"]
+    assert P._next_tasks(waiting, d, set(), set(), 2) == [("k1", {"k1", "h", "g"}), ("k3", {"k3"})]
+    assert P._next_tasks(["k2", "h", "g"], d, {"k3"}, {"k1", "h", "g"}, 1) == []  # h is being compiled
+    # once k1 has compiled h and g, k2 compiles only itself and h's own task nothing new
+    assert P._next_tasks(["k2", "h", "g"], d, {"k1", "h", "g", "k3"}, set(), 3) == \
+        [("k2", {"k2"}), ("h", set()), ("g", set())]
 
 
 def test_a_share_compiles_into_the_cache_and_reports_a_stale_entry():
@@ -48,6 +58,96 @@ def test_a_share_compiles_into_the_cache_and_reports_a_stale_entry():
     assert P._compile_share([good]) == []
     failed = P._compile_share([stale])
     assert len(failed) == 1 and failed[0].startswith("raytrace._shading.ray_groups(int64,)")
+
+
+def test_precompile_reports_its_progress_as_each_entry_finishes(tmp_path, monkeypatch):
+    """precompile(..., progress=callable) calls back in the calling process once per entry, in
+    recorded seconds, the last call (total, total): here on a table of its own (two cheap
+    helpers, one calling the other, and a stale entry; the costs made up) compiled by two
+    spawned processes into a temporary numba cache."""
+    table = {
+        "raytrace.cache._hash32": (1.0, SIGNATURES["raytrace.cache._hash32"][1]),
+        "raytrace.cache._hash01": (2.0, SIGNATURES["raytrace.cache._hash01"][1]),  # calls _hash32
+        "raytrace._shading.permute": (0.5, ["(int64,)"]),  # wrong arity: a signature from older code
+    }
+    monkeypatch.setattr(P, "entries_to_compile", lambda groups=("fast",): dict(table))
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))  # the workers' cache
+    calls = []
+    failed = P.precompile(2, ["fast"], progress=lambda done, total: calls.append((done, total)))
+    assert len(failed) == 1 and failed[0].startswith("raytrace._shading.permute(int64,)")
+    assert len(calls) == len(table)
+    assert all(total == 3.5 for _, total in calls)
+    done = [d for d, _ in calls]
+    assert done[-1] == 3.5 and done == sorted(done)
+    # one call per entry; _hash01 (the longest) compiles _hash32 within it, and counts it: the
+    # task of _hash32 that waited for it adds nothing
+    assert sorted(b - a for a, b in zip([0.0] + done, done)) == [0.0, 0.5, 3.0]
+    index = {p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")}
+    assert {"cache._hash32", "cache._hash01"} <= index
+
+
+def test_precompile_without_a_callback_compiles_and_returns_the_failures(tmp_path, monkeypatch):
+    table = {"raytrace.cache._hash32": (1.0, SIGNATURES["raytrace.cache._hash32"][1])}
+    monkeypatch.setattr(P, "entries_to_compile", lambda groups=("fast",): dict(table))
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    assert P.precompile(2) == []
+    assert [p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")] == ["cache._hash32"]
+
+
+def test_recorded_compile_times_are_each_kernels_own(monkeypatch):
+    """The recorder behind ``--record`` charges a nested compile of one of our dispatchers (a
+    helper a kernel calls) to the helper alone, and one of numba's own (an overload) to the
+    kernel that needed it: the times add up to the compile's total."""
+    from types import SimpleNamespace
+    clock = iter([0.0, 1.0, 3.0, 4.0, 4.5, 7.0])  # kernel, helper, numba overload
+    monkeypatch.setattr(P.time, "thread_time", lambda: next(clock))
+
+    def event(module, name, start):
+        func = SimpleNamespace(__module__=module, __name__=name)
+        return SimpleNamespace(data={"dispatcher": SimpleNamespace(py_func=func)}, is_start=start)
+
+    rec = P._compile_time_recorder()
+    rec.on_start(event("raytrace._shading", "add_mirror", True))  # 0.0
+    rec.on_start(event("raytrace.brdf", "brdf_cos", True))  # 1.0
+    rec.on_end(event("raytrace.brdf", "brdf_cos", False))  # 3.0: 2 s its own
+    rec.on_start(event("numba.np.arrayobj", "impl", True))  # 4.0
+    rec.on_end(event("numba.np.arrayobj", "impl", False))  # 4.5: stays with the kernel
+    rec.on_end(event("raytrace._shading", "add_mirror", False))  # 7.0
+    assert rec.spent["raytrace.brdf.brdf_cos"] == 2.0
+    assert rec.spent["raytrace._shading.add_mirror"] == 5.0
+
+
+def test_numbas_flag_comparison_keeps_its_results():
+    """raytrace._jit.fast_flag_comparison: numba's compiler flags compare, hash and list their
+    values as numba's own code does (every option read through its property)."""
+    from numba.core.compiler import Flags
+    from raytrace import _jit
+    assert _jit.FAST_FLAG_COMPARISON
+
+    def reference(f):
+        return {k: getattr(f, k) for k in type(f).options}
+
+    a, b, c = Flags(), Flags(), Flags()
+    a.nrt = b.nrt = True
+    c.nrt = True
+    c.fastmath = {"nsz"}
+    d = Flags()
+    d.nrt = True
+    d.boundscheck = Flags.options["boundscheck"].default  # set, to its default: equal to unset
+    for f in (a, b, c, d):
+        assert f.values() == reference(f) and list(f.values()) == list(reference(f))
+        assert hash(f) == hash(tuple(sorted(type(f).options)))
+    assert a == b and a == d and not (a == c) and a != c
+    assert (a == 3) is False
+
+
+def test_load_here_loads_the_recorded_kernels_into_this_process(monkeypatch):
+    """load_here (the CLI's pool workers, while the scenes are built): every entry of the table
+    compiled or loaded here, none reported as failed."""
+    qualname = "raytrace._shading.ray_groups"
+    monkeypatch.setattr(P, "entries_to_compile", lambda groups=("fast",): {qualname: SIGNATURES[qualname]})
+    assert P.load_here() == []
+    assert set(SIGNATURES[qualname][1]) <= {repr(tuple(s)) for s in P.dispatcher(qualname).signatures}
 
 
 def test_groups_merge_into_the_union_of_their_signatures():
