@@ -280,7 +280,8 @@ def _options() -> tuple:
           "frame lit and in view, the orbit plane that does best)"),
         O("--arg-lat-deg", "orbit", _float_in(-360.0, 360.0, unit=deg), None,
           "argument of latitude of the target at the epoch [deg] (default: the phase that keeps the target fully "
-          "sunlit and in view in the most frames; give one to set it: 180 flies the default spiral through Earth's shadow)"),
+          "sunlit and in view in the most frames; give one to set it: 180 flies the default spiral through "
+          "Earth's shadow)"),
         O("--epoch", "orbit", _utc, DEFAULT_EPOCH_UTC, "UTC epoch of frame 0, ISO 8601"),
         O("--sun-margin-deg", "orbit", _float_in(0.0, 90.0, unit=deg), 20.0,
           "stray-light margin added to the Sun's radius for the Sun-in-lens test [deg]"),
@@ -1361,8 +1362,9 @@ def _scenario(plan: dict) -> dict:
                         "auto: per frame, 99.5th luminance percentile of the target -> 0.9 (exposure_scale in labels)")
     if cfg["degrade"]["degrade"] == "physical" and cfg["degrade"]["motion_blur"] == "auto":
         scen["motion_blur"] = ("auto: per frame, a straight line along the principal axis v of the target's hull "
-                               "vertices' image positions over the exposure, of length min(sqrt(12 lambda), E) (lambda: "
-                               "their mean variance along v; E: the RMS of their paths' extents along v), the largest "
+                               "vertices' image positions over the exposure, of length min(sqrt(12 lambda), E) "
+                               "(lambda: their mean variance along v; E: the RMS of their paths' extents along v), the "
+                               "largest "
                                "over centred parts of the exposure, at most the image diagonal; motion_blur_px and "
                                "motion_angle_deg in labels")
     scen["random_streams"] = ("frame i: SeedSequence(seed).spawn(n)[i]; render seed = generate_state(1)[0] mod 2^31, "
@@ -1889,7 +1891,8 @@ def fit_workers(cameras: list, workers: int) -> int:
     cam = max(cameras, key=lambda c: c.width * c.height)
     need = WORKER_BASE_BYTES + FRAME_BYTES_PER_PIXEL * cam.width * cam.height
     if need > total:
-        raise CLIError(f"argument --width/--height: a {cam.width}x{cam.height} frame needs about {need / 2**30:.1f} GiB "
+        raise CLIError(f"argument --width/--height: a {cam.width}x{cam.height} frame needs about "
+                       f"{need / 2**30:.1f} GiB "
                        f"of memory to render, more than this machine's {total / 2**30:.1f} GiB; render a smaller image "
                        "(or crop it: a longer --focal-length-mm at a smaller size)")
     fit = max(1, int(available // need))
@@ -2325,7 +2328,8 @@ def render_scene_main(argv: list[str]) -> int:
                      description="Render one frame of the scene described by a JSON file (schema in README).")
     parser.add_argument("scene", help="scene file (JSON)")
     parser.add_argument("--out", type=_out_path, required=True, help="output folder (created if missing)")
-    parser.add_argument("--quality", type=_choice(QUALITIES), default=None, metavar=_choices_metavar(_choice(QUALITIES)),
+    parser.add_argument("--quality", type=_choice(QUALITIES), default=None,
+                        metavar=_choices_metavar(_choice(QUALITIES)),
                         help="overrides the file's quality preset (default: the file's)")
     parser.add_argument("--samples", type=_int_in(1, 1 << 20), default=None,
                         help="overrides the preset's sample count")
@@ -2916,9 +2920,11 @@ def snapshots_main(argv: list) -> int:
                 "in tests/snapshots/: masks exactly, depth and normals within tight tolerances, RGB by PSNR >= 45 dB. "
                 "Exit status 1 when something moved (a diff image per failure). --update rewrites the references.")
     p.add_argument("--update", action="store_true", help="rewrite the references instead of comparing (deliberate)")
-    p.add_argument("--targets", type=_subset(TARGETS), default=None, metavar=_choices_metavar(_subset(TARGETS), True),
+    p.add_argument("--targets", type=_subset(TARGETS), default=None,
+                   metavar=_choices_metavar(_subset(TARGETS), True),
                    help="only these targets, comma-separated (default: all)")
-    p.add_argument("--patterns", type=_subset(PATTERNS), default=None, metavar=_choices_metavar(_subset(PATTERNS), True),
+    p.add_argument("--patterns", type=_subset(PATTERNS), default=None,
+                   metavar=_choices_metavar(_subset(PATTERNS), True),
                    help="only these patterns, comma-separated (default: all)")
     p.add_argument("--dir", type=_out_path, default=SNAPSHOT_DIR, metavar="DIR",
                    help="reference folder (default: tests/snapshots)")

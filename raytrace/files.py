@@ -229,14 +229,19 @@ def atomic_write_image(path: str, pixels: np.ndarray, *, noisy: bool = False) ->
     _replace(tmp, path)
 
 
+def _write_synced(fh, data: bytes) -> None:
+    """Write ``data`` to the open binary file ``fh`` and have it on disk before returning."""
+    fh.write(data)
+    fh.flush()
+    os.fsync(fh.fileno())
+
+
 def atomic_write_bytes(path: str, data: bytes) -> None:
     """Write ``data`` to a temporary name in the same folder, fsync, then rename into place."""
     tmp = _temporary(path)
     try:
         with open(tmp, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
+            _write_synced(fh, data)
     except BaseException:
         _unlink(tmp)
         raise
@@ -264,9 +269,7 @@ def create_new_text(path: str, text: str) -> bool:
     tmp = _temporary(path)
     try:
         with open(tmp, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
+            _write_synced(fh, data)
         try:
             os.link(tmp, path)
             return True
@@ -280,9 +283,7 @@ def create_new_text(path: str, text: str) -> bool:
             return False
         try:
             with os.fdopen(fd, "wb") as fh:
-                fh.write(data)
-                fh.flush()
-                os.fsync(fh.fileno())
+                _write_synced(fh, data)
         except BaseException:
             _unlink(path)
             raise

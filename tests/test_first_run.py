@@ -15,15 +15,11 @@ import cli
 from orbit.patterns import PATTERNS
 from raytrace import files as F
 from raytrace.targets import BUILTIN_TARGETS
+from tests.cli_helpers import run_main
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def run_main(*argv) -> int:
-    try:
-        return cli.main([str(a) for a in argv])
-    except SystemExit as exc:
-        return exc.code
 
 
 def json_doc(capsys, *argv) -> dict:

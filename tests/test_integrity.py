@@ -20,16 +20,12 @@ import pytest
 
 import cli
 from raytrace import files as F
+from tests.cli_helpers import run_main
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ["--target", "tiangong", "--frames", "2", "--width", "64", "--height", "48", "--workers", "1", "--quiet"]
 
 
-def run_main(*argv) -> int:
-    try:
-        return cli.main([str(a) for a in argv])
-    except SystemExit as exc:  # argparse errors exit
-        return exc.code
 
 
 def tree(folder: Path) -> dict:

@@ -21,6 +21,7 @@ import pytest
 
 import cli
 from raytrace import files as F
+from tests.cli_helpers import run_main
 from tests.raytrace.oracles import png_chunks
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,11 +30,6 @@ SMALL = ["--target", "icesat", "--pattern", "spiral", "--frames", "8", "--width"
 MODS = ["--modalities", "rgb,rgb_degraded,mask,depth,normal,hdr"]
 
 
-def run_main(*argv) -> int:
-    try:
-        return cli.main([str(a) for a in argv])
-    except SystemExit as exc:  # argparse errors exit
-        return exc.code
 
 
 def tree(folder: Path) -> dict:
