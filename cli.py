@@ -33,6 +33,7 @@ with status 2, leaving nothing behind.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -1666,6 +1667,34 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def frame_threads(workers: int, tasks: int) -> int:
+    """The numba threads each frame of :func:`execute` runs on: the pool's workers share the
+    cores; one worker (or one frame) renders in this process, on numba's threads."""
+    if workers <= 1 or tasks <= 1:
+        import numba
+        return numba.config.NUMBA_NUM_THREADS
+    return max(1, default_workers() // min(workers, tasks))
+
+
+@contextlib.contextmanager
+def _prebuild_threads(threads: int, quality: str):
+    """The threads :func:`_prebuild_scenes` runs on here: all of numba's, unless the workers run
+    one each (the kernels' serial builds) and numba's cache lacks the parallel builds (a fresh
+    install): then one thread, on the serial builds the workers use, rather than compiling
+    the parallel ones for this alone (~10 s of CPU against ~2 s of a Cassini cache on two
+    cores). The same scene and cache either way (``raytrace._jit.ThreadedKernel``)."""
+    if threads != 1 or not _kernels_not_compiled(quality, serial=False):
+        yield
+        return
+    import numba
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+
+
 def connect_scheduler(scheduler: str):
     """A dask.distributed client of ``--scheduler``, connected before anything is written (a
     scheduler that cannot be reached leaves no folder behind)."""
@@ -1705,7 +1734,7 @@ def execute(tasks: list, *, workers: int, progress=None, client=None):
     import shutil
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     n = min(workers, len(tasks))
-    threads = max(1, default_workers() // n)
+    threads = frame_threads(workers, len(tasks))
     pool = ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_worker_init, initargs=(threads,))
     folder = None
@@ -1717,7 +1746,8 @@ def execute(tasks: list, *, workers: int, progress=None, client=None):
             from raytrace.files import process_folder
             try:
                 folder = process_folder(_SCENES_FOLDER)
-                prebuilt = _prebuild_scenes(tasks, folder)
+                with _prebuild_threads(threads, tasks[0]["cfg"]["render"]["quality"]):
+                    prebuilt = _prebuild_scenes(tasks, folder)
             except (OSError, pickle.PicklingError) as exc:  # e.g. no room in the temporary folder
                 sys.stderr.write(f"{PROG}: warning: the workers build their own scenes ({exc})\n")
                 prebuilt = {}
@@ -1798,29 +1828,37 @@ def _precompile_groups(quality: str) -> list:
     return groups
 
 
-def _kernels_not_compiled(quality: str = "fast") -> list:
+def _kernels_not_compiled(quality: str = "fast", serial: bool = False) -> list:
     """The groups of :func:`_precompile_groups` whose kernels numba's on-disk cache does not
-    hold yet (a fresh install, a new NUMBA_CACHE_DIR, a first ``balanced`` run): judged by the
-    cache index of one kernel per group, where numba's own cache locator puts it (next to the
-    source when writable, else the user's cache directory). Empty if numba's cache internals
-    cannot be read (no guess then)."""
+    hold yet, in their serial builds (``serial``: for processes on one numba thread each) or
+    their parallel ones (a fresh install, a new NUMBA_CACHE_DIR, a first ``balanced`` run):
+    judged by the cache index of one kernel per group, where numba's own cache locator puts it
+    (next to the source when writable, else the user's cache directory). Empty if numba's
+    cache internals cannot be read (no guess then)."""
     try:
         from raytrace._precompile import dispatcher, probe
         missing = []
         for group in _precompile_groups(quality):
             name = probe(group)
-            if name is not None and not os.path.exists(dispatcher(name)._cache._cache_file._index_path):
+            if name is not None and not os.path.exists(dispatcher(name, serial)._cache._cache_file._index_path):
                 missing.append(group)
         return missing
     except Exception:  # noqa: BLE001 (numba internals of another version)
         return []
 
 
-def _compile_kernels(groups: list, quiet: bool) -> None:
-    """A fresh install (or a preset's first run): compile the numba kernels of ``groups`` into
-    numba's cache on all cores at once (:func:`raytrace._precompile.precompile`), before the
-    workers start and would each compile all of them, under a progress bar: its unit is the
-    kernels' recorded compile time, so its rate and remaining time are measured on this
+SERIAL_COMPILE_RATIO = 0.5
+"""Compile time of the kernels' serial builds over the parallel builds' that
+``raytrace/_jit_signatures.py`` records: the ``fast`` group compiled in one process, 28.9 CPU s
+against the 59.7 recorded (2-core AMD EPYC)."""
+
+
+def _compile_kernels(groups: list, quiet: bool, serial: bool = False) -> None:
+    """A fresh install (or a preset's first run): compile the numba kernels of ``groups``, in
+    the builds the frames will call (``serial``: the pool's workers run one numba thread each),
+    into numba's cache on all cores at once (:func:`raytrace._precompile.precompile`), before
+    the workers start and would each compile all of them, under a progress bar: its unit is
+    the kernels' recorded compile time, so its rate and remaining time are measured on this
     machine as it goes. A kernel this misses compiles on its first call, as it would anyway."""
     processes = max(1, min(default_workers(), 4))
     try:
@@ -1829,7 +1867,8 @@ def _compile_kernels(groups: list, quiet: bool) -> None:
     except Exception:  # noqa: BLE001 (the estimate only)
         total = 0.0
     if not quiet:
-        about = f"about {5 * max(1, round(total / processes / 5))} s on idle cores" if total else "a minute or two"
+        seconds = total * (SERIAL_COMPILE_RATIO if serial else 1.0) / processes
+        about = f"about {5 * max(1, round(seconds / 5))} s on idle cores" if total else "a minute or two"
         print(f"first run: compiling the ray-tracing kernels ({', '.join(groups)}) into numba's cache, once, on "
               f"{processes} core{'s' if processes > 1 else ''} ({about}; the bar measures it as it goes)",
               file=sys.stderr)
@@ -1842,7 +1881,7 @@ def _compile_kernels(groups: list, quiet: bool) -> None:
 
     try:
         from raytrace._precompile import precompile
-        precompile(processes, groups, progress=progress)
+        precompile(processes, groups, progress=progress, serial=serial)
     except Exception:  # noqa: BLE001 (an optimisation: without it the kernels compile lazily)
         pass
     finally:
@@ -1950,9 +1989,11 @@ def _render_claimed(jobs: list, args: argparse.Namespace, desc: str | None, work
                       "visible": sum(f["visible"] for f in plan["result"]["frames"])})
     skipped = sum(s["skipped"] for s in stats)
     t0 = time.perf_counter()
-    missing = _kernels_not_compiled(getattr(args, "quality", "fast")) if all_tasks and args.scheduler is None else []
+    serial = frame_threads(workers, len(all_tasks)) == 1
+    missing = (_kernels_not_compiled(getattr(args, "quality", "fast"), serial)
+               if all_tasks and args.scheduler is None else [])
     if missing:
-        _compile_kernels(missing, quiet=args.quiet)
+        _compile_kernels(missing, quiet=args.quiet, serial=serial)
     bar = _progress(len(all_tasks) + skipped, skipped, desc or jobs[0][0]["name"], args.quiet)
     try:
         for _ in execute(all_tasks, workers=workers, client=client, progress=bar):
@@ -2353,9 +2394,10 @@ def render_scene_main(argv: list[str]) -> int:
             sys.stderr.write(f"{PROG}: warning: sun.shadow_fraction is {spec.lighting.shadow_fraction:g} but the "
                              f"scene's Earth leaves {nu_geo:.3g} of the solar disc visible from the target; the "
                              "render uses shadow_fraction (set it to match if the eclipse is meant)\n")
-        missing = _kernels_not_compiled(quality)
+        serial = frame_threads(1, 1) == 1
+        missing = _kernels_not_compiled(quality, serial)
         if missing:
-            _compile_kernels(missing, quiet=False)
+            _compile_kernels(missing, quiet=False, serial=serial)
         t0 = time.perf_counter()
         frame = render(Scene(spec.model), spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting,
                        quality=quality, samples=samples, seed=seed)

@@ -12,6 +12,13 @@ real process, alternating
 
 round by round so that load on a shared machine hits both alike, and prints each run's wall
 time, the medians and their ratio. Output goes to temporary folders.
+
+``--tree DIR`` (repeatable) runs the ``cli.py`` of each checkout in turn within every round
+(its packages are imported from that checkout), each with a warm cache of its own, and adds
+the ratios of each tree's medians to the first's::
+
+    git worktree add /tmp/before <commit>
+    python benchmarks/bench_first_run.py --tree /tmp/before --tree .
 """
 
 from __future__ import annotations
@@ -29,15 +36,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def run(args: list, cache_dir: str) -> dict:
+def run(args: list, cache_dir: str, tree: Path = ROOT) -> dict:
     env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir)
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        res = subprocess.run([sys.executable, str(ROOT / "cli.py"), *args, "--out", os.path.join(tmp, "o")],
+        res = subprocess.run([sys.executable, str(tree / "cli.py"), *args, "--out", os.path.join(tmp, "o")],
                              capture_output=True, text=True, check=False, cwd=tmp, env=env)
         wall = time.perf_counter() - t0
     if res.returncode != 0:
-        raise RuntimeError(f"cli.py {' '.join(args)} failed: {res.stderr.strip()[-400:]}")
+        raise RuntimeError(f"{tree}/cli.py {' '.join(args)} failed: {res.stderr.strip()[-400:]}")
     return {"wall_s": wall, "compiled": "compiling" in res.stderr, "summary": res.stdout.strip().splitlines()[-1]}
 
 
@@ -45,27 +52,40 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--args", default="--target cassini --pattern spiral")
+    p.add_argument("--tree", action="append", type=Path, help="a checkout whose cli.py to run (repeatable; "
+                   "default: this one)")
     a = p.parse_args()
     args = shlex.split(a.args)
+    trees = [t.resolve() for t in a.tree] if a.tree else [ROOT]
+    cold = {t: [] for t in trees}
+    warm = {t: [] for t in trees}
     with tempfile.TemporaryDirectory() as root:
-        warm_dir = os.path.join(root, "warm")
-        print("filling the warm cache (untimed) ...", flush=True)
-        run(args, warm_dir)
-        cold, warm = [], []
+        warm_dirs = {t: os.path.join(root, f"warm{i}") for i, t in enumerate(trees)}
+        print("filling the warm caches (untimed) ...", flush=True)
+        for t in trees:
+            run(args, warm_dirs[t], t)
         for k in range(a.repeats):
-            c = run(args, os.path.join(root, f"cold{k}"))
-            w = run(args, warm_dir)
-            assert c["compiled"] and not w["compiled"], (c, w)
-            cold.append(c["wall_s"])
-            warm.append(w["wall_s"])
-            print(f"round {k + 1}: cold {c['wall_s']:.1f} s, warm {w['wall_s']:.1f} s", flush=True)
-    mc, mw = statistics.median(cold), statistics.median(warm)
+            for i, t in enumerate(trees):
+                c = run(args, os.path.join(root, f"cold{i}-{k}"), t)
+                w = run(args, warm_dirs[t], t)
+                assert c["compiled"] and not w["compiled"], (c, w)
+                cold[t].append(c["wall_s"])
+                warm[t].append(w["wall_s"])
+                print(f"round {k + 1} {t}: cold {c['wall_s']:.1f} s, warm {w['wall_s']:.1f} s", flush=True)
     print(f"\ncli.py {a.args} ({os.cpu_count()} cores)")
-    print("| run | " + " | ".join(f"round {k + 1}" for k in range(a.repeats)) + " | median |")
-    print("|---|" + "---|" * (a.repeats + 1))
-    print("| cold (empty numba cache), s | " + " | ".join(f"{v:.1f}" for v in cold) + f" | {mc:.1f} |")
-    print("| warm, s | " + " | ".join(f"{v:.1f}" for v in warm) + f" | {mw:.1f} |")
-    print(f"cold / warm = {mc / mw:.2f}; compiling costs {mc - mw:.1f} s")
+    print("| tree | run | " + " | ".join(f"round {k + 1}" for k in range(a.repeats)) + " | median |")
+    print("|---|---|" + "---|" * (a.repeats + 1))
+    for t in trees:
+        for name, runs in (("cold (empty numba cache), s", cold[t]), ("warm, s", warm[t])):
+            print(f"| {t.name} | {name} | " + " | ".join(f"{v:.1f}" for v in runs)
+                  + f" | {statistics.median(runs):.1f} |")
+    for t in trees:
+        mc, mw = statistics.median(cold[t]), statistics.median(warm[t])
+        line = f"{t.name}: cold / warm = {mc / mw:.2f}; compiling costs {mc - mw:.1f} s"
+        if t != trees[0]:
+            c0, w0 = statistics.median(cold[trees[0]]), statistics.median(warm[trees[0]])
+            line += f"; against {trees[0].name}: cold {mc / c0:.2f}x, warm {mw / w0:.2f}x"
+        print(line)
 
 
 if __name__ == "__main__":

@@ -193,8 +193,63 @@ FAST_FLAG_COMPARISON = fast_flag_comparison()
 
 FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
+class ThreadedKernel:
+    """A kernel with ``prange`` loops, built twice by numba: ``parallel`` (``parallel=True``:
+    the loops run on numba's threads) and ``serial`` (the same code, each ``prange`` a plain
+    loop, under a name of its own in numba's cache). A call runs the serial build where the
+    calling thread's numba thread count is 1 (the CLI's pool workers when there are as many
+    as cores, a one-core machine), the parallel one elsewhere. Both compute every output
+    element by the same code and no kernel sums across loop iterations, so their results are
+    the same bits; the serial build compiles in about half the time (numba's parfor passes
+    and the loop body's gufunc wrappers are what ``parallel=True`` adds), which is most of a
+    fresh install's first run (BENCHMARKS.md, "Compiling the main job's kernels on a fresh
+    install"), and a process compiles or loads only the build its threads call.
+
+    Called from Python only: a numba kernel cannot call it (none does; it would call a
+    ``jit`` helper instead)."""
+
+    def __init__(self, py_func, **options):
+        self.py_func = py_func
+        self.parallel = numba.njit(parallel=True, **options)(py_func)
+        self.serial = numba.njit(**options)(serial_copy(py_func))
+        self.__name__, self.__qualname__ = py_func.__name__, py_func.__qualname__
+        self.__module__, self.__doc__ = py_func.__module__, py_func.__doc__
+
+    def build(self, serial: bool):
+        """The serial or the parallel build (a numba dispatcher)."""
+        return self.serial if serial else self.parallel
+
+    def __call__(self, *args):
+        return (self.serial if numba.get_num_threads() == 1 else self.parallel)(*args)
+
+    def __repr__(self) -> str:
+        return f"<ThreadedKernel {self.__module__}.{self.__qualname__}>"
+
+
+SERIAL_SUFFIX = ".serial"
+
+
+def serial_copy(py_func):
+    """``py_func`` again, qualified name ending in :data:`SERIAL_SUFFIX`: numba names a cache
+    entry after the function's module, qualified name and first line and keys it by signature
+    alone, not by ``parallel``, so both builds under one name would overwrite each other's."""
+    import types
+    copy = types.FunctionType(py_func.__code__, py_func.__globals__, py_func.__name__, py_func.__defaults__,
+                              py_func.__closure__)
+    copy.__kwdefaults__ = py_func.__kwdefaults__
+    copy.__qualname__ = py_func.__qualname__ + SERIAL_SUFFIX
+    copy.__module__, copy.__doc__ = py_func.__module__, py_func.__doc__
+    return copy
+
+
+def _threaded(**options):
+    def decorate(py_func):
+        return ThreadedKernel(py_func, **options)
+    return decorate
+
+
 jit = numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
-pjit = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, parallel=True)
+pjit = _threaded(cache=True, fastmath=FASTMATH, nogil=True)
 jit_exact = numba.njit(cache=True, nogil=True)
-pjit_exact = numba.njit(cache=True, nogil=True, parallel=True)
+pjit_exact = _threaded(cache=True, nogil=True)
 inline = numba.njit(cache=True, nogil=True, inline="always")

@@ -9,7 +9,11 @@ each calling ``Dispatcher.compile`` with ``cache=True``, so the cache is written
 parallel; the workers then load every kernel from it. No two processes compile the same
 helper (:func:`dependencies`), and a caller can follow the progress (``progress``). A kernel
 whose recorded signature no longer matches the code is skipped (it compiles on first call, as
-without this step).
+without this step). The kernels with parallel loops are built twice
+(``raytrace._jit.ThreadedKernel``): ``serial=True`` compiles the builds that processes on one
+numba thread each call (the CLI's pool workers when there are as many as cores: the first
+command on two cores), in about half the time of the parallel builds, which the recorded
+seconds measure.
 
 Where the time goes (``fast``, one process, cold cache; BENCHMARKS.md, "Compiling the main
 job's kernels on a fresh install"): ~40 % in LLVM (optimising and generating code: numba links
@@ -68,21 +72,35 @@ def signature_types(sig: str) -> tuple:
     return eval(sig, {"__builtins__": {}}, _namespace())  # noqa: S307 (our own file's reprs)
 
 
-def dispatcher(qualname: str):
-    """The numba dispatcher ``module.function`` of a recorded entry."""
+def kernel(qualname: str):
+    """The object ``module.function`` of a recorded entry: a numba dispatcher, or a kernel
+    built twice (``raytrace._jit.ThreadedKernel`` and its mirror in ``degrade``)."""
     module, _, name = qualname.rpartition(".")
     return getattr(importlib.import_module(module), name)
 
 
-def _compile_share(items: list) -> list:
+def dispatcher(qualname: str, serial: bool = False):
+    """The numba dispatcher of a recorded entry: of a kernel built twice, its serial build
+    (``serial``: what a process whose numba threads are one calls) or its parallel one."""
+    obj = kernel(qualname)
+    return obj.build(serial) if _threaded(obj) else obj
+
+
+def _threaded(obj) -> bool:
+    """Whether ``obj`` is a kernel built twice (duck-typed: ``degrade`` has its own class)."""
+    return callable(getattr(obj, "build", None)) and hasattr(obj, "serial") and hasattr(obj, "parallel")
+
+
+def _compile_share(items: list, serial: bool = False) -> list:
     """Compile (into the on-disk cache) the recorded signatures of ``items`` = [(qualname,
-    signatures)]; returns the entries that could not be compiled, with the reason."""
+    signatures)], of the kernels' serial or parallel builds; returns the entries that could
+    not be compiled, with the reason."""
     from . import _jit  # noqa: F401 (numba's faster flag comparison, also for degrade's kernels)
     failed = []
     for qualname, sigs in items:
         for sig in sigs:
             try:
-                dispatcher(qualname).compile(signature_types(sig))
+                dispatcher(qualname, serial).compile(signature_types(sig))
             except Exception as exc:  # a stale entry: it compiles on first call instead
                 failed.append(f"{qualname}{sig}: {type(exc).__name__}")
     return failed
@@ -162,6 +180,9 @@ def probe(group: str) -> str | None:
     earlier = set(group_signatures(GROUPS[:GROUPS.index(group)]))
     own = [(c, q) for q, (c, _) in group_signatures([group]).items()
            if q not in earlier and not q.startswith(_DIRECT_EMBREE)]
+    # built twice where it can be: its serial and its parallel build then tell apart
+    threaded = [(c, q) for c, q in own if _threaded(kernel(q))]
+    own = threaded or own
     return max(own)[1] if own else None
 
 
@@ -178,10 +199,13 @@ def entries_to_compile(groups=("fast",)) -> dict:
 
 def load_here(groups=("fast",)) -> list:
     """The kernels of ``groups`` (:func:`entries_to_compile`) in this process, from numba's
-    on-disk cache where it holds them (compiled where not); returns the entries that failed.
+    on-disk cache where it holds them (compiled where not), in the build this thread's kernel
+    calls run (serial where its numba thread count is 1); returns the entries that failed.
     What a first call would do, done ahead (the CLI's pool workers, while their scenes are
     built)."""
-    return _compile_share([(qualname, sigs) for qualname, (_, sigs) in entries_to_compile(groups).items()])
+    import numba
+    serial = numba.get_num_threads() == 1
+    return _compile_share([(qualname, sigs) for qualname, (_, sigs) in entries_to_compile(groups).items()], serial)
 
 
 def _next_tasks(waiting: list, deps: dict, compiled: set, busy: set, free: int) -> list:
@@ -199,10 +223,11 @@ def _next_tasks(waiting: list, deps: dict, compiled: set, busy: set, free: int) 
     return out
 
 
-def precompile(processes: int, groups=("fast",), progress=None) -> list:
+def precompile(processes: int, groups=("fast",), progress=None, serial: bool = False) -> list:
     """Compile the kernels of ``groups`` (see the module notes; :func:`entries_to_compile`) on
-    ``processes`` spawned processes; returns the entries that failed (empty when all
-    compiled).
+    ``processes`` spawned processes, of the kernels built twice the serial builds (``serial``:
+    for processes that run one numba thread each) or the parallel ones; returns the entries
+    that failed (empty when all compiled).
 
     One entry per task, the longest first (recorded seconds), as a process frees up; an entry
     waits while a running task compiles one of the helpers it calls (:func:`dependencies`), so
@@ -234,7 +259,7 @@ def precompile(processes: int, groups=("fast",), progress=None) -> list:
         while waiting or running:
             for q, need in _next_tasks(waiting, deps, compiled, busy, workers - len(running)):
                 waiting.remove(q)
-                running[pool.submit(_compile_share, [(q, entries[q][1])])] = need
+                running[pool.submit(_compile_share, [(q, entries[q][1])], serial)] = need
                 busy |= need
             finished, _ = wait(running, return_when=FIRST_COMPLETED)
             for fut in finished:
@@ -265,10 +290,14 @@ def _dispatchers() -> dict:
         if name.split(".")[0] not in _PACKAGES:
             continue
         for attr, obj in sorted(vars(mod).items()):
-            if isinstance(obj, CPUDispatcher) and obj.__module__ == name and obj.signatures:
-                sigs = [repr(tuple(s)) for s in obj.signatures if "Literal" not in repr(tuple(s))]
-                if sigs:
-                    out[f"{name}.{attr}"] = sigs
+            if getattr(obj, "__module__", None) != name:
+                continue
+            builds = [obj] if isinstance(obj, CPUDispatcher) else [obj.parallel, obj.serial] if _threaded(obj) else []
+            sigs = []
+            for build in builds:
+                sigs += [r for r in map(repr, map(tuple, build.signatures)) if "Literal" not in r and r not in sigs]
+            if sigs:
+                out[f"{name}.{attr}"] = sigs
     return out
 
 
@@ -387,9 +416,10 @@ if __name__ == "__main__":
     elif sys.argv[1:2] == ["--record-here"]:
         result = _record_here(sys.argv[2])
         print(json.dumps(result))
-    elif sys.argv[1:2] == ["--time"]:
+    elif sys.argv[1:2] in (["--time"], ["--time-serial"]):
         t0 = time.perf_counter()
-        bad = precompile(int(sys.argv[2]) if len(sys.argv) > 2 else 2, sys.argv[3:] or ("fast",))
+        bad = precompile(int(sys.argv[2]) if len(sys.argv) > 2 else 2, sys.argv[3:] or ("fast",),
+                         serial=sys.argv[1] == "--time-serial")
         print(f"{time.perf_counter() - t0:.1f} s, failed: {bad}")
     else:
-        sys.exit("usage: python -m raytrace._precompile --record | --time [processes [group ...]]")
+        sys.exit("usage: python -m raytrace._precompile --record | --time[-serial] [processes [group ...]]")

@@ -201,11 +201,11 @@ def test_the_first_run_compile_shows_a_progress_bar_to_its_end(monkeypatch, caps
     from raytrace import _precompile
     calls = []
 
-    def fake_precompile(processes, groups, progress=None):
+    def fake_precompile(processes, groups, progress=None, serial=False):
         total = sum(c for c, _ in _precompile.group_signatures(groups).values())
         for done in (0.25 * total, 0.5 * total, total):
             progress(done, total)
-        calls.append((processes, tuple(groups)))
+        calls.append((processes, tuple(groups), serial))
         return []
 
     monkeypatch.setattr(_precompile, "precompile", fake_precompile)
@@ -217,3 +217,22 @@ def test_the_first_run_compile_shows_a_progress_bar_to_its_end(monkeypatch, caps
     assert frames and "100%" in frames[-1], err
     cli._compile_kernels(["fast"], quiet=True)  # --quiet: nothing
     assert capsys.readouterr().err == ""
+    assert [c[2] for c in calls] == [False, False]
+    cli._compile_kernels(["fast"], quiet=True, serial=True)
+    assert calls[-1][2] is True
+
+
+def test_the_compile_is_of_the_builds_the_frames_will_call(tmp_path, monkeypatch):
+    """A pool whose workers run one numba thread each calls the kernels' serial builds
+    (raytrace._jit.ThreadedKernel), so the first run compiles those; one worker rendering in
+    this process on several threads calls the parallel builds."""
+    asked = []
+    monkeypatch.setattr(cli, "_kernels_not_compiled", lambda quality="fast", serial=False: ["fast"])
+    monkeypatch.setattr(cli, "_compile_kernels", lambda groups, quiet, serial=False: asked.append(serial))
+    small = ["--target", "icesat", "--frames", "4", "--width", "64", "--height", "48", "--modalities", "mask"]
+    assert run_main(*small, "--workers", "2", "--out", tmp_path / "w2") == 0
+    assert run_main(*small, "--workers", "1", "--out", tmp_path / "w1") == 0
+    import numba
+    assert asked == [cli.default_workers() // 2 == 1, numba.config.NUMBA_NUM_THREADS == 1]
+    assert cli.frame_threads(2, 4) == max(1, cli.default_workers() // 2)
+    assert cli.frame_threads(4, 1) == cli.frame_threads(1, 9) == numba.config.NUMBA_NUM_THREADS

@@ -23,6 +23,7 @@ def test_every_recorded_kernel_exists_and_takes_its_recorded_arguments(group):
     for qualname, (cost, sigs) in entries.items():
         f = P.dispatcher(qualname)
         assert isinstance(f, CPUDispatcher), qualname
+        assert isinstance(P.dispatcher(qualname, serial=True), CPUDispatcher), qualname
         assert cost >= 0.0 and sigs
         n_args = len(inspect.signature(f.py_func).parameters)
         for sig in sigs:
