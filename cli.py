@@ -1847,10 +1847,11 @@ def _kernels_not_compiled(quality: str = "fast", serial: bool = False) -> list:
         return []
 
 
-SERIAL_COMPILE_RATIO = 0.5
-"""Compile time of the kernels' serial builds over the parallel builds' that
-``raytrace/_jit_signatures.py`` records: the ``fast`` group compiled in one process, 28.9 CPU s
-against the 59.7 recorded (2-core AMD EPYC)."""
+SERIAL_COMPILE_RATIO = 0.57
+"""Compile time of the kernels' serial builds over their parallel builds' (which
+``raytrace/_jit_signatures.py`` records): the ``fast`` group, CPU seconds of the two compiling
+processes, 40.3 against 70.2 (``python -m raytrace._precompile --time-serial 2 fast`` and
+``--time 2 fast``, medians of 3 alternated, 2-core AMD EPYC; BENCHMARKS.md)."""
 
 
 def _compile_kernels(groups: list, quiet: bool, serial: bool = False) -> None:
