@@ -1670,10 +1670,10 @@ def default_workers() -> int:
 def frame_threads(workers: int, tasks: int) -> int:
     """The numba threads each frame of :func:`execute` runs on: the pool's workers share the
     cores; one worker (or one frame) renders in this process, on numba's threads."""
+    import numba
     if workers <= 1 or tasks <= 1:
-        import numba
         return numba.config.NUMBA_NUM_THREADS
-    return max(1, default_workers() // min(workers, tasks))
+    return max(1, min(default_workers() // min(workers, tasks), numba.config.NUMBA_NUM_THREADS))
 
 
 @contextlib.contextmanager
@@ -1681,8 +1681,9 @@ def _prebuild_threads(threads: int, quality: str):
     """The threads :func:`_prebuild_scenes` runs on here: all of numba's, unless the workers run
     one each (the kernels' serial builds) and numba's cache lacks the parallel builds (a fresh
     install): then one thread, on the serial builds the workers use, rather than compiling
-    the parallel ones for this alone (~10 s of CPU against ~2 s of a Cassini cache on two
-    cores). The same scene and cache either way (``raytrace._jit.ThreadedKernel``)."""
+    the parallel ones for this alone (their recorded compile times, ``_jit_signatures.py``, add
+    up to over 10 CPU s; a Cassini cache takes ~4.5 s on one thread, ~2.4 s on two). The same
+    scene and cache either way (``raytrace._jit.ThreadedKernel``)."""
     if threads != 1 or not _kernels_not_compiled(quality, serial=False):
         yield
         return

@@ -219,8 +219,8 @@ class ThreadedKernel:
         """The serial or the parallel build (a numba dispatcher)."""
         return self.serial if serial else self.parallel
 
-    def __call__(self, *args):
-        return (self.serial if numba.get_num_threads() == 1 else self.parallel)(*args)
+    def __call__(self, *args, **kwargs):
+        return (self.serial if numba.get_num_threads() == 1 else self.parallel)(*args, **kwargs)
 
     def __repr__(self) -> str:
         return f"<ThreadedKernel {self.__module__}.{self.__qualname__}>"
