@@ -62,7 +62,7 @@ elliptical pattern's one-period window); the default phase (:mod:`orbit.viewing`
 every frame of every pattern lit and in view."""
 
 DEFAULT_FRAMES = 48
-"""Frames of the main job: it finishes in under a minute on 2 cores at 1280×960 (README)."""
+"""Frames of the main job: it finishes in under a minute on 2 cores at 1280×960 (README, "The main job")."""
 DATASET_FRAMES = 500
 MODALITIES = ("rgb", "rgb_degraded", "mask", "depth", "normal", "hdr")
 """Per-frame image files a sequence can hold (folder names)."""
@@ -2368,7 +2368,7 @@ def check_scene_out(out_dir: str) -> None:
 def render_scene_main(argv: list[str]) -> int:
     """``cli.py render-scene SCENE.json --out DIR``: render one frame of an explicit scene."""
     parser = _Parser(prog=f"{PROG} render-scene",
-                     description="Render one frame of the scene described by a JSON file (schema in README).")
+                     description="Render one frame of the scene described by a JSON file (schema in docs/shading.md).")
     parser.add_argument("scene", help="scene file (JSON)")
     parser.add_argument("--out", type=_out_path, required=True, help="output folder (created if missing)")
     parser.add_argument("--quality", type=_choice(QUALITIES), default=None,

@@ -11,5 +11,5 @@ inter-reflection (``shade``, with the radiance cache ``cache`` and the path trac
 expressed in the target's body frame.
 
 ``_jit``, which every module with kernels imports, sets numba's thread policy and, on Linux,
-malloc's thresholds for the large per-frame arrays (README, "Memory").
+malloc's thresholds for the large per-frame arrays (docs/shading.md, "Memory").
 """

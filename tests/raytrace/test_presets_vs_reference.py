@@ -11,7 +11,7 @@ a 40° field, 320×240 pixels. At this size many target pixels are edge pixels (
 the coverage of a pixel by each part is estimated from a few sub-pixel rays, so the bounds are
 looser than the 1280×960 figures in BENCHMARKS.md.
 
-Documented bounds (relative RMS error over target pixels, noise-corrected), also in README:
+Documented bounds (relative RMS error over target pixels, noise-corrected), also in docs/shading.md:
 
 =============  ======  ==========  ==================================================
                fast    balanced    (``balanced`` with its default 8 gather rays)
