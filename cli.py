@@ -51,6 +51,7 @@ import numpy as np
 
 from orbit.attitude import ATTITUDE_MODES
 from orbit.patterns import PATTERNS
+from raytrace.constants import SOLAR_CONSTANT_W_M2
 from raytrace.targets import BUILTIN_TARGETS as TARGETS
 
 PROG = "cli.py"
@@ -72,7 +73,6 @@ EXPOSURE_MODES = ("fixed", "auto")
 EARTH_TEXTURES = ("procedural", "uniform", "none")
 QUALITIES = ("fast", "balanced", "reference")
 PAPER_GROUP_NAMES = ("D1", "D2", "D3", "D4")
-SOLAR_CONSTANT_W_M2 = 1361.0
 _WHITE_BALANCE_M = 530e-9
 """Photon energy used for every channel in the camera equation: a white-balanced sensor (a grey
 surface gives equal R, G, B signals) [m]."""
@@ -646,7 +646,8 @@ def _explicit_pattern(cfg: dict, given: set, n: float, band, radius_m: float):
     gamma = p["gamma_m"] if p["gamma_m"] is not None else beta * (window / 2.0 + tau0 / n)
     s0 = state_from_kappa(A, kappa, gamma, n, z_amp=z_amp, z_phase=z_phase, tau0=tau0)
     params = parameters(s0, n)
-    # the class is that of the kappa given (SPEC §4: |kappa| = kappa* is drip-drop, 1 drift); kappa recomputed from
+    # the class is that of the kappa given (|kappa| = kappa* is drip-drop, 1 drift: docs/orbit.md, "Patterns and
+    # their thresholds"); kappa recomputed from
     # the state can fall an ulp on the other side of a boundary (kappa* gave "spiral")
     pattern = _class_of(kappa)
     if params.pattern != pattern and params.pattern in PATTERNS:

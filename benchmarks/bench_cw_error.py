@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark: error of the closed-form CW solution against nonlinear propagation (SPEC §7).
+"""Benchmark: error of the closed-form CW solution against nonlinear propagation.
 
     python benchmarks/bench_cw_error.py            # prints a Markdown report
     python benchmarks/bench_cw_error.py --quick    # fewer points in the exponent fit
@@ -9,12 +9,14 @@ for ρ ∈ {10 m, 100 m, 1 km, 10 km} at 1/4, 1 and 5 orbits for
 
   x₀ = ρ, ẏ₀ = −2n x₀     (closed CW ellipse, radial semi-axis ρ)
   V-bar, y₀ = ρ at rest
-  with J2: the ellipse A = ρ/2 (SPEC §7 column 1) at ρ = 10 m and 100 m, and its
+  with J2: the ellipse A = ρ/2 (first column of the table in docs/accuracy.md, "CW error after
+           one orbit") at ρ = 10 m and 100 m, and its
            along-track drift per orbit
 
 using orbit.nonlinear (DOP853, rtol 1e-12; "rotating" formulation for two-body,
 "eci" with J2), the least-squares exponent of error vs ρ over 10 m … 10 km, the prefactor
-c of error ≈ c ρ²/a per orbit against SPEC, and the agreement of the two formulations.
+c of error ≈ c ρ²/a per orbit against its closed-form value, and the agreement of the two
+formulations.
 Runs in a few seconds.
 """
 
@@ -110,9 +112,9 @@ def main(argv: list[str] | None = None) -> int:
     # exponent and prefactor
     rho_fit = np.logspace(1.0, 4.0, 4 if args.quick else 13)
     print(f"Least-squares fit of log(error after T) vs log ρ over {rho_fit.size} values of "
-          "ρ = 10 m … 10 km, and the prefactor c = error·a/ρ² (SPEC §7):")
+          "ρ = 10 m … 10 km, and the prefactor c = error·a/ρ²:")
     print()
-    print("| initial state | exponent | c at 10 m | c at 10 km | SPEC c |")
+    print("| initial state | exponent | c at 10 m | c at 10 km | c in closed form |")
     print("|---|---:|---:|---:|---:|")
     fits = dict(FAMILIES)
     fits["ellipse A = ρ/2"] = (ellipse_family, 3 * math.pi / 4, "3π/4")
@@ -123,8 +125,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {label} | {slope:.4f} | {c[0]:.4f} | {c[-1]:.4f} | {c_name} = {c_spec:.4f} |")
     print()
 
-    print("J2 along-track drift per orbit of the ellipse A = ρ/2 (slope over 3 orbits; "
-          "SPEC: ≈ 0.23 m for ρ = 10 m):")
+    print("J2 along-track drift per orbit of the ellipse A = ρ/2 (slope over 3 orbits):")
     print()
     for rho, drift in drifts:
         print(f"* ρ = {length(rho)}: {drift:+.4f} m/orbit ({100 * drift / rho:+.2f} % of ρ)")

@@ -204,7 +204,7 @@ def main(argv=None) -> int:
     print(f"Command: `python benchmarks/bench_degrade.py{' --quick' if args.quick else ''}`\n")
     print("### Physical chain per stage\n")
     print("\n".join(physical))
-    print("\n### Paper mode (SPEC §10) against scipy.ndimage + skimage.util.random_noise\n")
+    print("\n### Paper mode against scipy.ndimage + skimage.util.random_noise\n")
     print("\n".join(paper))
     print("\n### Convolution: direct vs FFT (1280×960×3 float32)\n")
     print("\n".join(convolution_table(max(3, repeats // 2))))

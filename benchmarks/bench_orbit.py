@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from orbit import cw  # noqa: E402
 
 N = 1.1313666536110223e-3
-S0 = np.array([5.0, 30.0, 2.0, 0.012, -0.004, 0.002])  # SPEC §5 E5
+S0 = np.array([5.0, 30.0, 2.0, 0.012, -0.004, 0.002])  # state E5 of tests/orbit/test_cw.py
 
 
 def closed_form(t):

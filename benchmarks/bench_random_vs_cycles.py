@@ -1,7 +1,7 @@
 """Random scenes, our renderer against Blender Cycles: does the whole light model agree?
 
     python benchmarks/bench_random_vs_cycles.py --out bench_out/random [--n 16] [--seed 0]
-        [--spp 256] [--width 320] [--models ../shared/models] [--presets fast balanced:16] [--no-cycles]
+        [--spp 256] [--width 320] [--models DIR] [--presets fast balanced:16] [--no-cycles]
 
 The time-against-error study (``bench_time_error.py``) measures our presets against our own
 path tracer on twelve fixed views. This one asks whether that yardstick is right on views

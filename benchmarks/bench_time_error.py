@@ -18,10 +18,10 @@ distance at which the target fills a 40° field:
 Lighting: Sun 1361 W/m² (0.533° disc), Earth (uniform albedo 0.3, true size at 400 km) and a
 1 W/(m²·sr) ambient sky (lights the target, not drawn).
 
-``--targets issue-satellite`` renders instead a satellite built to the issue's description of
-the scene it timed Cycles on ("bus + panels + dish at 25 m", :func:`issue_satellite`), from
-three views of its own (``oblique``, ``side``, ``backlit``; Sun and sky, no Earth): Cycles'
-seconds there against the issue's table tell how fast this machine is against the issue's.
+``--targets issue-satellite`` renders instead a reference scene ("bus + panels + dish at 25 m",
+:func:`issue_satellite`) on which Cycles' times on another 2-core machine are known, from three
+views of its own (``oblique``, ``side``, ``backlit``; Sun and sky, no Earth): Cycles' seconds
+there against those times tell how fast this machine is against that one.
 
 Reference: our path tracer (``quality="reference"``), ``--ref-spp`` samples per pixel, twice
 with two seeds. Their mean is the yardstick; half their difference estimates its own noise,
@@ -109,16 +109,16 @@ def write_scene(target: str, folder: Path, width: int) -> list[tuple[str, Path]]
     return out
 
 
-# the issue's own scene (issue 4: "a satellite of bus + panels + dish at 25 m, sun 1361 W/m² plus a
-# constant ambient sky"), on which it timed Cycles 5.0 at 1 / 16 / 64 / 256 spp in 0.24 / 2.0 /
-# 7.5 / 29.7 s on its 2-core machine: rendered here it tells how fast this machine is against
-# that one, and how our presets do on a scene with fewer parts and edges than the four targets
+# a reference scene ("a satellite of bus + panels + dish at 25 m, sun 1361 W/m² plus a constant
+# ambient sky"), on which Cycles 5.0 took 0.24 / 2.0 / 7.5 / 29.7 s at 1 / 16 / 64 / 256 spp on
+# a 2-core machine: rendered here it tells how fast this machine is against that one, and how
+# our presets do on a scene with fewer parts and edges than the four targets
 ISSUE_SCENE = "issue-satellite"
 ISSUE_DISTANCE_M = 25.0
 
 
 def issue_satellite() -> list[tuple[str, trimesh.Trimesh, tuple]]:
-    """(name, mesh [m], Lambertian albedo) of the issue's satellite, body frame (z up): a bus
+    """(name, mesh [m], Lambertian albedo) of the reference satellite, body frame (z up): a bus
     1.8 × 1.8 × 2.4 m (gold-MLI-like albedo), two solar wings 5.0 × 1.8 m, 4 cm thick, on yokes
     0.6 m from the bus (solar-cell blue-grey), and a parabolic dish 2.2 m across on a strut
     above the bus (white paint; an open mesh, both sides visible)."""
@@ -151,7 +151,7 @@ def issue_satellite() -> list[tuple[str, trimesh.Trimesh, tuple]]:
 
 
 def issue_viewpoints():
-    """(name, direction from the satellite to the camera, Sun direction) of the issue's scene."""
+    """(name, direction from the satellite to the camera, Sun direction) of the reference scene."""
     return [
         ("oblique", np.array([0.5, -1.0, 0.45]), np.array([0.6, -0.45, 0.66])),
         ("side", np.array([0.05, -1.0, 0.1]), np.array([-0.7, -0.35, 0.62])),
@@ -160,7 +160,7 @@ def issue_viewpoints():
 
 
 def write_issue_scene(folder: Path, width: int) -> list[tuple[str, Path]]:
-    """The issue's satellite as per-part PLYs and one SCENE.json per viewpoint (camera 25 m from
+    """The reference satellite as per-part PLYs and one SCENE.json per viewpoint (camera 25 m from
     its centre, the lens of the other scenes; Sun 1361 W/m², ambient sky 1 W/(m²·sr), no Earth);
     returns [(viewpoint, path)]."""
     parts = folder / "parts"
@@ -308,7 +308,7 @@ def main() -> None:
     ap.add_argument("--out", required=True)
     ap.add_argument("--width", type=int, default=1280)
     ap.add_argument("--targets", nargs="*", default=list(BUILTIN_TARGETS),
-                    help=f"built-in targets, or {ISSUE_SCENE} (the issue's bus + panels + dish, views "
+                    help=f"built-in targets, or {ISSUE_SCENE} (reference bus + panels + dish, views "
                          f"{' '.join(v[0] for v in issue_viewpoints())})")
     ap.add_argument("--views", nargs="*", default=None, help="default: every view of each target")
     ap.add_argument("--ref-spp", type=int, default=512)

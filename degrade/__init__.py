@@ -2,7 +2,7 @@
 
 ``degrade`` works on any finite, nonnegative float image (H×W×3 RGB or H×W monochrome;
 float32 in → float32 out, other floats are converted to float32, integers are refused) and
-imports nothing from ``orbit`` or ``raytrace`` (DESIGN.md). SPEC §10 gives the maths.
+imports nothing from ``orbit`` or ``raytrace``. docs/degradation.md gives the maths.
 
 Modules
 -------

@@ -1,7 +1,7 @@
 """Input validation shared by the public functions of :mod:`degrade`.
 
 Every check raises ``ValueError`` whose message names the parameter, says what is allowed
-and shows what arrived (DESIGN.md, "Errors at public boundaries"). Same rules as
+and shows what arrived (docs/degradation.md). Same rules as
 ``orbit/_checks.py``, restated here because ``degrade`` imports nothing from ``orbit``.
 
 Image dtype policy: images are real floating-point arrays. float32 passes through without a
@@ -45,8 +45,8 @@ def integer(name: str, value, lo: int, hi: int) -> int:
 
 
 def instance(name: str, value, cls: type):
-    """Return ``value`` if it is a ``cls``, else raise ValueError (DESIGN.md: ValueError at
-    public boundaries, also for a wrong type)."""
+    """Return ``value`` if it is a ``cls``, else raise ValueError (ValueError at public
+    boundaries, also for a wrong type)."""
     is_cls = isinstance(value, cls)
     if not is_cls:
         raise ValueError(f"{name} must be a {cls.__name__}, got {type(value).__name__}")

@@ -1,4 +1,4 @@
-"""Numba policy for every kernel in :mod:`degrade` (DESIGN.md), set once here.
+"""Numba policy for every kernel in :mod:`degrade`, set once here.
 
 Mirrors ``raytrace/_jit.py`` without importing it (``degrade`` knows nothing of the other
 packages), but leaves numba's threading layer alone: ``raytrace`` prefers TBB for its side

@@ -2,8 +2,9 @@
 
 Two studies on the same clean images (float32 sRGB-encoded RGB in [0, 1]):
 
-* paper mode (SPEC §10): groups D1 blur, D2 blur + Poisson, D3 blur + Gaussian, D4 all
-  three, applied to the display values (:func:`degrade.paper.paper_degrade`);
+* paper mode: groups D1 blur, D2 blur + Poisson, D3 blur + Gaussian, D4 all three, applied to
+  the display values (:func:`degrade.paper.paper_degrade`; docs/degradation.md, "Paper-compatible
+  mode");
 * physical mode: the chain of :func:`degrade.chain.degrade` built up one stage at a time —
   optics; + shot noise; + read noise; + quantisation (ADC and output encoding); + Bayer
   mosaic and demosaic — on the linearised clean image (sRGB decoded), re-encoded to sRGB.

@@ -1,15 +1,16 @@
-"""The physical imaging chain (SPEC §10) in one call: optics → sensor → encoding.
+"""The physical imaging chain in one call: optics → sensor → encoding.
 
     I_lin ⊛ PSF_total → RGGB mosaic → photons → electrons (Poisson) → full-well clip
           → + read noise → ADC → demosaic → sRGB encode (8/16 bit)
 
 PSF_total = PSF_diffraction ⊛ PSF_aberration ⊛ PSF_defocus ⊛ PSF_motion, per colour channel
 (the Airy pattern scales with wavelength). A stage whose config is ``None`` (or whose
-parameters make it the identity, e.g. zero motion) is skipped (DESIGN.md, "Skip what a frame
-does not need"). Per-frame quantities (motion length and angle from the image-plane
-velocity × exposure, :func:`degrade.psf.motion_from_velocity`; defocus radius from the range,
+parameters make it the identity, e.g. zero motion) is skipped. Per-frame quantities (motion
+length and angle from the image-plane velocity × exposure,
+:func:`degrade.psf.motion_from_velocity`; defocus radius from the range,
 :func:`degrade.psf.defocus_radius_px`) go into :class:`OpticsConfig` via
 :func:`dataclasses.replace`; the PSF of each distinct configuration is built once and cached.
+The chain and its defaults: docs/degradation.md, "Physical chain".
 """
 
 from __future__ import annotations
@@ -40,8 +41,8 @@ class OpticsConfig:
     focal_length_m : float
         Focal length f [m]. Default 4 mm (the default camera of ``raytrace``).
     aperture_m : float or None
-        Entrance-pupil diameter D [m]; None: no diffraction. Default 1 mm (f/4, SPEC §10's
-        example: r₁ = 0.78 px at 550 nm with 3.45 µm pixels).
+        Entrance-pupil diameter D [m]; None: no diffraction. Default 1 mm (f/4: r₁ = 0.78 px at
+        550 nm with 3.45 µm pixels).
     pixel_pitch_m : float
         Pixel pitch p [m]. Default 3.45 µm (IMX250 class).
     wavelengths_m : tuple of 3 float
@@ -117,7 +118,7 @@ class DegradeConfig:
 
 
 def optics_psf(optics: OpticsConfig, channels: int = 3, *, corner: bool = False) -> np.ndarray:
-    """Total PSF of the optics, one kernel per channel (SPEC §10).
+    """Total PSF of the optics, one kernel per channel (docs/degradation.md, "Optics").
 
     Parameters
     ----------
@@ -204,7 +205,7 @@ def _apply_optics(img: np.ndarray, optics: OpticsConfig) -> np.ndarray:
 
 
 def degrade(image_linear, config: DegradeConfig = DegradeConfig(), *, rng=None) -> np.ndarray:
-    """Run the physical chain of SPEC §10 on one linear frame.
+    """Run the physical chain (docs/degradation.md, "Physical chain") on one linear frame.
 
     Parameters
     ----------

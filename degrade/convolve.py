@@ -103,7 +103,7 @@ def convolve_image(image, kernel, *, mode: str = "reflect", method: str = "auto"
     kernel : array_like of float, shape (K1, K2) or (C, K1, K2)
         One kernel for all channels, or one per channel; odd sizes, centre at (K − 1)/2.
     mode : {"reflect", "mirror"}, optional
-        Border extension (scipy.ndimage names; see the module docstring). SPEC §10 asks for
+        Border extension (scipy.ndimage names; see the module docstring). The chain uses
         mirror ("reflect") padding; ``"reflect"`` repeats the edge pixel.
     method : {"auto", "direct", "fft"}, optional
         ``"auto"`` picks by nonzero tap count (:data:`DIRECT_MAX_TAPS`).

@@ -7,7 +7,7 @@
   E = π L / (4 N²) (on-axis, lens transmission 1, no vignetting; e.g. Jähne, *Digital Image
   Processing*, 6th ed., §3.3), a pixel of area p² collects E·p²·t_exp joules in the exposure,
   i.e. E·p²·t·λ/(h c) photons at the band's centre wavelength λ; the linear signal is the
-  fraction of the full well those photons fill, QE·photons/FW (SPEC §10: 1.0 = full well).
+  fraction of the full well those photons fill, QE·photons/FW (1.0 = full well).
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
-"""Paper-compatible degradation (SPEC §10): motion blur, Poisson and Gaussian noise on 8-bit
-display values, reproducing ``skimage.util.random_noise`` bit for bit.
+"""Paper-compatible degradation: motion blur, Poisson and Gaussian noise on 8-bit display
+values, reproducing ``skimage.util.random_noise`` bit for bit (docs/degradation.md,
+"Paper-compatible mode").
 
-Groups (SPEC §10, §12.9 — a composition, not a sum):
+Groups (a composition, not the sum the paper's formula suggests):
 
 * D1: B = round(255 · clip(I ⊛ h_motion(L = 15, θ = 30°)))/255 (blur, re-quantised to 8 bit)
 * D2: clip(Poisson(B · vals)/vals), vals = 2^⌈log₂(number of distinct values of B)⌉
@@ -69,7 +70,7 @@ _LUT8 = np.arange(256) / 255.0  # float64 value of each 8-bit code, as img_as_fl
 
 @dataclass(frozen=True, slots=True)
 class PaperConfig:
-    """Parameters of the paper's degradation (SPEC §10 defaults).
+    """Parameters of the paper's degradation (defaults: the paper's values).
 
     Attributes
     ----------
@@ -260,7 +261,8 @@ def gaussian_noise(image, *, var: float = 0.01, mean: float = 0.0, rng=None) -> 
 
 
 def paper_degrade(image, group: str = "D4", config: PaperConfig = PaperConfig(), *, rng=None) -> np.ndarray:
-    """Degrade a display-encoded image as the paper did (SPEC §10, groups D1–D4).
+    """Degrade a display-encoded image as the paper did (groups D1–D4; docs/degradation.md,
+    "Paper-compatible mode").
 
     Parameters
     ----------

@@ -1,4 +1,5 @@
-"""Point-spread functions on the pixel grid (SPEC §10), each normalised to sum 1.
+"""Point-spread functions on the pixel grid, each normalised to sum 1 (docs/degradation.md,
+"Optics").
 
 Every kernel is a float64 array of odd size whose centre pixel ``(K − 1)/2`` is the optical
 axis of the blur, and a pure function of hashable parameters: it is built once per parameter
@@ -64,10 +65,10 @@ def airy_psf(aperture_m: float, wavelength_m: float, focal_length_m: float, pixe
     pixel_pitch_m : float
         Pixel pitch p [m] (square pixels, 100 % fill factor).
     supersample : int, optional
-        Samples per pixel side for the pixel integration (≥ 9, SPEC §10). Odd values put a
+        Samples per pixel side for the pixel integration (≥ 9). Odd values put a
         sample on each pixel centre.
     radius_r1 : float, optional
-        Kernel half-width in units of the first-dark-ring radius r₁ (≥ 3, SPEC §10). The
+        Kernel half-width in units of the first-dark-ring radius r₁ (≥ 3). The
         kernel is at least 5×5 px.
 
     Returns
@@ -98,7 +99,7 @@ def airy_psf(aperture_m: float, wavelength_m: float, focal_length_m: float, pixe
     s = _checks.integer("supersample", supersample, 9, 101)
     rr = _checks.finite_scalar("radius_r1", radius_r1)
     if rr < 3.0:
-        raise ValueError(f"radius_r1 must be >= 3 (SPEC §10), got {radius_r1!r}")
+        raise ValueError(f"radius_r1 must be >= 3, got {radius_r1!r}")
     return _airy(d, lam, f, p, s, rr)
 
 
@@ -121,7 +122,7 @@ def _airy(d: float, lam: float, f: float, p: float, s: int, rr: float) -> np.nda
 
 
 def gaussian_psf(sigma_px: float) -> np.ndarray:
-    """Gaussian aberration PSF sampled at pixel centres (SPEC §10).
+    """Gaussian aberration PSF sampled at pixel centres (docs/degradation.md, "Optics").
 
     Parameters
     ----------
@@ -148,7 +149,7 @@ def _gaussian(sigma: float) -> np.ndarray:
 
 def defocus_radius_px(aperture_m: float, focal_length_m: float, pixel_pitch_m: float,
                       object_distance_m: float, focus_distance_m: float = math.inf) -> float:
-    """Blur-circle radius of a thin lens for an object off the focus distance (SPEC §10).
+    """Blur-circle radius of a thin lens for an object off the focus distance (R = c/(2p)).
 
     Parameters
     ----------
@@ -183,7 +184,7 @@ def defocus_radius_px(aperture_m: float, focal_length_m: float, pixel_pitch_m: f
 
 
 def defocus_psf(radius_px: float, *, supersample: int = 16) -> np.ndarray:
-    """Defocus PSF: a uniform disc (pillbox) integrated over each pixel (SPEC §10).
+    """Defocus PSF: a uniform disc (pillbox) integrated over each pixel.
 
     Parameters
     ----------
@@ -191,7 +192,7 @@ def defocus_psf(radius_px: float, *, supersample: int = 16) -> np.ndarray:
         Blur-circle radius R [px] (see :func:`defocus_radius_px`), ≥ 0; 0 gives the 1×1
         identity kernel.
     supersample : int, optional
-        Samples per pixel side (≥ 16, SPEC §10).
+        Samples per pixel side (≥ 16).
 
     Returns
     -------
@@ -218,7 +219,7 @@ def _pillbox(r: float, s: int) -> np.ndarray:
 
 
 def motion_psf(length_px: float, angle_deg: float, *, samples_per_px: int = 200) -> np.ndarray:
-    """Linear motion-blur PSF: a uniform segment splatted bilinearly (SPEC §10).
+    """Linear motion-blur PSF: a uniform segment splatted bilinearly.
 
     Parameters
     ----------
@@ -229,7 +230,7 @@ def motion_psf(length_px: float, angle_deg: float, *, samples_per_px: int = 200)
         Direction θ [deg], counter-clockwise from the +column axis as displayed (rows grow
         downward).
     samples_per_px : int, optional
-        Samples per pixel of length (≥ 200, SPEC §10); at least 1000 samples in all.
+        Samples per pixel of length (≥ 200); at least 1000 samples in all.
 
     Returns
     -------
@@ -238,7 +239,7 @@ def motion_psf(length_px: float, angle_deg: float, *, samples_per_px: int = 200)
 
     Notes
     -----
-    SPEC §10: h(i, j) = (1/L) ∫_{−L/2}^{L/2} Λ(j − c − s cos θ) Λ(i − c + s sin θ) ds with
+    h(i, j) = (1/L) ∫_{−L/2}^{L/2} Λ(j − c − s cos θ) Λ(i − c + s sin θ) ds with
     Λ(u) = max(0, 1 − |u|), evaluated by the midpoint rule. The kernel is point-symmetric, so
     convolution and correlation with it coincide.
     """
@@ -291,7 +292,7 @@ def motion_from_velocity(velocity_px_s, exposure_s: float) -> tuple[float, float
         L = |velocity| · t [px].
     angle_deg : float
         θ = atan2(−dv/dt, du/dt) in (−180, 180] [deg]: counter-clockwise from +u as displayed
-        (SPEC §10), the convention of :func:`motion_psf` and
+        (docs/conventions.md), the convention of :func:`motion_psf` and
         :class:`degrade.chain.OpticsConfig` (rows grow downward, hence the minus sign).
 
     Notes
@@ -311,7 +312,7 @@ def motion_from_velocity(velocity_px_s, exposure_s: float) -> tuple[float, float
 
 
 def compose(*kernels: np.ndarray) -> np.ndarray:
-    """Convolve PSFs into one kernel (SPEC §10: PSF_total = diffraction ⊛ aberration ⊛ …).
+    """Convolve PSFs into one kernel (PSF_total = diffraction ⊛ aberration ⊛ …).
 
     Parameters
     ----------

@@ -1,14 +1,14 @@
-"""Bayer sensor: RGGB mosaic, photon shot noise, full well, read noise, ADC, demosaic (SPEC §10).
+"""Bayer sensor: RGGB mosaic, photon shot noise, full well, read noise, ADC, demosaic.
 
     I_lin (H×W×3) → RGGB mosaic → Φ = I·Φ_max photons → e = min(Poisson(QE·Φ + D_c·t), FW)
         + N(0, σ_r²) → DN = clip(round(e/g + offset), 0, 2^b − 1) → DN/(2^b − 1) → demosaic
 
-Default parameters (SPEC §10) describe a plausible space-grade global-shutter CMOS camera of
-the Sony IMX250 class (3.45 µm pixels, 12-bit ADC). Published EMVA 1288 measurements of
-IMX250 cameras report roughly QE ≈ 0.65 at 525 nm, saturation ≈ 10 500 e⁻ and temporal
-dark noise ≈ 2.3 e⁻; the defaults (QE 0.6, FW 10 000 e⁻, σ_r 5 e⁻) are rounder and more
-conservative (a radiation-aged or faster-read-out detector). Check a specific camera's data
-sheet before quoting these as its values.
+Default parameters (docs/degradation.md, "Sensor") describe a plausible space-grade
+global-shutter CMOS camera of the Sony IMX250 class (3.45 µm pixels, 12-bit ADC). Published
+EMVA 1288 measurements of IMX250 cameras report roughly QE ≈ 0.65 at 525 nm, saturation
+≈ 10 500 e⁻ and temporal dark noise ≈ 2.3 e⁻; the defaults (QE 0.6, FW 10 000 e⁻, σ_r 5 e⁻)
+are rounder and more conservative (a radiation-aged or faster-read-out detector). Check a
+specific camera's data sheet before quoting these as its values.
 
 Randomness: everything comes from the one ``rng`` passed in. The photosites (C order) are
 cut into ``n = min(8, max(1, size // 65536))`` equal blocks; block k draws its Poisson
@@ -57,7 +57,7 @@ class SensorConfig:
     bit_depth : int
         ADC resolution b [bit], 1…16. Default 12.
     offset_dn : float
-        ADC offset (black level), kept in the output as SPEC §10 writes it [DN]. Default 0.
+        ADC offset (black level), kept in the output (not subtracted) [DN]. Default 0.
     dark_current_e_per_s : float
         Dark current D_c [e⁻/s], ≥ 0. Default 0.
     exposure_s : float
@@ -125,7 +125,7 @@ class SensorConfig:
 
 
 def mosaic_rggb(image_linear) -> np.ndarray:
-    """Sample an RGB image through an RGGB colour filter array (SPEC §10).
+    """Sample an RGB image through an RGGB colour filter array (top-left pixel red).
 
     Parameters
     ----------
@@ -159,7 +159,8 @@ def demosaic(raw, *, algorithm: str = "MHC") -> np.ndarray:
         RGGB mosaic (see :func:`mosaic_rggb`), ≥ 0 [1].
     algorithm : {"MHC", "linear"}, optional
         ``"MHC"``: Malvar–He–Cutler gradient-corrected linear interpolation; ``"linear"``:
-        bilinear (normalised convolution with the kernels of SPEC §10).
+        bilinear (normalised convolution of each masked channel, G with [[0,1,0],[1,4,1],[0,1,0]]/4,
+        R and B with [[1,2,1],[2,4,2],[1,2,1]]/4, divided by the same convolution of the mask).
 
     Returns
     -------
@@ -207,7 +208,7 @@ def _demosaic(arr: np.ndarray, alg: str) -> np.ndarray:
 
 @jit_exact
 def _adc(signal_e, noise_e, full_well_e, gain, offset_dn, max_dn, rounding, out):  # pragma: no cover
-    """out = clip(round((min(signal, FW) + noise)/g + offset), 0, max)/max (SPEC §10), 1-D;
+    """out = clip(round((min(signal, FW) + noise)/g + offset), 0, max)/max, 1-D;
     an empty ``noise_e`` means no read noise."""
     have_noise = noise_e.size == signal_e.size
     for k in range(signal_e.size):
@@ -240,7 +241,7 @@ def sensor_readout(image_linear, config: SensorConfig = SensorConfig(), *, rng=N
 
     Notes
     -----
-    SPEC §10: e = min(Poisson(QE·Φ + D_c·t_exp), FW) + N(0, σ_r²) [e⁻];
+    docs/degradation.md, "Sensor": e = min(Poisson(QE·Φ + D_c·t_exp), FW) + N(0, σ_r²) [e⁻];
     DN = clip(round(e/g + offset), 0, 2^b − 1); mean DN = QE Φ/g and
     var DN = (QE Φ + σ_r² + g²/12)/g² below saturation. Random streams: see the module
     docstring (blocks of photosites, one child of ``rng.spawn`` each).
@@ -289,7 +290,7 @@ _NO_NOISE = np.empty(0)
 
 
 def simulate_sensor(image_linear, config: SensorConfig = SensorConfig(), *, rng=None) -> np.ndarray:
-    """Full sensor model: RGGB mosaic → :func:`sensor_readout` → demosaic (SPEC §10).
+    """Full sensor model: RGGB mosaic → :func:`sensor_readout` → demosaic.
 
     Parameters
     ----------

@@ -5,7 +5,8 @@ Clohessy–Wiltshire dynamics in the target's LVLH frame, the four relative-moti
 a nonlinear reference propagator, target attitude laws and camera pose labels.
 
 ``orbit`` knows nothing of pixels: it hands the pipeline states, rotations and flags.
-Conventions and equations: SPEC.md §0–§9, §11 (shipped beside the project).
+Conventions: docs/conventions.md; equations, patterns, visibility and attitude: docs/orbit.md;
+accuracy of the CW model: docs/accuracy.md.
 
 Submodules (imported lazily, so ``import orbit`` stays cheap): ``constants``, ``epoch``,
 ``cw``, ``patterns``, ``sampling``, ``reference``, ``sun``, ``visibility``, ``nonlinear``,

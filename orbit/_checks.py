@@ -1,7 +1,7 @@
 """Input validation shared by the public functions of :mod:`orbit`.
 
 Every check raises ``ValueError`` whose message names the parameter, says what is allowed
-and shows what arrived (DESIGN.md, "Errors at public boundaries").
+and shows what arrived (docs/orbit.md, "Library API").
 """
 
 from __future__ import annotations

@@ -1,9 +1,9 @@
-"""Target attitude laws ``R_lvlh_from_body(t)`` (SPEC §9, "Target attitude modes").
+"""Target attitude laws ``R_lvlh_from_body(t)`` (docs/orbit.md, "Target attitude").
 
-The target body frame is the mesh's model frame; LVLH is the target-centred frame of SPEC §1,
-which turns at +n about its ẑ axis (orbit normal) relative to inertial space. Times are
-measured from the start of the sequence; the inertial frame used for the tumble coincides
-with LVLH at t = 0, so that ``R_inertial_from_lvlh(t) = R_z(n t)``.
+The target body frame is the mesh's model frame; LVLH is the target-centred frame of
+docs/conventions.md, which turns at +n about its ẑ axis (orbit normal) relative to inertial
+space. Times are measured from the start of the sequence; the inertial frame used for the
+tumble coincides with LVLH at t = 0, so that ``R_inertial_from_lvlh(t) = R_z(n t)``.
 
 Modes (R₀ = ``R0_lvlh_from_body``):
 
@@ -526,7 +526,7 @@ def torque_free(t_s, R0_inertial_from_body, omega0_body_rad_s, inertia_body_kg_m
 
 @dataclass(frozen=True, slots=True)
 class TargetAttitude:
-    """Attitude law of the target, ``R_lvlh_from_body(t)`` (SPEC §9).
+    """Attitude law of the target, ``R_lvlh_from_body(t)`` (docs/orbit.md, "Target attitude").
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 """Physical constants used by :mod:`orbit` (SI units).
 
-Values follow SPEC §0: EGM2008/WGS-84 Earth GM and equatorial radius, the EGM2008 J2,
+Values: EGM2008/WGS-84 Earth GM and equatorial radius, the EGM2008 J2,
 IAU 2012 astronomical unit, and the nominal solar radius used for shadow geometry.
 """
 

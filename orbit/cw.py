@@ -1,8 +1,9 @@
-"""Clohessy–Wiltshire (Hill) relative motion about a circular target orbit (SPEC §2).
+"""Clohessy–Wiltshire (Hill) relative motion about a circular target orbit.
 
-State convention (SPEC §1): ``s = [x, y, z, ẋ, ẏ, ż]`` is the observer's position relative to
-the target in the target's LVLH frame (x radial out, y along-track, z orbit normal) [m] and
-its derivative in the rotating frame [m/s].
+State convention (docs/conventions.md): ``s = [x, y, z, ẋ, ẏ, ż]`` is the observer's
+position relative to the target in the target's LVLH frame (x radial out, y along-track, z orbit
+normal) [m] and its derivative in the rotating frame [m/s]. Equations: docs/orbit.md,
+"Relative motion (Clohessy–Wiltshire)".
 
 Everything here is closed form and vectorised over time: no time stepping.
 
@@ -66,7 +67,7 @@ def stm(n: float, t_s) -> np.ndarray:
 
     Notes
     -----
-    With S = sin nt, C = cos nt (SPEC §2)::
+    With S = sin nt, C = cos nt (the closed-form solution of Clohessy and Wiltshire)::
 
         [4−3C,      0, 0,   S/n,       2(1−C)/n,    0  ]
         [6(S−nt),   1, 0,   2(C−1)/n,  (4S−3nt)/n,  0  ]
@@ -130,7 +131,7 @@ def propagate(s0_lvlh, n: float, t_s) -> np.ndarray:
 
     Notes
     -----
-    Equivalent to ``stm(n, t_s) @ s0`` but evaluated component-wise (SPEC §2)::
+    Equivalent to ``stm(n, t_s) @ s0`` but evaluated component-wise::
 
         x = x₀ + (ẋ₀/n) S + (3x₀ + 2ẏ₀/n)(1 − C)
         y = y₀ − (2ẋ₀/n)(1 − C) + (6x₀ + 4ẏ₀/n) S − (6n x₀ + 3ẏ₀) t
@@ -156,7 +157,7 @@ def propagate(s0_lvlh, n: float, t_s) -> np.ndarray:
     out = np.empty((t.size, 6))
     a = 3.0 * x0 + 2.0 * vy0 / n  # ellipse term
     b = 6.0 * x0 + 4.0 * vy0 / n
-    beta = 6.0 * n * x0 + 3.0 * vy0  # along-track drift rate β (SPEC §3): centre moves at -β
+    beta = 6.0 * n * x0 + 3.0 * vy0  # along-track drift rate β = (3/2) n x_l: centre moves at -β
     out[:, 0] = x0 + (vx0 / n) * S + a * omc
     out[:, 1] = y0 - (2.0 * vx0 / n) * omc + b * S - beta * t
     out[:, 2] = z0 * C + (vz0 / n) * S

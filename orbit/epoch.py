@@ -18,7 +18,8 @@ from ._checks import finite_array
 __all__ = ["DEFAULT_EPOCH_UTC", "JD_UNIX_EPOCH", "gmst_rad", "julian_date", "to_iso_utc", "to_unix_seconds"]
 
 DEFAULT_EPOCH_UTC = "2026-03-20T12:00:00Z"
-"""Default epoch (the March 2026 equinox day used by the SPEC §6 Sun example)."""
+"""Default epoch (the March 2026 equinox day; the Sun test vector of tests/orbit/test_sun.py is
+at this instant)."""
 
 JD_UNIX_EPOCH = 2440587.5
 """Julian date of 1970-01-01T00:00:00 UTC [d]."""

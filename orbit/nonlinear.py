@@ -1,10 +1,11 @@
-"""Numerical reference for relative motion: exact two-body dynamics and, beyond SPEC, J2.
+"""Numerical reference for relative motion: exact two-body dynamics and, beyond the CW model, J2.
 
-The closed-form Clohessy–Wiltshire solution (:mod:`orbit.cw`, SPEC §2) is a linearisation. This
-module integrates the motion it approximates so that its error can be measured (SPEC §7):
+The closed-form Clohessy–Wiltshire solution (:mod:`orbit.cw`) is a linearisation. This module
+integrates the motion it approximates so that its error can be measured (docs/accuracy.md,
+"CW error after one orbit"):
 
 * ``method="rotating"`` — exact two-body relative dynamics of the observer in the rotating LVLH
-  frame of a circular target orbit (SPEC §11)::
+  frame of a circular target orbit (no linearisation; f ≈ −3x/r₀ gives the CW equations)::
 
       ẍ = 2n ẏ − n² f (r₀ + x),   ÿ = −2n ẋ − n² f y,   z̈ = −n² (1 + f) z,
       f = (r₀/r_O)³ − 1 = expm1(−1.5 · log1p(q)),   q = (2 r₀ x + |ρ|²)/r₀².
@@ -25,10 +26,10 @@ module integrates the motion it approximates so that its error can be measured (
 Both are integrated with scipy's DOP853 (Hairer, Nørsett & Wanner) at ``rtol = 1e-12`` by
 default. With two-body gravity they agree after one orbit to ≈ 1.7e-11·|ρ| at that rtol
 (< 1e-7 m up to |ρ| ≈ 5 km) and to ≈ 1.7e-12·|ρ| at ``rtol = 1e-13`` (< 1e-7 m for
-10 m ≤ |ρ| ≤ 10 km, SPEC §7); the difference is the truncation error of the "eci"
+10 m ≤ |ρ| ≤ 10 km); the difference is the truncation error of the "eci"
 formulation (tests/orbit/test_nonlinear.py).
 
-J2 is not part of SPEC's model (SPEC §7 lists it as a known limitation). With it a CW
+J2 is not part of the CW model (a known limitation, docs/accuracy.md, "Orbit model"). With it a CW
 ellipse of radial semi-axis A drifts along-track by ≈ −0.045·A·(1 − 3 sin²φ₀) per orbit at
 400 km, φ₀ being the target's latitude when the CW state is set (measured; the secular J2
 effects on formations are analysed by Schweighart & Sedwick).
@@ -95,7 +96,7 @@ def relative_rhs(t: float, s, n: float, r0_m: float) -> np.ndarray:
 
     Notes
     -----
-    SPEC §11::
+    Exact two-body relative dynamics, written so that f avoids cancellation::
 
         ẍ = 2n ẏ − n² f (r₀ + x),   ÿ = −2n ẋ − n² f y,   z̈ = −n² (1 + f) z
         f = (r₀/r_O)³ − 1 = expm1(−1.5 · log1p(q)),   q = (2 r₀ x + |ρ|²)/r₀²
@@ -315,7 +316,8 @@ def propagate_nonlinear(s0_lvlh, orbit: ReferenceOrbit, t_s, *, j2: bool = False
 # ----------------------------------------------------------------------------- CW error
 @dataclass(frozen=True, slots=True, eq=False)
 class CWError:
-    """Clohessy–Wiltshire closed form against the nonlinear reference (SPEC §7).
+    """Clohessy–Wiltshire closed form against the nonlinear reference (docs/accuracy.md,
+    "CW error after one orbit").
 
     Attributes
     ----------

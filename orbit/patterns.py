@@ -1,6 +1,7 @@
 """Relative-motion patterns: characteristic point, pattern parameters, classification.
 
-The in-plane CW motion always has the form (SPEC §3, τ = n(t − t_p))::
+The in-plane CW motion always has the form (τ = n(t − t_p); docs/orbit.md, "Patterns and their
+thresholds")::
 
     x(t) = x_l + A cos τ
     y(t) = γ − 2A sin τ − β (t − t_p)
@@ -10,7 +11,7 @@ x_l and drifts along-track at −β = −(3/2) n x_l. P, the characteristic poin
 instant where ẋ = 0 and x is maximal (x_p = x_l + A).
 
 Two dimensionless numbers describe the shape: κ = x_l / A and the paper's
-σ = −ẏ_p / (n x_p) = (4 + 3κ) / (2(1 + κ)). The pattern follows from |κ| alone (SPEC §4):
+σ = −ẏ_p / (n x_p) = (4 + 3κ) / (2(1 + κ)). The pattern follows from |κ| alone:
 
 =============  ==========================  =================================================
 pattern        κ                           σ (for x_p > 0)
@@ -30,7 +31,8 @@ References
 ----------
 W. H. Clohessy and R. S. Wiltshire (1960), doi:10.2514/8.8704.
 The σ classification follows the source paper (Remote Sens. 2026, 18(8), 1177,
-doi:10.3390/rs18081177) with the corrections of SPEC §12.2–12.4.
+doi:10.3390/rs18081177) with the corrections listed in docs/accuracy.md, "Where this departs
+from the source paper".
 """
 
 from __future__ import annotations
@@ -117,7 +119,7 @@ SIGMA_SPIRAL_HIGH = sigma_from_kappa(-KAPPA_STAR)
 """σ ≈ 2.2038732545 at κ = −κ*: spiral below, drip-drop at or above."""
 
 ELLIPTICAL_RTOL = 1e-9
-"""Elliptical iff |x_l| ≤ ELLIPTICAL_RTOL · max(A, |x_l|, 1e-9 m) (SPEC §4)."""
+"""Elliptical iff |x_l| ≤ ELLIPTICAL_RTOL · max(A, |x_l|, 1e-9 m)."""
 
 _P_PHASE_SNAP_RAD = 1e-9  # a P this close before t0 (in phase) is taken as at t0
 _XP_ZERO_RTOL = 1e-12  # |x_p| below this fraction of max(A, |x_l|) is x_p = 0 (σ undefined)
@@ -125,7 +127,8 @@ _XP_ZERO_RTOL = 1e-12  # |x_p| below this fraction of max(A, |x_l|) is x_p = 0 (
 
 @dataclass(frozen=True, slots=True)
 class PatternParameters:
-    """Pattern parameters of a relative state (SPEC §3–§4), SI units.
+    """Pattern parameters of a relative state, SI units (docs/orbit.md, "Patterns and their
+    thresholds").
 
     Attributes
     ----------
@@ -204,7 +207,7 @@ class PatternParameters:
 
 
 def classify(A: float, x_l: float, *, length_scale_m: float = 0.0) -> str:
-    """Classify in-plane relative motion from its amplitude and centre offset (SPEC §4).
+    """Classify in-plane relative motion from its amplitude and centre offset (by κ = x_l / A).
 
     Parameters
     ----------
@@ -243,7 +246,7 @@ def classify(A: float, x_l: float, *, length_scale_m: float = 0.0) -> str:
 
 
 def classify_sigma(sigma: float, x_p: float) -> str:
-    """Classify from the paper's σ and the sign of x_p (SPEC §4), for compatibility.
+    """Classify from the paper's σ and the sign of x_p, for compatibility.
 
     Parameters
     ----------
@@ -285,7 +288,7 @@ def classify_sigma(sigma: float, x_p: float) -> str:
 
 
 def parameters(s_lvlh, n: float, t0: float = 0.0) -> PatternParameters:
-    """Pattern parameters of any relative state (SPEC §3), all in closed form.
+    """Pattern parameters of any relative state, all in closed form.
 
     Parameters
     ----------
@@ -348,7 +351,7 @@ def parameters(s_lvlh, n: float, t0: float = 0.0) -> PatternParameters:
 
 def state_from_pattern(A: float, beta: float, gamma: float, n: float, *, z_amp: float = 0.0,
                        z_phase: float = 0.0, tau0: float = 0.0) -> np.ndarray:
-    """Initial state from pattern parameters (SPEC §3 inverse map).
+    """Initial state from pattern parameters (the inverse of :func:`parameters`).
 
     Parameters
     ----------

@@ -1,14 +1,16 @@
-"""Camera pointing, pinhole projection and 6-DoF pose labels (SPEC §9).
+"""Camera pointing, pinhole projection and 6-DoF pose labels.
 
 Camera frame (OpenCV): x right, y down, z forward (boresight), origin at the optical centre.
-The camera sits at ``rho_lvlh`` (the relative position of SPEC §1, observer minus target, in
-LVLH) and looks at the target centre. A pose label maps target-body points into the camera:
+The camera sits at ``rho_lvlh`` (the relative position of docs/conventions.md, observer minus
+target, in LVLH) and looks at the target centre. A pose label maps target-body points into the
+camera:
 
     p_cam = R_cam_from_body · p_body + t_cam,
     R_cam_from_body = R_cam_from_lvlh · R_lvlh_from_body,   t_cam = R_cam_from_lvlh · (0 − ρ).
 
 Rotation conventions (active matrices, Hamilton scalar-first quaternions, z-y-x Euler angles)
-are those of :mod:`orbit.rotations`.
+are those of :mod:`orbit.rotations`. Pointing and labels: docs/orbit.md, "Camera pointing and
+pose labels"; the pinhole: docs/conventions.md, "Camera model".
 
 References
 ----------
@@ -37,7 +39,7 @@ _BLENDER_FROM_OPENCV = np.diag([1.0, -1.0, -1.0])
 
 
 def look_at(rho_lvlh, *, up_ref_lvlh=(0.0, 0.0, 1.0), roll_rad=0.0) -> np.ndarray:
-    """Camera attitude that points the boresight at the target centre (SPEC §9).
+    """Camera attitude that points the boresight at the target centre.
 
     Parameters
     ----------
@@ -110,7 +112,7 @@ def look_at(rho_lvlh, *, up_ref_lvlh=(0.0, 0.0, 1.0), roll_rad=0.0) -> np.ndarra
 
 
 def pose_from_relative(rho_lvlh, R_lvlh_from_body, R_cam_from_lvlh):
-    """Pose of the target body in the camera frame from the relative geometry (SPEC §9).
+    """Pose of the target body in the camera frame from the relative geometry.
 
     Parameters
     ----------
@@ -141,7 +143,7 @@ def pose_from_relative(rho_lvlh, R_lvlh_from_body, R_cam_from_lvlh):
 
 
 def camera_matrix(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
-    """Pinhole intrinsic matrix K (SPEC §9).
+    """Pinhole intrinsic matrix K (docs/conventions.md, "Camera model").
 
     Parameters
     ----------
@@ -164,7 +166,7 @@ def camera_matrix(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
 
 def intrinsics_from_focal(focal_length_m: float, pixel_pitch_m, width: int,
                           height: int) -> np.ndarray:
-    """Intrinsic matrix of a sensor with a centred principal point (SPEC §9).
+    """Intrinsic matrix of a sensor with a centred principal point.
 
     Parameters
     ----------
@@ -195,7 +197,7 @@ def intrinsics_from_focal(focal_length_m: float, pixel_pitch_m, width: int,
 
 
 def project(K, p_cam) -> np.ndarray:
-    """Pinhole projection of camera-frame points to pixel coordinates (SPEC §9).
+    """Pinhole projection of camera-frame points to pixel coordinates.
 
     Parameters
     ----------
@@ -223,7 +225,7 @@ def project(K, p_cam) -> np.ndarray:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class PoseLabels:
-    """Per-frame 6-DoF pose labels of the target in the camera frame (SPEC §9).
+    """Per-frame 6-DoF pose labels of the target in the camera frame.
 
     Attributes
     ----------
@@ -298,7 +300,7 @@ def pose_labels(R_cam_from_body, t_cam_m) -> PoseLabels:
 
 
 def blender_from_opencv(R, t):
-    """Convert a camera-frame pose from OpenCV axes to Blender camera axes (SPEC §9).
+    """Convert a camera-frame pose from OpenCV axes to Blender camera axes.
 
     Parameters
     ----------

@@ -1,8 +1,9 @@
-"""Circular reference (target) orbit in ECI and the ECI ↔ LVLH transformation (SPEC §1, §6).
+"""Circular reference (target) orbit in ECI and the ECI ↔ LVLH transformation.
 
 The target flies a circular orbit of radius a = R_E + altitude with inclination i, right
 ascension of the ascending node Ω and argument of latitude u(t) = u₀ + n t, n = sqrt(μ/a³).
-Its LVLH frame (SPEC §1: x̂ radial out, ŷ along-track, ẑ orbit normal) seen from ECI is
+Its LVLH frame (docs/conventions.md: x̂ radial out, ŷ along-track, ẑ orbit normal) seen
+from ECI is
 
     R_eci_from_lvlh(t) = R₃(Ω) R₁(i) R₃(u(t))          (active elementary rotations)
 
@@ -14,7 +15,7 @@ frame) sits at
 with r_T = a x̂, v_T = n a ŷ. The inverse is ρ = Rᵀ(r_O − r_T), ρ̇ = Rᵀ(v_O − v_T) − ω × ρ.
 
 Precision: ECI positions are ~7e6 m, so their float64 spacing is ~1e-9 m. Everything here is
-float64 and float32 is never used (DESIGN.md, "Precision and frames"); the renderer receives
+float64 and float32 is never used; the renderer receives
 LVLH/body-frame quantities only.
 
 References
@@ -78,7 +79,8 @@ def _omega_cross(n: float, rho: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, slots=True)
 class ReferenceOrbit:
-    """Circular orbit of the target spacecraft (SPEC §6).
+    """Circular orbit of the target spacecraft (docs/orbit.md, "The reference orbit and where on it
+    a sequence is flown").
 
     Parameters
     ----------
@@ -101,7 +103,7 @@ class ReferenceOrbit:
 
     Notes
     -----
-    ``R_eci_from_lvlh`` has columns (SPEC §6)::
+    ``R_eci_from_lvlh`` = R₃(Ω) R₁(i) R₃(u) has columns::
 
         x̂ = [cΩ cu − sΩ su ci,   sΩ cu + cΩ su ci,   su si]
         ŷ = [−cΩ su − sΩ cu ci,  −sΩ su + cΩ cu ci,  cu si]
@@ -249,7 +251,7 @@ class ReferenceOrbit:
         return (r[0], v[0]) if scalar else (r, v)
 
     def observer_state_eci(self, s_lvlh, t_s) -> tuple[np.ndarray, np.ndarray]:
-        """ECI state of an observer given its relative state in LVLH (SPEC §6).
+        """ECI state of an observer given its relative state in LVLH (r_O = r_T + R ρ).
 
         Parameters
         ----------

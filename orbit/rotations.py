@@ -1,6 +1,6 @@
-"""Rotation matrices, z-y-x Euler angles and unit quaternions (SPEC §9).
+"""Rotation matrices, z-y-x Euler angles and unit quaternions.
 
-Conventions (SPEC §9):
+Conventions (docs/conventions.md, "Rotations and quaternions"):
 
 * Rotation matrices are **active** and act on column vectors, named target-from-source:
   ``v_ref = R_ref_from_body @ v_body``. ``R_z(a) = [[c, −s, 0], [s, c, 0], [0, 0, 1]]``.
@@ -94,7 +94,7 @@ def rot_y(a) -> np.ndarray:
 
 
 def rot_z(a) -> np.ndarray:
-    """Active rotation about the z axis (SPEC §9 ``R_z``).
+    """Active rotation about the z axis (``R_z``).
 
     Parameters
     ----------
@@ -145,7 +145,7 @@ def _unit(name: str, v, what: str = "vector") -> np.ndarray:
 
 
 def axis_angle(axis, angle) -> np.ndarray:
-    """Rotation by ``angle`` about ``axis`` (Rodrigues' formula, SPEC §9 ``Rot(ŵ, φ)``).
+    """Rotation by ``angle`` about ``axis`` (Rodrigues' formula, ``Rot(ŵ, φ)``).
 
     Parameters
     ----------
@@ -182,7 +182,7 @@ def axis_angle(axis, angle) -> np.ndarray:
 # --------------------------------------------------------------------------- Euler z-y-x
 
 def matrix_from_euler_zyx(yaw, pitch, roll) -> np.ndarray:
-    """Rotation from z-y-x (3-2-1) Euler angles: ``R_z(ψ) R_y(θ) R_x(φ)`` (SPEC §9).
+    """Rotation from z-y-x (3-2-1) Euler angles: ``R_z(ψ) R_y(θ) R_x(φ)``.
 
     Parameters
     ----------
@@ -236,7 +236,7 @@ def euler_zyx_from_matrix(R) -> np.ndarray:
 
     Notes
     -----
-    SPEC §9 (1-based indices): ψ = atan2(R₂₁, R₁₁), θ = −asin(R₃₁), φ = atan2(R₃₂, R₃₃).
+    In closed form (1-based indices): ψ = atan2(R₂₁, R₁₁), θ = −asin(R₃₁), φ = atan2(R₃₂, R₃₃).
     Evaluated in an equivalent, better conditioned form:
 
     * θ = atan2(−R₃₁, hypot(R₁₁, R₂₁)) — equal to −asin(R₃₁) (clipped) for a rotation, but
@@ -265,7 +265,7 @@ def euler_zyx_from_matrix(R) -> np.ndarray:
 # --------------------------------------------------------------------------- quaternions
 
 def quat_from_matrix(R) -> np.ndarray:
-    """Unit quaternion of a rotation matrix by Shepperd's method (SPEC §9).
+    """Unit quaternion of a rotation matrix by Shepperd's method (Shepperd 1978).
 
     Parameters
     ----------
@@ -318,7 +318,7 @@ def quat_from_matrix(R) -> np.ndarray:
 
 
 def matrix_from_quat(q) -> np.ndarray:
-    """Active rotation matrix of a quaternion (SPEC §9 ``R(q)``).
+    """Active rotation matrix of a quaternion (``R(q)``).
 
     Parameters
     ----------
@@ -343,7 +343,8 @@ def matrix_from_quat(q) -> np.ndarray:
          [2(q₁q₂ + q₀q₃), 1−2(q₁²+q₃²), 2(q₂q₃ − q₀q₁)],
          [2(q₁q₃ − q₀q₂), 2(q₂q₃ + q₀q₁), 1−2(q₁²+q₂²)]]
 
-    The source paper prints the transpose (frame-transformation form, SPEC §12.6).
+    The source paper prints the transpose (frame-transformation form; docs/accuracy.md, "Where
+    this departs from the source paper").
     """
     q = _unit("q", finite_array("q", q, shape_tail=(4,)), "quaternion")
     q0, q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
@@ -401,7 +402,7 @@ def quat_conjugate(q) -> np.ndarray:
 
 
 def quat_continuous(q_seq) -> np.ndarray:
-    """Choose quaternion signs along a sequence so that it has no sign jumps (SPEC §9).
+    """Choose quaternion signs along a sequence so that it has no sign jumps (q_k·q_{k−1} ≥ 0).
 
     Parameters
     ----------
@@ -423,7 +424,7 @@ def quat_continuous(q_seq) -> np.ndarray:
 
 
 def quat_angle(q1, q2) -> np.ndarray:
-    """Angle of the rotation between two quaternions, sign-invariant (SPEC §9).
+    """Angle of the rotation between two quaternions, sign-invariant (2 acos |q₁·q₂|).
 
     Parameters
     ----------

@@ -1,7 +1,8 @@
-"""Seeded sampling of relative-motion patterns around a target of a given size (SPEC §4).
+"""Seeded sampling of relative-motion patterns around a target of a given size.
 
-SPEC §4 gives distributions for a camera kept 10–60 m from a target. Those numbers suit a
-target whose bounding radius is at most :data:`REFERENCE_RADIUS_M` (4 m, a Crew Dragon).
+The draws (docs/orbit.md, "How a sequence is drawn") are distributions for a camera kept 10–60 m
+from a target. Those numbers suit a target whose bounding radius is at most
+:data:`REFERENCE_RADIUS_M` (4 m, a Crew Dragon).
 For a larger target every length — the band, A, |x_l|, B and the drift length — is
 multiplied by ``scale = max(1, R_b / REFERENCE_RADIUS_M)``. CW motion is linear and the
 pattern classes depend only on κ, so the shapes and the acceptance rates are unchanged, and
@@ -37,14 +38,14 @@ __all__ = [
 ]
 
 REFERENCE_RADIUS_M = 4.0
-"""Largest target bounding radius for which SPEC §4's 10–60 m band is used unscaled [m]."""
+"""Largest target bounding radius for which the 10–60 m band is used unscaled [m]."""
 
 BASE_BAND_M = (10.0, 60.0)
-"""Allowed camera range for a target of radius ≤ REFERENCE_RADIUS_M [m] (SPEC §4)."""
+"""Allowed camera range for a target of radius ≤ REFERENCE_RADIUS_M [m]."""
 
 _CHECK_GRID = 1024
-_DRIFT_LENGTH_M = 80.0  # along-track distance the drift centre covers in its window (SPEC §4)
-_DRIFT_MARGIN_M = 10.5  # |x_l| − A ≥ this keeps a drift clear of the 10 m keep-out (SPEC §4)
+_DRIFT_LENGTH_M = 80.0  # along-track distance the drift centre covers in its window
+_DRIFT_MARGIN_M = 10.5  # |x_l| − A ≥ this keeps a drift clear of the 10 m keep-out
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,7 +63,7 @@ class RangeBand:
 
     @property
     def scale(self) -> float:
-        """Length scale relative to SPEC §4's 10–60 m band [-]."""
+        """Length scale relative to the 10–60 m band [-]."""
         return self.r_min_m / BASE_BAND_M[0]
 
 
@@ -77,7 +78,7 @@ def range_band(target_radius_m: float) -> RangeBand:
 
 
 def default_window_s(pattern: str, n: float, *, x_l_m: float = 0.0, scale: float = 1.0) -> float:
-    """Window length T_w of SPEC §4's sampling table [s].
+    """Window length T_w of the sampling table [s] (docs/orbit.md, "How a sequence is drawn").
 
     elliptical: one period T; spiral and drip-drop: T/2; drift: min(T, 80 m·scale / |β|) with
     β = (3/2) n x_l, i.e. the time for the drifting centre to cover 80 m·scale.
@@ -135,7 +136,7 @@ class PatternSample:
 
 
 def _draw(pattern: str, rng: np.random.Generator, scale: float, r_max: float):
-    """One draw of (A, κ, B, T_w-relevant x_l) from SPEC §4's table, lengths × scale."""
+    """One draw of (A, κ, B, T_w-relevant x_l) from the sampling table, lengths × scale."""
     sign = 1.0 if rng.random() < 0.5 else -1.0
     if pattern == "elliptical":
         A = rng.uniform(10.0, 28.0) * scale
@@ -177,7 +178,7 @@ def sample_pattern(pattern: str, n: float, *, target_radius_m: float, n_frames: 
     rng : int, numpy.random.Generator or None, keyword-only
         Seed or generator; normalised once with ``np.random.default_rng``.
     window_s : float, optional
-        Window length [s]; default from :func:`default_window_s` (SPEC §4).
+        Window length [s]; default from :func:`default_window_s`.
     max_attempts : int, optional
         Draws before giving up.
 
@@ -194,7 +195,7 @@ def sample_pattern(pattern: str, n: float, *, target_radius_m: float, n_frames: 
     Notes
     -----
     Each draw centres the window on the target along-track: x_l = κA, β = (3/2) n x_l,
-    γ = β(T_w/2 + τ₀/n), so the ellipse centre passes y = 0 at t = T_w/2 (SPEC §4).
+    γ = β(T_w/2 + τ₀/n), so the ellipse centre passes y = 0 at t = T_w/2.
     """
     one_of("pattern", pattern, PATTERNS)
     n = mean_motion("n", n)
@@ -222,7 +223,7 @@ def sample_pattern(pattern: str, n: float, *, target_radius_m: float, n_frames: 
         if r_lo < band.r_min_m or r_hi > band.r_max_m:
             continue
         params = parameters(s0, n)
-        if params.pattern != pattern:  # cannot happen with SPEC §4's κ ranges; guard anyway
+        if params.pattern != pattern:  # cannot happen with the table's κ ranges; guard anyway
             continue
         s0.setflags(write=False)
         t_frames.setflags(write=False)

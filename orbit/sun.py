@@ -1,9 +1,10 @@
 """Geocentric Sun position from the Astronomical Almanac's low-precision formulae.
 
 The Sun is needed only as a direction for lighting and for the shadow and exclusion tests
-of :mod:`orbit.visibility` (SPEC §8), so the almanac's closed form (accurate to about
-0.011 deg over 1950–2050) is used instead of a numerical ephemeris. Conventions: SPEC §1
-(ECI = J2000 mean equator and equinox, metres) and SPEC §6 ("Sun position").
+of :mod:`orbit.visibility`, so the almanac's closed form (accurate to about 0.011 deg over
+1950–2050) is used instead of a numerical ephemeris. Conventions: docs/conventions.md
+(ECI = J2000 mean equator and equinox, metres) and docs/orbit.md, "The reference orbit and
+where on it a sequence is flown".
 
 Instants are Unix seconds (UTC), as everywhere in :mod:`orbit`; see :mod:`orbit.epoch`.
 """
@@ -77,7 +78,7 @@ def sun_position_eci(utc, *, frame: str = "j2000") -> np.ndarray:
     utc : float or array_like of float, shape () or (n,)
         Instants as Unix seconds (UTC), within 1950–2050 [s].
     frame : {"j2000", "date"}
-        ``"j2000"``: mean equator and equinox of J2000, the ECI frame of SPEC §1 (within
+        ``"j2000"``: mean equator and equinox of J2000, the ECI frame of docs/conventions.md (within
         0.011 deg of GCRS). ``"date"``: mean equator and equinox of date (the almanac's own
         frame). Mixing the two costs up to 0.7 deg by 2050.
 
@@ -94,7 +95,7 @@ def sun_position_eci(utc, *, frame: str = "j2000") -> np.ndarray:
 
     Notes
     -----
-    With d = JD(UTC) − 2451545.0 (SPEC §6; using UTC for TT costs < 0.001 deg):
+    With d = JD(UTC) − 2451545.0 (Astronomical Almanac; using UTC for TT costs < 0.001 deg):
 
     * L = 280.460 + 0.9856474 d, g = 357.528 + 0.9856003 d (deg, mod 360),
     * λ = L + 1.915 sin g + 0.020 sin 2g (apparent ecliptic longitude, deg),

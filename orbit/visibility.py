@@ -1,9 +1,10 @@
 """Visibility of the target: Earth occlusion, Earth background, Sun exclusion, Earth shadow.
 
-Implements SPEC §8 on ECI positions in metres (SPEC §1): the segment test for the line of
-sight, the cone test for "Earth in the background" (which is *not* an occlusion test,
-SPEC §12.7), the Sun-exclusion angle, the cylindrical and conical Earth-shadow models
-(SPEC §12.8) and the illuminated fraction ν of the solar disc.
+Implements docs/orbit.md, "Visibility" on ECI positions in metres: the segment test for the
+line of sight, the cone test for "Earth in the background" (which is *not* an occlusion test,
+although the source paper uses it as one), the Sun-exclusion angle, the cylindrical and conical
+Earth-shadow models (the paper's test is the cylindrical one; docs/accuracy.md, "Where this
+departs from the source paper") and the illuminated fraction ν of the solar disc.
 
 Every function is vectorised: positions have shape (3,) or (n, 3) and are broadcast against
 each other; results have shape () (NumPy scalars) or (n,). The Earth is a sphere of radius
@@ -36,7 +37,7 @@ SHADOW_NAMES = ("sunlit", "penumbra", "umbra")
 """Names of the shadow codes, indexed by code."""
 
 DEFAULT_SUN_MARGIN_RAD = float(np.radians(20.0))
-"""Default stray-light margin added to the Sun's apparent radius [rad] (SPEC §8)."""
+"""Default stray-light margin added to the Sun's apparent radius [rad]."""
 
 
 # --------------------------------------------------------------------------- validation
@@ -179,9 +180,10 @@ def _illuminated_fraction(r_target, r_sun):
     annulus = ~full & ~none & (c <= a - b)       # Earth disc wholly inside the Sun disc
     partial = ~(full | none | annulus)
 
-    # Partial overlap, |a − b| < c < a + b. SPEC §8's x, y and acos terms, rewritten without
-    # cancellation: y from Heron's formula, the acos as atan2 half-angles θ_a, θ_b of the
-    # common chord, and each lens half as a circular segment r²(θ − sin θ cos θ).
+    # Partial overlap, |a − b| < c < a + b. The x, y and acos terms of illuminated_fraction's
+    # Notes, rewritten without cancellation: y from Heron's formula, the acos as atan2
+    # half-angles θ_a, θ_b of the common chord, and each lens half as a circular segment
+    # r²(θ − sin θ cos θ).
     c_p = np.where(partial, c, a + b)            # harmless stand-in elsewhere (y = 0)
     heron = (np.maximum(a + b - c_p, 0.0) * np.maximum(b - a + c_p, 0.0)
              * np.maximum(a - b + c_p, 0.0) * (a + b + c_p))
@@ -230,7 +232,7 @@ def line_of_sight(r_cam_eci, r_target_eci, *, radius_m: float = R_EARTH_M):
 
     Notes
     -----
-    Closest point of the segment to the Earth's centre (SPEC §8)::
+    Closest point of the segment to the Earth's centre::
 
         d = r_T − r_C,  t* = clamp(−(r_C·d)/(d·d), 0, 1),  p = r_C + t* d,  visible ⇔ |p| > R
 
@@ -244,10 +246,10 @@ def line_of_sight(r_cam_eci, r_target_eci, *, radius_m: float = R_EARTH_M):
 def earth_in_background(r_cam_eci, r_target_eci, *, radius_m: float = R_EARTH_M):
     """Whether the direction to the target lies inside the Earth's apparent disc.
 
-    This is **not** an occlusion test (SPEC §8, §12.7): a target 20 m straight below the
-    camera is in front of the Earth, fully visible, and has the Earth behind it. Use
-    :func:`line_of_sight` for occlusion; use this flag for rendering and labels (the Earth
-    fills the image around the target).
+    This is **not** an occlusion test (the source paper uses it as one): a target 20 m
+    straight below the camera is in front of the Earth, fully visible, and has the Earth
+    behind it. Use :func:`line_of_sight` for occlusion; use this flag for rendering and labels
+    (the Earth fills the image around the target).
 
     Parameters
     ----------
@@ -273,7 +275,7 @@ def earth_in_background(r_cam_eci, r_target_eci, *, radius_m: float = R_EARTH_M)
     Notes
     -----
     Cone test: θ = angle(−r_C, r_T − r_C) < asin(R/|r_C|), i.e.
-    cos θ > sqrt(|r_C|² − R²)/|r_C| (SPEC §8). Angles are computed with atan2 so the test
+    cos θ > sqrt(|r_C|² − R²)/|r_C|. Angles are computed with atan2 so the test
     stays accurate for small θ.
     """
     r_cam, r_target = _positions(r_cam_eci=r_cam_eci, r_target_eci=r_target_eci)
@@ -339,7 +341,7 @@ def sun_clear(r_cam_eci, r_target_eci, r_sun_eci, *, margin_rad: float = DEFAULT
 
     Notes
     -----
-    α_s = asin(R_S/|r_S − r_C|) + margin (SPEC §8); the Sun's apparent radius is
+    α_s = asin(R_S/|r_S − r_C|) + margin; the Sun's apparent radius is
     ≈ 0.267 deg at 1 AU. The boresight is assumed to point at the target.
     """
     r_cam, r_target, r_sun = _positions(r_cam_eci=r_cam_eci, r_target_eci=r_target_eci,
@@ -374,8 +376,8 @@ def shadow_cylindrical(r_target_eci, r_sun_eci):
 
     Notes
     -----
-    With ŝ = r_S/|r_S|: in shadow iff r_T·ŝ < 0 and |r_T − (r_T·ŝ)ŝ| < R_E (SPEC §8).
-    Equivalent to the corrected inequality of the source paper (SPEC §12.8): lit iff
+    With ŝ = r_S/|r_S|: in shadow iff r_T·ŝ < 0 and |r_T − (r_T·ŝ)ŝ| < R_E.
+    Equivalent to the source paper's inequality with its lost minus sign restored: lit iff
     r_T·ŝ > −sqrt(|r_T|² − R_E²). The conical model (:func:`shadow_conical`) is preferred.
     """
     r_target, r_sun = _positions(r_target_eci=r_target_eci, r_sun_eci=r_sun_eci)
@@ -405,7 +407,7 @@ def shadow_conical(r_target_eci, r_sun_eci):
 
     Notes
     -----
-    SPEC §8, with d_S = |r_S| and ŝ = r_S/d_S::
+    Umbra and penumbra cones, with d_S = |r_S| and ŝ = r_S/d_S::
 
         α_u = asin((R_S − R_E)/d_S),  α_p = asin((R_S + R_E)/d_S)
         x_u = R_E/sin α_u (umbra apex behind the Earth),  x_p = R_E/sin α_p
@@ -444,7 +446,7 @@ def illuminated_fraction(r_target_eci, r_sun_eci):
 
     Notes
     -----
-    Overlap of two discs in the plane of the sky (SPEC §8), from the apparent radii seen
+    Overlap of two discs in the plane of the sky, from the apparent radii seen
     at r_T: a = asin(R_S/|r_S − r_T|), b = asin(R_E/|r_T|), c = angle(−r_T, r_S − r_T)::
 
         c ≥ a + b → ν = 1;   c ≤ b − a → ν = 0;   c ≤ a − b → ν = 1 − b²/a²;   else
@@ -552,7 +554,7 @@ class Visibility:
 
 def visibility(r_cam_eci, r_target_eci, r_sun_eci, *, sun_margin_rad: float = DEFAULT_SUN_MARGIN_RAD,
                earth_radius_m: float = R_EARTH_M) -> Visibility:
-    """Compute every visibility flag of SPEC §8 at once.
+    """Compute every visibility flag (docs/orbit.md, "Visibility") at once.
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Numba policy for every kernel in :mod:`raytrace` (DESIGN.md), set once here.
+"""Numba policy for every kernel in :mod:`raytrace`, set once here.
 
 ``cache=True`` so CI and later runs skip compilation; ``nogil`` so threads can overlap
 kernels with Embree calls; ``prange`` only on outer pixel/ray loops.

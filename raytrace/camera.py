@@ -1,4 +1,4 @@
-"""Pinhole camera (SPEC §9): intrinsics, pixel centres, OpenCV axes.
+"""Pinhole camera (docs/conventions.md, "Camera model"): intrinsics, pixel centres, OpenCV axes.
 
 Camera frame: x right, y down, z forward (boresight). Integer pixel coordinates (u = column,
 v = row) are pixel centres; a centred principal point is c = ((W − 1)/2, (H − 1)/2).
@@ -87,7 +87,7 @@ class Camera:
                    height: int = DEFAULT_HEIGHT) -> Camera:
         """Camera from a focal length and a square pixel pitch, principal point centred.
 
-        f_x = f_y = focal_length_m / pixel_pitch_m; c = ((W − 1)/2, (H − 1)/2) (SPEC §9).
+        f_x = f_y = focal_length_m / pixel_pitch_m; c = ((W − 1)/2, (H − 1)/2).
         """
         f = _positive_finite("focal_length_m", focal_length_m)
         p = _positive_finite("pixel_pitch_m", pixel_pitch_m)

@@ -6,8 +6,9 @@ Input: a sequence folder as the pipeline writes it — ``camera.json`` (``K``, `
 ``R_cam_from_body`` (9 numbers, row-major), ``t_cam_m``, ``q_cam_from_body``, ``files``:
 modality → path relative to the folder), the images ``rgb/``, ``rgb_degraded/``, ``mask/``
 (uint16 component ids, 0 background), ``depth/`` (float32 z-depth [m], inf on background)
-and ``model/`` holding the rendered mesh as one PLY in metres. Pose convention (SPEC §9): ``p_cam = R_cam_from_body @ p_body + t_cam_m``, OpenCV
-camera axes, integer pixel coordinates at pixel centres.
+and ``model/`` holding the rendered mesh as one PLY in metres. Pose convention
+(docs/conventions.md): ``p_cam = R_cam_from_body @ p_body + t_cam_m``, OpenCV camera axes,
+integer pixel coordinates at pixel centres.
 
 Frames whose ``files`` lack an image the export needs (frames the pipeline did not render)
 are left out; a file that is listed but missing or unreadable is an error.
@@ -117,7 +118,7 @@ def _quat_from_matrix(R: np.ndarray) -> np.ndarray:
 
 
 def _matrix_from_quat(q: np.ndarray) -> np.ndarray:
-    """Active rotation matrix R(q) of a unit Hamilton quaternion, scalar first (SPEC §9)."""
+    """Active rotation matrix R(q) of a unit Hamilton quaternion, scalar first."""
     q0, q1, q2, q3 = q
     return np.array([
         [1 - 2 * (q2 * q2 + q3 * q3), 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)],
@@ -128,7 +129,7 @@ def _matrix_from_quat(q: np.ndarray) -> np.ndarray:
 
 def _parse_frame(i: int, rec) -> _Frame:
     where = f"labels.json frame record {i}"
-    is_object = isinstance(rec, dict)  # DESIGN.md: ValueError at public boundaries, also for a type
+    is_object = isinstance(rec, dict)  # ValueError at public boundaries, also for a type
     if not is_object:
         raise ValueError(f"{where} must be a JSON object, got {type(rec).__name__}")
     missing = [k for k in ("frame", "R_cam_from_body", "t_cam_m") if k not in rec]
@@ -149,7 +150,7 @@ def _parse_frame(i: int, rec) -> _Frame:
         q = q / np.linalg.norm(q)
         if not np.allclose(_matrix_from_quat(q), R, atol=1e-6):
             raise ValueError(f"{where}: q_cam_from_body does not describe R_cam_from_body "
-                             "(Hamilton, scalar first, active; SPEC §9)")
+                             "(Hamilton, scalar first, active; docs/conventions.md)")
     files = rec.get("files") or {}
     is_object = isinstance(files, dict)
     if not is_object:
@@ -409,8 +410,8 @@ def export_bop(sequence_dir, out_dir, *, obj_id: int = 1, scene_id: int = 0, spl
     -----
     * ``im_id`` is the sequence's frame number; ``gt_id`` is 0 (one object per image).
     * Pose: ``cam_R_m2c = R_cam_from_body`` (row-major), ``cam_t_m2c = 1000 · t_cam_m``
-      (SPEC §9). The model frame is the target's body frame (origin at the centre of mass,
-      not at the bounding-box centre BOP models usually use; poses refer to this frame).
+      (docs/conventions.md). The model frame is the target's body frame (origin at the centre of
+      mass, not at the bounding-box centre BOP models usually use; poses refer to this frame).
     * Depth: z-depth [mm] = code × ``depth_scale``, rounded to the nearest code; 0 where the
       render has no target (inf) or the depth would overflow 16 bits. ``depth_scale`` is one
       value for the scene, the smallest of 1, 2, 5 × 10^k mm that keeps the farthest possible
@@ -611,7 +612,8 @@ def export_speedplus(sequence_dir, out_dir, *, split: str = "train", domain: str
     ``project_keypoints`` in speedplusbaseline ``src/utils/utils.py``): a camera-frame
     ("VBS", OpenCV axes) point is ``p_cam = quat2dcm(q)ᵀ · p_tango + r`` where ``quat2dcm``
     is the direction-cosine (passive) matrix of the scalar-first quaternion q, i.e. the
-    transpose of the active Hamilton rotation matrix R(q) of SPEC §9. Hence
+    transpose of the active Hamilton rotation matrix R(q) (docs/conventions.md, "Rotations and
+    quaternions"). Hence
 
     * ``q_vbs2tango_true = q_cam_from_body`` (Hamilton, **scalar first** [q0, q1, q2, q3]):
       the rotation that turns the camera (VBS) axes into the target (Tango) axes;

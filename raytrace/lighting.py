@@ -14,15 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import environment as env
+from .constants import EARTH_RADIUS_M, SOLAR_CONSTANT_W_M2, SUN_ANGULAR_DIAMETER_RAD
+from .stars import StarField
 
 __all__ = ["EARTH_RADIUS_M", "SOLAR_CONSTANT_W_M2", "SUN_ANGULAR_DIAMETER_RAD", "Earth", "Lighting"]
-
-SOLAR_CONSTANT_W_M2 = 1361.0
-"""Total solar irradiance at 1 au (Kopp & Lean 2011, doi:10.1029/2010GL045777) [W/m²]."""
-EARTH_RADIUS_M = 6378137.0
-"""Earth's equatorial radius (WGS-84), as in :mod:`orbit.constants` [m]."""
-SUN_ANGULAR_DIAMETER_RAD = math.radians(0.533)
-"""Mean angular diameter of the Sun seen from Earth's distance [rad]."""
 
 EARTH_TEXTURES = ("uniform", "procedural")
 
@@ -178,7 +173,6 @@ class Lighting:
         if self.earth is not None and not isinstance(self.earth, Earth):
             raise ValueError(f"earth must be a raytrace.lighting.Earth or None, got {type(self.earth).__name__}")
         if self.stars is not None:
-            from .stars import StarField
             if not isinstance(self.stars, StarField):
                 raise ValueError(f"stars must be a raytrace.stars.StarField or None, got {type(self.stars).__name__}")
             object.__setattr__(self, "R_body_from_eci",

@@ -11,8 +11,8 @@ Units
     carry no units, and glTF files that claim metres often are not. Use 1 for metre files,
     0.001 for millimetre files, 0.01 for centimetre files.
 Body frame
-    The file's model frame scaled to metres: axes and origin as authored (SPEC §9 "Target
-    body frame"). ``recentre="bbox"`` or ``"centroid"`` moves the origin to the centre of
+    The file's model frame scaled to metres: axes and origin as authored (docs/conventions.md,
+    "Body frame"). ``recentre="bbox"`` or ``"centroid"`` moves the origin to the centre of
     the bounding box or to the area-weighted surface centroid, for files whose origin is far
     from the object. The offset that was subtracted is kept in
     ``model.metadata["origin_offset_m"]``: ``p_body = unit_scale_m * p_file - offset``.

@@ -5,7 +5,7 @@ geometry each, so an Embree ``geomID`` maps to a component and component ``k`` (
 written as instance id ``k + 1`` (0 is background).
 
 Frames and units: every mesh is in the target's **body frame**, in metres, with the origin at
-the centre of mass (SPEC §9 "Target body frame").
+the centre of mass (docs/conventions.md, "Body frame").
 """
 
 from __future__ import annotations
@@ -37,7 +37,8 @@ MATERIALS = (
     "heat_shield",     # ablative heat shield (dark, matte)
     "titanium",        # metallic engine nozzles, RTG fins (grey metal)
 )
-"""Material names a component may use; issue 4's shading gives each a BRDF preset."""
+"""Material names a component may use; the shading gives each a BRDF preset (docs/shading.md,
+"Materials")."""
 
 SEMANTIC_CLASSES = (
     "bus", "module", "solar_panel", "antenna", "dish", "boom", "engine", "thruster",

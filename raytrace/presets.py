@@ -28,9 +28,9 @@ class Quality:
     gather_rays : int
         Final-gather rays per pixel (0: the cache alone) [-].
     filter_passes : int
-        À-trous passes on the gathered irradiance (pass k has holes of 2^k pixels; up to the
-        fiftieth session on its difference from the cache, in which the measurements below
-        that chose the passes, σ_l and β were made) [-].
+        À-trous passes on the gathered irradiance (pass k has holes of 2^k pixels; the
+        measurements below that chose the passes, σ_l and β were made when it filtered the
+        gathered irradiance's difference from the cache) [-].
     filter_sigma_l : float
         Edge stopping on the gathered light itself: a neighbour's weight falls as exp(−z/σ_l), z the
         z-score of the two pixels' difference from their gathers' own variances
@@ -178,8 +178,8 @@ def _balanced_aa(samples: int) -> int:
     From N = 32, where edge sub-samples near a boundary cast their own gathers
     (:func:`_own_at_boundary`), 8×8 with gathers of N / 8 rays (:func:`_balanced_aa_gather`) and a
     second pattern at 20 % of the pixels (:func:`_balanced_aa_extra`) instead of 6×6, N / 4 and
-    10 % (forty-eighth session, an AVX-512 machine; ``benchmarks/bench_bias_noise.py``, median
-    error and time, each setting in its own run): N = 32 1.39 % in 0.607 s → 1.23 % in 0.733 s,
+    10 % (an AVX-512 machine; ``benchmarks/bench_bias_noise.py``, median error and time, each
+    setting in its own run): N = 32 1.39 % in 0.607 s → 1.23 % in 0.733 s,
     N = 64 1.22 % in 0.941 s → 1.02 % in 1.031 s, N = 256 0.89 % in 4.09 s → 0.86 % in 3.02 s:
     below the curve of more gather rays (error ∝ t^−0.2 from 32 to 256 rays). At N = 64, step by
     step: 8×8 with N / 8-ray gathers 1.08 % in 0.951 s; with N / 16 rays 1.16 % in 0.801 s; 6×6
@@ -198,10 +198,10 @@ def _balanced_aa_gather(samples: int) -> int:
     (:func:`_own_at_boundary`): the measurements are :func:`_balanced_aa`'s. The gathers of a
     pixel's sub-samples are consecutive blocks of one Owen-scrambled Sobol sequence of the
     pixel (:func:`raytrace._shading.gather_start`), so together they are one stratified set
-    (a net of 64 × 8 rays at N = 64) rather than 64 independent ones (forty-ninth session, the
-    12 scenes at 1280×960, the same rays: N = 32 1.23 → 1.19 %, N = 64 1.02 → 1.00 %; there, 8×8
-    sub-samples with N / 16 rays gave 1.06 % and 10×10 with N / 16 0.97 % for 1.04× the time,
-    better on the sunlit and Earth-lit views and worse on the backlit ones, and not kept)."""
+    (a net of 64 × 8 rays at N = 64) rather than 64 independent ones (the 12 scenes at
+    1280×960, the same rays: N = 32 1.23 → 1.19 %, N = 64 1.02 → 1.00 %; there, 8×8 sub-samples
+    with N / 16 rays gave 1.06 % and 10×10 with N / 16 0.97 % for 1.04× the time, better on the
+    sunlit and Earth-lit views and worse on the backlit ones, and not kept)."""
     return max(2, samples // 4) if samples < 32 else samples // 8
 
 
@@ -245,7 +245,7 @@ def _balanced_aa_extra(samples: int) -> float:
     64 and 256 (t^−0.2 there); and the pixels that flicker most in a sequence get half the
     noise variance. From N = 32, with the 8×8 grid (:func:`_balanced_aa`), 20 %: at N = 64 with
     N / 8-ray sub-sample gathers, 10 % gave 1.08 % in 0.951 s, none 1.15 % in 0.919 s, 20 %
-    1.03 % in 1.006 s (forty-eighth session, each in its own run of
+    1.03 % in 1.006 s (an AVX-512 machine, each in its own run of
     ``benchmarks/bench_bias_noise.py``). Tried there and not kept: the extra patterns shared out by
     contrast (k patterns at a pixel ∝ its sub-samples' range, up to 4 or 8, as many in all as
     10 %), 1.08 % in 0.97 s — the contrast ranks the noisiest pixels but does not measure their
@@ -358,7 +358,7 @@ def _cache_divisions(samples: int) -> int:
     four targets' caches takes 1.6–2.2× as long at 1/90 (1/120: 2.0–3.3×; 1.5–4.7 s and
     2.8–6.5 s against 1.0–2.2 s, each after a first build had compiled the kernels), so the
     default ``balanced``-8 (``render-scene``'s) keeps the default lattice (BENCHMARKS.md, "A finer
-    radiance cache for `balanced`"). At N = 12 (forty-fifth session, an AVX-512 machine):
+    radiance cache for `balanced`"). At N = 12 (an AVX-512 machine, 2026-12-04):
     2.11 → 1.95 % (ten scenes lower, ICESat ``sunlit`` and ``backlit`` +0.01 / +0.04 %) for
     1.053× the time (0.996–1.082 by scene), where the curve from 12 to 16 rays (2.09 → 1.84 % for
     0.292 → 0.348 s, t^−0.73) would ask 1.12× for that error: below it, and 12 rays then reach
@@ -376,7 +376,7 @@ def _box_grid(samples: int) -> int:
     1–2 px from an edge, 0.08 at 2–3 px, 0.002 beyond 10 px (0.14 of 0.21 even unfiltered,
     so not the residual filter's). Measured on the 12 scenes of ``benchmarks/bench_time_error.py``
     at 1280×960 (``benchmarks/bench_bias_noise.py``, median error; time: the settings alternated
-    per scene, fastest of 3, median of the per-scene ratios; fiftieth session):
+    per scene, fastest of 3, median of the per-scene ratios):
 
     * N = 64: 1.00 → 0.95 % (all 12 scenes lower: ICESat ``sunlit`` 0.49 → 0.48 % …
       Tiangong ``backlit`` 3.17 → 2.82 %, ICESat ``earth`` 0.99 → 0.84 %; interior noise falls

@@ -6,7 +6,7 @@ pickled so scenes can be sent to worker processes. :meth:`Scene.render_geometry`
 primary ray per pixel centre — only inside the projection of the target's convex hull — and
 returns every geometric AOV from the same hit record (:class:`GeometryFrame`).
 
-Precision (DESIGN.md): Embree sees float32 body-frame coordinates, with every ray origin
+Precision: Embree sees float32 body-frame coordinates, with every ray origin
 advanced to just in front of the target so that they stay target-sized at any range; every
 hit is then re-intersected in float64 with the triangle Embree reported from the true
 optical centre, so depth is exact to float64 round-off rather than float32. Rays are

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._kernels import rows_times_matrix
-from .lighting import SOLAR_CONSTANT_W_M2
+from .constants import SOLAR_CONSTANT_W_M2
 
 __all__ = ["MAG_BRIGHTEST", "MAG_FAINTEST", "SUN_V_MAG", "StarField", "irradiance_of_magnitude"]
 

@@ -101,7 +101,7 @@ def test_lock_file_deleted_by_its_holder_cannot_let_two_runs_in(tmp_path):
 
 
 def test_two_different_runs_started_at_once_never_both_succeed(tmp_path):
-    """The issue's race: two runs with different options into one new folder at the same time.
+    """The race: two runs with different options into one new folder at the same time.
     Exactly one may own it; the folder then holds that run's sequence only."""
     for attempt in range(2):
         seq = tmp_path / f"X{attempt}"

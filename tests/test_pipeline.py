@@ -540,8 +540,9 @@ def test_negative_option_values_are_read_as_values(capsys):
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
 def test_explicit_kappa_on_the_spiral_boundary_is_drip_drop(capsys, sign):
-    """SPEC §4: |kappa| = kappa* is drip-drop, just below it spiral. kappa recomputed from the state built from
-    kappa* falls an ulp below it; the class is that of the kappa given (it refused `--pattern drip-drop`)."""
+    """|kappa| = kappa* is drip-drop, just below it spiral (docs/orbit.md, "Patterns and their
+    thresholds"). kappa recomputed from the state built from kappa* falls an ulp below it; the class
+    is that of the kappa given (it refused `--pattern drip-drop`)."""
     from orbit.patterns import KAPPA_STAR
     for kappa, pattern in ((sign * KAPPA_STAR, "drip-drop"), (sign * np.nextafter(KAPPA_STAR, 0.0), "spiral")):
         assert run_main("--target", "spacedragon", "--pattern", pattern, "--amplitude-m", "12", "--kappa", repr(float(kappa)),
@@ -899,7 +900,8 @@ def test_every_degradation_option_reaches_the_degraded_image(tmp_path, extra):
 
 def test_roll_turns_the_camera_about_its_boresight(capsys):
     """--roll-deg φ: every frame's R_cam_from_body is the roll-free one turned about the camera
-    z axis by φ (either sense, per SPEC §9's definition), and t_cam_m keeps its depth."""
+    z axis by φ (either sense; look_at applies it as R_z(roll)·R_cam_from_lvlh), and t_cam_m keeps
+    its depth."""
     argv = ["--target", "icesat", "--pattern", "drift", "--frames", "3", "--json"]
     assert run_main(*argv) == 0
     f0 = json.loads(capsys.readouterr().out)["frames"]

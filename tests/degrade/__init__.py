@@ -1,1 +1,1 @@
-"""Tests of the degrade package (SPEC §10)."""
+"""Tests of the degrade package (docs/degradation.md)."""

@@ -1,4 +1,4 @@
-"""Ablation: SPEC §10 ordering on a synthetic scene, streams, table and LPIPS column."""
+"""Ablation: the D1–D4 ordering on a synthetic scene, streams, table and LPIPS column."""
 
 import sys
 import types
@@ -34,7 +34,7 @@ def report():
 def test_spec_ordering(report):
     psnr = [report.row("paper", g).psnr_db.mean for g in ("D1", "D2", "D3", "D4")]
     ssim = [report.row("paper", g).ssim.mean for g in ("D1", "D2", "D3", "D4")]
-    assert psnr[0] > psnr[1] > psnr[2] > psnr[3]  # SPEC §10
+    assert psnr[0] > psnr[1] > psnr[2] > psnr[3]  # each noise step costs PSNR
     assert ssim[0] > ssim[1] > ssim[2] >= ssim[3] - 0.005  # D3 and D4 SSIM differ by ~0.001
 
 

@@ -121,7 +121,7 @@ def test_monochrome_chain():
 
 
 def test_sensor_noise_statistics_survive_the_chain():
-    # flat grey, no blur, no CFA: mean of the linear output = the input (SPEC §10, below FW)
+    # flat grey, no blur, no CFA: mean of the linear output = the input (Φ_max = FW/QE, below FW)
     img = np.full((200, 200, 3), 0.25, np.float32)
     cfg = DegradeConfig(optics=None, sensor=SensorConfig(demosaic=None), encoding="linear")
     out = degrade(img, cfg, rng=3).astype(np.float64)

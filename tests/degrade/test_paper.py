@@ -53,7 +53,8 @@ def test_groups_equal_random_noise_chain(seed):
 
 
 def test_poisson_scale_is_256_for_8bit_data():
-    # SPEC §10: vals = 2^ceil(log2(#distinct)) = 256 with 8-bit data (here 200 distinct values)
+    # as in skimage's random_noise: vals = 2^ceil(log2(#distinct)) = 256 with 8-bit data (here 200
+    # distinct values)
     b = (np.arange(200 * 50) % 200 / 255.0).reshape(100, 100)
     out = poisson_noise(b, rng=1).astype(np.float64)
     assert_array_equal(out * 256, np.rint(out * 256))
@@ -82,7 +83,7 @@ def clipped_gaussian_mse(b, c, sigma):
 
 
 def test_d3_error_matches_closed_form():
-    # SPEC §10: on black pixels clipping at 0 halves the noise power (MSE 0.005, not 0.01)
+    # on black pixels clipping at 0 halves the noise power (MSE 0.005, not 0.01)
     img = render(shape=(192, 256, 3), seed=4)
     b = paper_blur(img).astype(np.float64)
     expected = clipped_gaussian_mse(b, img.astype(np.float64), 0.1)

@@ -1,4 +1,4 @@
-"""PSFs against closed forms and SPEC §10 values (Born & Wolf for the Airy pattern)."""
+"""PSFs against closed forms and docs/degradation.md values (Born & Wolf for the Airy pattern)."""
 
 import math
 
@@ -71,13 +71,13 @@ def test_airy_838_percent_inside_first_dark_ring():
     v1, v3 = special.jn_zeros(1, 3)[[0, 2]]
     r1_px, r3_px = 8.0, 8.0 * v3 / v1
     inside_r1 = h[r_px <= r1_px].sum() / h[r_px <= r3_px].sum() * encircled_energy(v3)
-    assert_allclose(encircled_energy(v1), 0.838, atol=5e-4)  # SPEC §10
+    assert_allclose(encircled_energy(v1), 0.838, atol=5e-4)  # Born & Wolf: 83.8 % inside r1
     assert_allclose(inside_r1, encircled_energy(v1), atol=3e-3)
 
 
 def test_airy_sizes_follow_spec():
-    # SPEC §10 example: λ = 550 nm, f/D = 4, p = 3.45 µm → r1 = 0.78 px; at least 5×5 px and a
-    # radius of at least 3 r1/p.
+    # the default optics (docs/degradation.md, "Optics"): λ = 550 nm, f/D = 4, p = 3.45 µm
+    # → r1 = 0.78 px; at least 5×5 px and a radius of at least 3 r1/p.
     r1 = psf.AIRY_FIRST_ZERO * 550e-9 * 4 / 3.45e-6
     assert_allclose(r1, 0.78, atol=0.005)
     h = psf.airy_psf(1e-3, 550e-9, 4e-3, 3.45e-6)
@@ -96,7 +96,7 @@ def test_airy_larger_for_longer_wavelength():
 @pytest.mark.parametrize("sigma", [0.5, 1.0, 2.3])
 def test_gaussian_matches_scipy_window_and_variance(sigma):
     h = psf.gaussian_psf(sigma)
-    k = 2 * math.ceil(3 * sigma) + 1  # SPEC §10
+    k = 2 * math.ceil(3 * sigma) + 1  # kernel size 2⌈3σ⌉ + 1
     assert h.shape == (k, k)
     g = gaussian_window(k, sigma)  # independent sampled Gaussian exp(-n²/2σ²)
     assert_allclose(h, np.outer(g, g) / np.outer(g, g).sum(), rtol=1e-12, atol=1e-15)
@@ -161,7 +161,7 @@ def test_motion_spec_values_theta_0():
     assert h.shape == (k, k)
     row = h[(k - 1) // 2] * 15
     expected = np.zeros(k)
-    expected[1:18] = [0.125, 0.875] + [1.0] * 13 + [0.875, 0.125]  # SPEC §10
+    expected[1:18] = [0.125, 0.875] + [1.0] * 13 + [0.875, 0.125]  # segment [−7.5, 7.5] ⊛ tent Λ
     assert_allclose(row, expected, atol=1e-9)
     assert_allclose(np.delete(h, (k - 1) // 2, axis=0), 0.0, atol=0)
 
@@ -172,7 +172,7 @@ def test_motion_spec_values_theta_30():
     t = math.radians(30.0)
     along = np.array([-math.sin(t), math.cos(t)])  # (row, col): counter-clockwise as displayed
     across = np.array([math.cos(t), math.sin(t)])
-    assert_allclose(along @ cov @ along, 18.918, atol=2e-3)  # SPEC §10
+    assert_allclose(along @ cov @ along, 18.918, atol=2e-3)  # docs/degradation.md, "Optics"
     assert_allclose(along @ cov @ along, 15**2 / 12 + 1 / 6, atol=2e-3)
     assert_allclose(across @ cov @ across, 0.170, atol=1e-3)
     assert_allclose(h, h[::-1, ::-1], atol=1e-12)  # point-symmetric
@@ -195,7 +195,7 @@ def test_motion_from_velocity_blurs_along_the_displacement(du, dv):
     w, vecs = np.linalg.eigh(cov)
     axis = vecs[:, np.argmax(w)]
     assert_allclose(abs(axis @ np.array([dv, du])) / math.hypot(du, dv), 1.0, atol=1e-9)
-    assert_allclose(w.max(), length**2 / 12 + 1 / 6, rtol=0.02)  # SPEC §10 variance along the line
+    assert_allclose(w.max(), length**2 / 12 + 1 / 6, rtol=0.02)  # along the line: L²/12 + 1/6
 
 
 def test_motion_from_velocity_angle_convention():

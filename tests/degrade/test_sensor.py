@@ -1,4 +1,5 @@
-"""Bayer mosaic, OpenImageIO demosaic and the noise model against SPEC §10 formulas."""
+"""Bayer mosaic, OpenImageIO demosaic and the noise model against the formulas of
+docs/degradation.md, "Sensor"."""
 
 import dataclasses
 
@@ -32,8 +33,8 @@ def test_flat_colour_survives_mosaic_and_demosaic(algorithm, shape):
 
 
 def test_linear_demosaic_is_spec_normalised_convolution():
-    # SPEC §10 reference: masked channel ⊛ kernel / mask ⊛ kernel. Compared 2 px away from the
-    # borders, where no padding convention is involved.
+    # reference bilinear demosaic: masked channel ⊛ kernel / mask ⊛ kernel. Compared 2 px away
+    # from the borders, where no padding convention is involved.
     raw = np.random.default_rng(3).random((40, 52), dtype=np.float32)
     mask = np.zeros((40, 52, 3))
     mask[0::2, 0::2, 0] = mask[0::2, 1::2, 1] = mask[1::2, 0::2, 1] = mask[1::2, 1::2, 2] = 1
@@ -57,7 +58,8 @@ def dn(image, config):
 
 
 def test_noise_mean_and_variance_spec_values():
-    # SPEC §10: Φ = 5000 photons → mean DN = QE Φ/g = 1228.5, std = sqrt(QEΦ + σr² + g²/12)/g = 22.52
+    # docs/degradation.md, "Sensor": Φ = 5000 photons → mean DN = QE Φ/g = 1228.5,
+    # std = sqrt(QEΦ + σr² + g²/12)/g = 22.52
     c = SensorConfig()
     phi = 5000.0
     img = np.full((400, 500), phi / c.photons_max, np.float32)

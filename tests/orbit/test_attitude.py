@@ -1,4 +1,4 @@
-"""Tests of the target attitude laws (SPEC §9, "Target attitude modes")."""
+"""Tests of the target attitude laws (docs/orbit.md, "Target attitude")."""
 
 from __future__ import annotations
 
@@ -14,14 +14,14 @@ from orbit.attitude import ATTITUDE_MODES, TargetAttitude, torque_free
 from orbit.rotations import (axis_angle, is_rotation, matrix_from_euler_zyx, matrix_from_quat,
                              quat_from_matrix, rot_z, rotation_angle)
 
-N_400KM = 1.1313666536110223e-3  # SPEC §0 [rad/s]
+N_400KM = 1.1313666536110223e-3  # n = sqrt(μ/a³) at 400 km altitude [rad/s]
 T_400KM = 2.0 * np.pi / N_400KM
 R0 = matrix_from_euler_zyx(0.3, -0.4, 1.0)
 J_GENERAL = np.array([[10.0, 0.5, -0.3], [0.5, 14.0, 0.2], [-0.3, 0.2, 7.0]])  # kg m²
 
 
 def R_inertial_from_lvlh(t, n, inclination=0.9, raan=-0.6, u0=0.3):
-    """LVLH axes built from a circular orbit in an inertial frame (SPEC §1), columns x̂ ŷ ẑ.
+    """LVLH axes built from a circular orbit in an inertial frame, columns x̂ ŷ ẑ.
 
     Independent of the R_z(n t) shortcut used by the code: the orbit is inclined and the
     LVLH triad is computed from r and h = r × v.

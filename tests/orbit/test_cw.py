@@ -1,4 +1,4 @@
-"""CW closed form against SPEC §5 vectors, the matrix exponential and numerical integration."""
+"""CW closed form against worked examples, the matrix exponential and numerical integration."""
 
 import math
 
@@ -12,10 +12,11 @@ from scipy.linalg import expm
 
 from orbit import cw
 
-N = 1.1313666536110223e-3  # SPEC §0, 400 km circular orbit
+N = 1.1313666536110223e-3  # n = sqrt(μ/a³), 400 km circular orbit (a = 6 778 137 m)
 T = 2.0 * math.pi / N
 
-# SPEC §5 test vectors: s0 and r(T/4), r(T/2), r(T) [m]
+# worked examples E1–E5 (one per pattern and a general state): s0 and r(T/4), r(T/2), r(T) [m],
+# from the closed-form CW solution at this n (docs/orbit.md, "Relative motion (Clohessy–Wiltshire)")
 VECTORS = {
     "E1": ([10, 0, 5, 0, -2 * N * 10, 0], [[0, -20, 0], [-10, 0, -5], [10, 0, 5]]),
     "E2": ([15, 0, 0, 0, -1.95 * N * 15, 0], [[1.5, -30.5342917, 0], [-12, -7.06858347, 0], [15, -14.1371669, 0]]),
@@ -33,7 +34,7 @@ states = st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=3).flatmap(
 def test_spec_vectors(name):
     s0, expected = VECTORS[name]
     r = cw.propagate(s0, N, [T / 4, T / 2, T])[:, :3]
-    assert_allclose(r, expected, atol=1e-6, rtol=0)  # SPEC §5 tolerance
+    assert_allclose(r, expected, atol=1e-6, rtol=0)  # the examples' precision
 
 
 def test_stm_identity_and_determinant():
@@ -43,7 +44,7 @@ def test_stm_identity_and_determinant():
 
 
 def test_stm_equals_matrix_exponential():
-    # independent oracle: Φ(t) = expm(A t) (SPEC §2)
+    # independent oracle: Φ(t) = expm(A t)
     A = cw.system_matrix(N)
     for t in (-2000.0, -1.0, 1e-3, 17.0, 1234.5, T, 7.3 * T):
         assert_allclose(cw.stm(N, t), expm(A * t), rtol=1e-10, atol=1e-12 * max(1.0, abs(t)))
@@ -66,7 +67,7 @@ def test_stm_satisfies_ode_by_central_difference():
 
 @pytest.mark.parametrize("name", sorted(VECTORS))
 def test_propagate_matches_numerical_integration(name):
-    # independent oracle: DOP853 on ṡ = A s (SPEC §2, rtol 1e-13)
+    # independent oracle: DOP853 on ṡ = A s (rtol 1e-13)
     s0 = np.array(VECTORS[name][0], dtype=float)
     A = cw.system_matrix(N)
     t = np.linspace(0, 1.5 * T, 31)
@@ -96,7 +97,7 @@ def test_closed_ellipse_is_periodic_for_1000_orbits():
 
 
 def test_drift_is_linear_over_1000_orbits():
-    # E4 drifts by −β T per revolution with β = 3(ẏ0 + 2n x0) (SPEC §3)
+    # E4 drifts by −β T per revolution with β = 3(ẏ0 + 2n x0) = (3/2) n x_l
     s0 = np.array(VECTORS["E4"][0])
     beta = 3 * (s0[4] + 2 * N * s0[0])
     k = np.arange(0, 1001)

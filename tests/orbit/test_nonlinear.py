@@ -1,4 +1,5 @@
-"""Tests of orbit.nonlinear: the numerical reference for CW (SPEC §7, §11) and J2.
+"""Tests of orbit.nonlinear: the numerical reference for CW and J2 (docs/accuracy.md, "CW error
+after one orbit").
 
 Figures quoted in comments were measured with this code (400 km, i = 51.6 deg, DOP853).
 """
@@ -23,7 +24,7 @@ from orbit.nonlinear import (
 from orbit.reference import ReferenceOrbit
 
 DEG = math.pi / 180.0
-ORBIT = ReferenceOrbit()                      # SPEC §0: 400 km, n = 1.13137e-3 rad/s
+ORBIT = ReferenceOrbit()                      # default: 400 km, n = 1.13137e-3 rad/s
 N = ORBIT.n_rad_s
 A_M = ORBIT.a_m
 T = ORBIT.period_s
@@ -31,7 +32,7 @@ RHOS = (10.0, 100.0, 1e3, 1e4)
 
 
 def family(name: str, rho: float) -> np.ndarray:
-    """Initial states of the SPEC §7 table columns."""
+    """Initial states of the table's columns (docs/accuracy.md, "CW error after one orbit")."""
     return np.array({
         "ellipse": [rho / 2, 0, 0, 0, -2 * N * rho / 2, 0],   # A = ρ/2, β = 0
         "vbar": [0, rho, 0, 0, 0, 0],                          # V-bar, at rest
@@ -40,15 +41,16 @@ def family(name: str, rho: float) -> np.ndarray:
     }[name], dtype=float)
 
 
-# SPEC §7: |r_nonlinear − r_CW| after one orbit [m], rows ρ = 10 m … 10 km
-SPEC_TABLE = {
+# docs/accuracy.md, "CW error after one orbit": |r_nonlinear − r_CW| after one orbit [m], rows
+# ρ = 10 m … 10 km (DOP853 at rtol 1e-12, 3 significant figures)
+CW_ERROR_TABLE = {
     "ellipse": (3.48e-5, 3.48e-3, 0.348, 34.7),
     "vbar": (2.78e-4, 2.78e-2, 2.78, 278.0),
     "x0": (1.39e-4, 1.39e-2, 1.39, 138.0),
     "z0": (1.39e-4, 1.39e-2, 1.39, 139.0),
 }
-# SPEC §7 prefactors c of error ≈ c ρ²/a per orbit
-SPEC_PREFACTOR = {"ellipse": 3 * math.pi / 4, "vbar": 6 * math.pi, "x0": 3 * math.pi, "z0": 3 * math.pi}
+# prefactors c of error ≈ c ρ²/a per orbit, in closed form
+CW_ERROR_PREFACTOR = {"ellipse": 3 * math.pi / 4, "vbar": 6 * math.pi, "x0": 3 * math.pi, "z0": 3 * math.pi}
 
 
 def generic_state(rho: float) -> np.ndarray:
@@ -59,7 +61,8 @@ def generic_state(rho: float) -> np.ndarray:
 # --------------------------------------------------------------------------- right-hand side
 @pytest.mark.parametrize("rho", [10.0, 1e3, 1e4, 1e5])
 def test_relative_rhs_matches_direct_two_body_formula(rho):
-    """SPEC §11 against ρ̈ = −2ω×ρ̇ − ω×(ω×r_O) − μ r_O/|r_O|³ evaluated in long double."""
+    """The rotating-frame right-hand side against ρ̈ = −2ω×ρ̇ − ω×(ω×r_O) − μ r_O/|r_O|³
+    evaluated in long double."""
     s = generic_state(rho)
     got = relative_rhs(0.0, s, N, A_M)
     ld = np.longdouble
@@ -86,7 +89,7 @@ def test_relative_rhs_linearises_to_cw_and_is_vectorised():
 # --------------------------------------------------------------------------- formulations
 @pytest.mark.parametrize("rho", RHOS)
 def test_rotating_and_eci_formulations_agree(rho):
-    """SPEC §7: two independent formulations agree to < 1e-7 m after one orbit.
+    """Two independent formulations agree to < 1e-7 m after one orbit.
 
     Measured |Δr| after one orbit for ``generic_state`` (two orbit orientations):
     rtol 1e-12: 1.8e-10, 1.8e-9, 1.8e-8, 1.7e-7 m for ρ = 10 m … 10 km;
@@ -141,7 +144,7 @@ def test_eci_without_j2_equals_rotating_and_default_method():
 def test_linearisation_at_one_centimetre(name):
     """CW is the linearisation: at ρ = 1 cm both agree to ~1e-8 of ρ (the remaining error
     is the second-order term c ρ²/a ≈ 3.5e-11 … 2.8e-10 m), and even there the difference
-    has the SPEC prefactor c (measured within 2e-4; integration error is ~1e-14 m)."""
+    has the closed-form prefactor c (measured within 2e-4; integration error is ~1e-14 m)."""
     rho = 0.01
     s0 = family(name, rho)
     err = cw_error(s0, ORBIT, T)
@@ -149,15 +152,15 @@ def test_linearisation_at_one_centimetre(name):
     dv = np.linalg.norm(err.s_ref[0, 3:] - err.s_cw[0, 3:])
     assert dv / (N * rho) < 1e-8
     c = err.max_position_error_m / (rho * rho / A_M)
-    assert c == pytest.approx(SPEC_PREFACTOR[name], rel=1e-3)
+    assert c == pytest.approx(CW_ERROR_PREFACTOR[name], rel=1e-3)
 
 
 @pytest.mark.parametrize("name", ["ellipse", "vbar", "x0", "z0"])
 def test_cw_error_after_one_orbit_matches_spec_table(name):
-    """SPEC §7 table within 2 % (measured: all within 0.35 %), exponent 2 ± 0.02 and
+    """The table of docs/accuracy.md within 2 % (measured: all within 0.35 %), exponent 2 ± 0.02 and
     prefactor within 1 % (measured: ≤ 0.44 %, the largest at 10 km for x0)."""
     errors = []
-    for rho, expected in zip(RHOS, SPEC_TABLE[name]):
+    for rho, expected in zip(RHOS, CW_ERROR_TABLE[name]):
         e = cw_error(family(name, rho), ORBIT, T).max_position_error_m
         assert e == pytest.approx(expected, rel=0.02)
         errors.append(e)
@@ -165,7 +168,7 @@ def test_cw_error_after_one_orbit_matches_spec_table(name):
     err_fit = np.array([cw_error(family(name, r), ORBIT, T).max_position_error_m for r in rho_fit])
     slope, _ = np.polyfit(np.log(rho_fit), np.log(err_fit), 1)
     assert slope == pytest.approx(2.0, abs=0.02)
-    np.testing.assert_allclose(err_fit / (rho_fit ** 2 / A_M), SPEC_PREFACTOR[name], rtol=0.01)
+    np.testing.assert_allclose(err_fit / (rho_fit ** 2 / A_M), CW_ERROR_PREFACTOR[name], rtol=0.01)
 
 
 def test_cw_error_grows_linearly_over_ten_orbits_and_stays_finite():
@@ -241,10 +244,11 @@ def _drift_per_orbit(s0, orbit, orbits=3):
 
 
 def test_j2_drift_of_ten_metre_ellipse():
-    """SPEC §7: "with J2 the CW-bounded 10 m ellipse drifts ≈ 0.23 m along-track per orbit
-    (≈ 2.3 % of ρ per orbit, any inclination)".
+    """With J2 the CW-bounded 10 m ellipse drifts ≈ 0.23 m along-track per orbit (≈ 2.3 % of ρ
+    per orbit) at any inclination when started at the ascending node (docs/accuracy.md,
+    "Orbit model").
 
-    Reproduced by the §7 table's "ellipse A = ρ/2" with ρ = 10 m, i.e. s0 = [5, 0, 0, 0,
+    Reproduced by the table's "ellipse A = ρ/2" with ρ = 10 m, i.e. s0 = [5, 0, 0, 0,
     −10n, 0] (radial semi-axis 5 m, along-track semi-axis 10 m), started at the ascending
     node (u₀ = 0): measured −0.2254 m/orbit at i = 0, 51.6 and 98 deg (towards −y). The A = 10 m
     ellipse drifts twice that (−0.451 m/orbit, 4.5 % of A).
@@ -273,9 +277,10 @@ def test_j2_drift_of_ten_metre_ellipse():
 
 
 def test_j2_vbar_and_cross_track_figures_of_spec():
-    """SPEC §7: "a V-bar hold moves 2.5e-6·ρ and a pure cross-track state 8.8e-5·ρ per
-    orbit" — reproduced at i = 51.6 deg, u₀ = 0 as the J2-only displacement (J2 run minus
-    two-body run) after one orbit: measured 2.49e-6·ρ and 8.79e-5·ρ (ρ = 10 m and 100 m)."""
+    """With J2 a V-bar hold moves 2.5e-6·ρ and a pure cross-track state 8.8e-5·ρ per orbit
+    (docs/accuracy.md, "CW error after one orbit") — reproduced at i = 51.6 deg, u₀ = 0 as the
+    J2-only displacement (J2 run minus two-body run) after one orbit: measured 2.49e-6·ρ and
+    8.79e-5·ρ (ρ = 10 m and 100 m)."""
     for rho in (10.0, 100.0):
         for name, expected in (("vbar", 2.5e-6), ("z0", 8.8e-5)):
             s0 = family(name, rho)

@@ -1,4 +1,4 @@
-"""Pattern parameters and classification (SPEC §3–§5).
+"""Pattern parameters and classification (docs/orbit.md, "Patterns and their thresholds").
 
 Thresholds are checked against brute-force geometry: segment–segment intersection of the
 in-plane trajectory drawn as a polyline, bisected on κ — no use of the sin w / w derivation.
@@ -19,7 +19,8 @@ from orbit.patterns import (KAPPA_STAR, SIGMA_SPIRAL_HIGH, SIGMA_SPIRAL_LOW, cla
 N = 1.1313666536110223e-3
 T = 2.0 * math.pi / N
 
-# SPEC §5 expected parameters
+# expected parameters of the worked examples E1–E5 of tests/orbit/test_cw.py, from the closed-form
+# expressions for A, x_l, β, γ, t_p, σ and κ at this n
 E = {
     "E1": dict(s0=[10, 0, 5, 0, -2 * N * 10, 0], A=10, x_l=0, beta=0, gamma=0, sigma=2, kappa=0, t_p=0,
                pattern="elliptical"),
@@ -68,7 +69,7 @@ def test_characteristic_point_is_the_maximum_of_x():
 
 # ---------------------------------------------------------------- brute-force geometry
 def _curve(kappa, tau):
-    """In-plane trajectory with A = 1, n = 1 (shape depends on κ only), SPEC §3."""
+    """In-plane trajectory with A = 1, n = 1 (shape depends on κ only), from P."""
     return np.stack([kappa + np.cos(tau), -2 * np.sin(tau) - 1.5 * kappa * tau], axis=-1)
 
 
@@ -155,7 +156,7 @@ def test_kappa_star_from_polyline_intersections():
     k_neg = _refined_threshold(_overlaps, -0.1, -0.5, consecutive)
     assert k_pos == pytest.approx(KAPPA_STAR, abs=1e-8)
     assert k_neg == pytest.approx(-KAPPA_STAR, abs=1e-8)
-    assert KAPPA_STAR == pytest.approx(0.2896448376149622, abs=1e-15)  # SPEC §4
+    assert KAPPA_STAR == pytest.approx(0.2896448376149622, abs=1e-15)  # (4/3)|cos u*|, tan u* = u*
     assert SIGMA_SPIRAL_LOW == pytest.approx(1.8877036417, abs=1e-10)
     assert SIGMA_SPIRAL_HIGH == pytest.approx(2.2038732545, abs=1e-10)
     assert patterns.sigma_from_kappa(k_pos) == pytest.approx(SIGMA_SPIRAL_LOW, abs=1e-8)
@@ -233,7 +234,7 @@ def test_stationary_vbar_hold_and_pure_drift_parameters():
 
 
 def test_negative_sigma_requires_negative_xp():
-    # σ < 0 with x_p < 0: below the target, looping (SPEC §4)
+    # σ < 0 with x_p < 0: below the target, looping (a drift)
     s0 = state_from_sigma(-5.0, -0.5, 0.0, N)
     p = parameters(s0, N)
     assert p.x_p == pytest.approx(-5.0) and p.sigma == pytest.approx(-0.5) and p.pattern == "drift"
@@ -305,7 +306,7 @@ def test_inverse_map_start_at_p():
     assert s0[3] == 0.0
     p = parameters(s0, N)
     assert p.t_p == 0.0 and p.gamma == pytest.approx(-7.0) and p.tau0 == 0.0
-    # SPEC §3 s_P formula
+    # s_P = [A + 2β/(3n), γ, 0, 0, −β − 2nA, 0]
     assert_allclose(s0, [12 + 2 * 0.004 / (3 * N), -7.0, 0, 0, -0.004 - 2 * N * 12, 0], rtol=1e-15)
 
 

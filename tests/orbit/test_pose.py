@@ -1,4 +1,5 @@
-"""Tests of camera pointing, projection and pose labels (SPEC §9)."""
+"""Tests of camera pointing, projection and pose labels (docs/orbit.md, "Camera pointing and pose
+labels")."""
 
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ quats = (st.tuples(*[st.floats(-1.0, 1.0)] * 4).map(np.array)
 
 
 def test_spec_example():
-    """SPEC §9: ρ = [0, −30, 5] → R_cam_from_lvlh and t_cam = [0, 0, 30.41381265]."""
+    """Look-at worked by hand: ρ = [0, −30, 5] → R_cam_from_lvlh and t_cam = [0, 0, sqrt(925)]."""
     rho = np.array([0.0, -30.0, 5.0])
     R = look_at(rho)
     assert_allclose(R, [[1, 0, 0], [0, -0.16439899, -0.98639392], [0, 0.98639392, -0.16439899]],

@@ -1,4 +1,4 @@
-"""Tests of orbit.reference: circular target orbit and ECI ↔ LVLH (SPEC §0, §1, §6)."""
+"""Tests of orbit.reference: circular target orbit and ECI ↔ LVLH."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ def states(max_pos_m=1e4, max_vel_m_s=10.0):
     return st.tuples(pos, pos, pos, vel, vel, vel).map(np.array)
 
 
-# --------------------------------------------------------------------------- SPEC §0 numbers
+# --------------------------------------------------------------------------- default orbit
 def test_default_orbit_matches_spec_section0():
     orbit = ReferenceOrbit()
     assert orbit.altitude_m == 400e3
@@ -47,7 +47,7 @@ def test_default_orbit_matches_spec_section0():
 
 
 def test_epoch_and_unix_seconds():
-    # SPEC §6 example: 2026-03-20T12:00Z is JD 2461120.0 → (2461120.0 − 2440587.5)·86400 s.
+    # 2026-03-20T12:00Z is JD 2461120.0 → (2461120.0 − 2440587.5)·86400 s.
     orbit = ReferenceOrbit()
     assert orbit.epoch_unix_s == (2461120.0 - 2440587.5) * 86400.0
     assert orbit.unix_s(60.0) == orbit.epoch_unix_s + 60.0
@@ -58,9 +58,9 @@ def test_epoch_and_unix_seconds():
     assert to_unix_seconds(other.epoch_utc) == orbit.epoch_unix_s
 
 
-# --------------------------------------------------------------------------- SPEC §6 rotation
+# --------------------------------------------------------------------------- ECI ← LVLH rotation
 def test_rotation_matches_spec_check_value():
-    """SPEC §6: i = 51.6, Ω = 30, u = 10 deg → R_eci_from_lvlh to 1e-8."""
+    """R₃(Ω) R₁(i) R₃(u) evaluated at i = 51.6, Ω = 30, u = 10 deg → R_eci_from_lvlh to 1e-8."""
     expected = np.array([[0.79893794, -0.45623931, 0.39184673],
                          [0.58581440, 0.44293331, -0.67869844],
                          [0.13608694, 0.77178739, 0.62114778]])
@@ -109,7 +109,7 @@ def test_vectorised_shapes_match_scalar_calls():
 @settings(deadline=None, max_examples=200)
 @given(orbit=orbits(any_altitudes), t=times)
 def test_rotation_orthonormal_and_target_state_consistent(orbit, t):
-    """R is a proper rotation; x̂ ∥ r_T, ŷ ∥ v_T, ẑ ∥ r_T × v_T; |v_T| = n a (SPEC §1, §6)."""
+    """R is a proper rotation; x̂ ∥ r_T, ŷ ∥ v_T, ẑ ∥ r_T × v_T; |v_T| = n a."""
     R = orbit.R_eci_from_lvlh(t)
     np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-14)
     assert np.linalg.det(R) == pytest.approx(1.0, abs=1e-14)

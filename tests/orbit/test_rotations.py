@@ -1,4 +1,4 @@
-"""Tests of orbit.rotations against SPEC §9 and an independent library (scipy)."""
+"""Tests of orbit.rotations against docs/conventions.md and an independent library (scipy)."""
 
 from __future__ import annotations
 
@@ -36,10 +36,10 @@ def wrap(a):
     return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
 
 
-# --------------------------------------------------------------------------- SPEC examples
+# --------------------------------------------------------------------------- worked examples
 
 def test_spec_example_euler_to_quaternion():
-    """SPEC §9: (ψ, θ, φ) = (30, 20, 10) deg → q = [0.95154852, 0.03813458, 0.18930786,
+    """docs/conventions.md: (ψ, θ, φ) = (30, 20, 10) deg → q = [0.95154852, 0.03813458, 0.18930786,
     0.23929834]; the matrix equals scipy's (an independent implementation)."""
     yaw, pitch, roll = np.deg2rad([30.0, 20.0, 10.0])
     R = matrix_from_euler_zyx(yaw, pitch, roll)
@@ -56,7 +56,7 @@ def test_spec_example_euler_to_quaternion():
 def test_elementary_rotations_match_spec_and_scipy():
     a = 0.7
     c, s = np.cos(a), np.sin(a)
-    assert_allclose(rot_z(a), [[c, -s, 0], [s, c, 0], [0, 0, 1]], atol=0)  # SPEC §9 R_z
+    assert_allclose(rot_z(a), [[c, -s, 0], [s, c, 0], [0, 0, 1]], atol=0)  # active R_z
     for f, e in ((rot_x, [1, 0, 0]), (rot_y, [0, 1, 0]), (rot_z, [0, 0, 1])):
         assert_allclose(f(a), Rotation.from_rotvec(a * np.array(e)).as_matrix(), atol=1e-15)
         assert_allclose(f(a), axis_angle(e, a), atol=1e-15)
@@ -120,7 +120,7 @@ def test_euler_round_trip_away_from_gimbal_lock(yaw, pitch, roll):
     assert abs(e[1] - pitch) < 1e-12
     assert np.all(np.abs(wrap(e - [yaw, pitch, roll])) < 1e-11)
     assert_allclose(matrix_from_euler_zyx(*e), R, atol=1e-15)
-    # scipy's inverse gives the same angles (SPEC §9: matches from_euler('ZYX'))
+    # scipy's inverse gives the same angles (our R matches from_euler('ZYX'))
     assert np.all(np.abs(wrap(Rotation.from_matrix(R).as_euler("ZYX") - e)) < 1e-9)
 
 
@@ -274,10 +274,10 @@ def test_bad_input_raises_naming_the_parameter(call, name):
         call()
 
 
-# --------------------------------------------------------------------------- paper (SPEC §12)
+# --------------------------------------------------------------------------- the source paper
 
 def test_paper_quaternion_matrix_is_the_transpose_of_ours():
-    """SPEC §12.6: the paper prints the frame-transformation (passive) form R(q)ᵀ."""
+    """The paper prints the frame-transformation (passive) form R(q)ᵀ (docs/accuracy.md)."""
     q0, q1, q2, q3 = q = np.array([0.95154852, 0.03813458, 0.18930786, 0.23929834])
     R_paper = np.array([
         [q0**2 + q1**2 - q2**2 - q3**2, 2 * (q1 * q2 + q0 * q3), 2 * (q1 * q3 - q0 * q2)],
@@ -294,7 +294,7 @@ def test_paper_quaternion_matrix_is_the_transpose_of_ours():
 
 
 def test_paper_euler_product_is_zxy_not_zyx():
-    """SPEC §12.5: the paper's "zyx" matrix is R_y(θ) R_x(φ) R_z(ψ), a 3-1-2 sequence."""
+    """The paper's "zyx" matrix is R_y(θ) R_x(φ) R_z(ψ), a 3-1-2 sequence (docs/accuracy.md)."""
     yaw, pitch, roll = np.deg2rad([30.0, 20.0, 10.0])
     R_paper = rot_y(pitch) @ rot_x(roll) @ rot_z(yaw)
     assert_allclose(R_paper, Rotation.from_euler("YXZ", [pitch, roll, yaw]).as_matrix(), atol=1e-15)

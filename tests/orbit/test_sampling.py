@@ -1,4 +1,5 @@
-"""Seeded pattern sampling (SPEC §4 table) with a range band scaled to the target."""
+"""Seeded pattern sampling with a range band scaled to the target (docs/orbit.md, "How a sequence
+is drawn")."""
 
 import math
 
@@ -53,7 +54,8 @@ def test_band_scales_with_target_size():
     ("elliptical", 1.00), ("spiral", 0.94), ("drip-drop", 0.60), ("drift", 0.90),
 ])
 def test_acceptance_rates_match_spec_table(pattern, expected):
-    # SPEC §4 measured acceptance; 400 draws: binomial σ ≤ 0.025, allow ±0.06
+    # acceptance rates of docs/orbit.md, "How a sequence is drawn"; 400 draws: binomial σ ≤ 0.025,
+    # allow ±0.06
     draws = 400
     attempts = sum(sample_pattern(pattern, N, target_radius_m=3.0, n_frames=100, rng=s).attempts
                    for s in range(draws))

@@ -1,4 +1,4 @@
-"""Tests of orbit.sun: SPEC §6 test vector and an independent ephemeris (ERFA via astropy)."""
+"""Tests of orbit.sun: a worked example and an independent ephemeris (ERFA via astropy)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ def _angle_deg(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.degrees(np.arctan2(cross, np.sum(u * v, axis=-1)))
 
 
-# --- SPEC §6 worked example (JD 2461120.0) ---------------------------------------------
+# --- worked example: the almanac's formulae at JD 2461120.0 ------------------------------
 
 def test_spec_example_of_date():
     t = to_unix_seconds(EXAMPLE_UTC)
@@ -52,7 +52,7 @@ def test_shapes_and_unit_norm():
 
 
 def test_frames_differ_by_precession():
-    # SPEC §6: mixing the frames costs up to 0.7 deg by 2050 (precession 1.397 deg/century).
+    # mixing the frames costs up to 0.7 deg by 2050 (precession 1.397 deg/century).
     t = to_unix_seconds("2050-06-01T00:00:00Z")
     sep = _angle_deg(sun_direction_eci(t, frame="date"), sun_direction_eci(t, frame="j2000"))
     assert 0.6 < sep < 0.75
@@ -90,7 +90,7 @@ def ephemeris():
 
 def test_j2000_direction_vs_gcrs(ephemeris):
     # Measured max over 1950–2051 on a dense 16 s grid: 0.01101 deg (in 2049); this seeded
-    # sample reaches 0.00826 deg. SPEC §6's "≤ 0.0083 deg" is the max of a sparse sample.
+    # sample reaches 0.00826 deg; a sparse sample alone would suggest ≤ 0.0083 deg.
     t, gcrs_m, _ = ephemeris
     err_deg = _angle_deg(sun_position_eci(t), gcrs_m)
     assert err_deg.max() < 0.0112
@@ -99,7 +99,7 @@ def test_j2000_direction_vs_gcrs(ephemeris):
 
 def test_date_direction_vs_mean_of_date(ephemeris):
     # GCRS rotated to the mean equator and equinox of date (IAU 2006 precession, no nutation).
-    # Dense-grid max 0.01023 deg (SPEC §6 says ≤ 0.0072 deg from a smaller sample).
+    # Dense-grid max 0.01023 deg (a smaller sample gives ≤ 0.0072 deg).
     t, _, of_date_m = ephemeris
     err_deg = _angle_deg(sun_position_eci(t, frame="date"), of_date_m)
     assert err_deg.max() < 0.0105

@@ -1,4 +1,5 @@
-"""Tests of orbit.visibility (SPEC §8) against brute force and independent formulations."""
+"""Tests of orbit.visibility (docs/orbit.md, "Visibility") against brute force and independent
+formulations."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from orbit.visibility import (
     line_of_sight, shadow_conical, shadow_cylindrical, sun_angle, sun_clear, visibility,
 )
 
-R0_M = R_EARTH_M + 400e3                      # SPEC §0 reference orbit radius
+R0_M = R_EARTH_M + 400e3                      # default reference orbit radius
 SUN_X = np.array([AU_M, 0.0, 0.0])            # Sun on +x: the shadow axis is −x
 
 
@@ -31,7 +32,7 @@ def _perpendicular_unit(rng: np.random.Generator, axis: np.ndarray) -> np.ndarra
 
 
 def _cone_geometry(r_sun: np.ndarray, xi: np.ndarray):
-    """Umbra and penumbra radii at axial distance ξ behind the Earth (SPEC §8 conical model)."""
+    """Umbra and penumbra radii at axial distance ξ behind the Earth (conical model)."""
     d_sun = np.linalg.norm(r_sun, axis=-1)
     alpha_u = np.arcsin((R_SUN_M - R_EARTH_M) / d_sun)
     alpha_p = np.arcsin((R_SUN_M + R_EARTH_M) / d_sun)
@@ -94,7 +95,7 @@ def _brute_force_segment(cam: np.ndarray, tgt: np.ndarray, n: int = 20_000):
 
 
 def test_line_of_sight_vs_dense_sampling():
-    # Oracle: dense sampling of the segment (SPEC §8: "no false results on 3000 random pairs").
+    # Oracle: dense sampling of the segment (3000 random pairs, no false results).
     rng = np.random.default_rng(8)
     cam, tgt = _segment_pairs(rng)
     got = line_of_sight(cam, tgt)
@@ -124,7 +125,7 @@ def test_camera_at_target():
     assert not line_of_sight(0.5 * p, 0.5 * p)
 
 
-# --- SPEC §8 counterexample, Earth in the background ----------------------------------------
+# --- the cone test's counterexample, Earth in the background --------------------------------
 
 def test_nadir_and_zenith_targets():
     cam = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8]) * R0_M
@@ -202,7 +203,7 @@ def test_sun_angle_vs_arccos():
 
 
 def test_sun_apparent_radius_default():
-    # SPEC §8: the Sun's apparent radius is ≈ 0.267 deg; default margin 20 deg.
+    # the Sun's apparent radius is ≈ 0.267 deg; default margin 20 deg.
     cam = np.array([R0_M, 0.0, 0.0])
     sun = cam + np.array([0.0, AU_M, 0.0])
     for deg, clear in [(20.26, False), (20.28, True)]:
@@ -213,7 +214,8 @@ def test_sun_apparent_radius_default():
 # --- Earth shadow ---------------------------------------------------------------------------
 
 def test_cylindrical_vs_paper_inequality():
-    # Oracle: SPEC §12.8 corrected inequality, lit iff r_T·ŝ > −sqrt(|r_T|² − R_E²).
+    # Oracle: the paper's inequality with its sign restored (docs/accuracy.md): lit iff
+    # r_T·ŝ > −sqrt(|r_T|² − R_E²).
     rng = np.random.default_rng(12)
     n = 20_000
     s_hat = _random_unit(rng, n)
@@ -249,7 +251,7 @@ def _near_shadow_boundary(rng: np.random.Generator, n: int):
 
 
 def test_conical_matches_cone_radii():
-    # Oracle: SPEC §8 cone radii evaluated independently from the returned codes.
+    # Oracle: the cone radii evaluated independently from the returned codes.
     rng = np.random.default_rng(13)
     tgt, sun = _near_shadow_boundary(rng, 20_000)
     s_hat = _unit(sun)
@@ -264,7 +266,7 @@ def test_conical_matches_cone_radii():
 
 
 def test_conical_vs_illuminated_fraction():
-    # SPEC §8: ν = 0 ⇔ umbra, 0 < ν < 1 ⇔ penumbra, ν = 1 ⇔ sunlit. The two models share the
+    # ν = 0 ⇔ umbra, 0 < ν < 1 ⇔ penumbra, ν = 1 ⇔ sunlit. The two models share the
     # exact cone geometry; they may differ only within 1 µm of a cone surface (ν rounds to 1
     # when the hidden fraction is below ~1e-16; measured band 0.23 µm).
     rng = np.random.default_rng(14)
@@ -326,7 +328,7 @@ def test_illuminated_fraction_vs_grid_integration():
 
 
 def test_penumbra_width_at_400_km():
-    # SPEC §8: "At 400 km the penumbra is 21 km wide across the shadow axis". Bisection along
+    # At 400 km the penumbra is 21 km wide across the shadow axis. Bisection along
     # the line p(δ) = −ξ ŝ + δ ê across the axis at ξ = sqrt(r0² − R_E²).
     xi = np.sqrt(R0_M**2 - R_EARTH_M**2)
 

@@ -1,5 +1,5 @@
 """raytrace._precompile: the recorded signatures of every group's kernels still match the code
-(regenerate with ``python -m raytrace._precompile --record`` when this fails), the groups merge
+(regenerate with ``python benchmarks/record_kernel_signatures.py`` when this fails), the groups merge
 without losing a signature, each helper compiles once, within the first kernel that calls it,
 compiling reports stale entries instead of failing, and its progress as each entry finishes."""
 import os
@@ -95,19 +95,29 @@ def test_precompile_without_a_callback_compiles_and_returns_the_failures(tmp_pat
     assert [p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")] == ["cache._hash32"]
 
 
+def _recorder_module():
+    import importlib.util
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "record_kernel_signatures.py"
+    spec = importlib.util.spec_from_file_location("record_kernel_signatures", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def test_recorded_compile_times_are_each_kernels_own(monkeypatch):
-    """The recorder behind ``--record`` charges a nested compile of one of our dispatchers (a
+    """The recorder (``benchmarks/record_kernel_signatures.py``) charges a nested compile of one of our dispatchers (a
     helper a kernel calls) to the helper alone, and one of numba's own (an overload) to the
     kernel that needed it: the times add up to the compile's total."""
     from types import SimpleNamespace
+    R = _recorder_module()
     clock = iter([0.0, 1.0, 3.0, 4.0, 4.5, 7.0])  # kernel, helper, numba overload
-    monkeypatch.setattr(P.time, "thread_time", lambda: next(clock))
+    monkeypatch.setattr(R.time, "thread_time", lambda: next(clock))
 
     def event(module, name, start):
         func = SimpleNamespace(__module__=module, __name__=name)
         return SimpleNamespace(data={"dispatcher": SimpleNamespace(py_func=func)}, is_start=start)
 
-    rec = P._compile_time_recorder()
+    rec = R._compile_time_recorder()
     rec.on_start(event("raytrace._shading", "add_mirror", True))  # 0.0
     rec.on_start(event("raytrace.brdf", "brdf_cos", True))  # 1.0
     rec.on_end(event("raytrace.brdf", "brdf_cos", False))  # 3.0: 2 s its own
