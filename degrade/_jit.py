@@ -34,14 +34,15 @@ FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 class ThreadedKernel:
     """A kernel with ``prange`` loops, built twice: ``parallel`` (``parallel=True``) and
     ``serial`` (each ``prange`` a plain loop, under a cache name of its own); a call runs the
-    serial build where the calling thread's numba thread count is 1, the parallel one
-    elsewhere. The same bits either way; the serial build compiles in about half the time.
+    serial build (with the parallel loop body's ``numpy`` error model) where the calling
+    thread's numba thread count is 1, the parallel one elsewhere. The same bits either way; the
+    serial build compiles in about half the time.
     As ``raytrace._jit.ThreadedKernel`` (which see), which this package does not import."""
 
     def __init__(self, py_func, **options):
         self.py_func = py_func
         self.parallel = numba.njit(parallel=True, **options)(py_func)
-        self.serial = numba.njit(**options)(serial_copy(py_func))
+        self.serial = numba.njit(error_model="numpy", **options)(serial_copy(py_func))
         self.__name__, self.__qualname__ = py_func.__name__, py_func.__qualname__
         self.__module__, self.__doc__ = py_func.__module__, py_func.__doc__
 

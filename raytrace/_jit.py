@@ -198,9 +198,14 @@ class ThreadedKernel:
     the loops run on numba's threads) and ``serial`` (the same code, each ``prange`` a plain
     loop, under a name of its own in numba's cache). A call runs the serial build where the
     calling thread's numba thread count is 1 (the CLI's pool workers when there are as many
-    as cores, a one-core machine), the parallel one elsewhere. Both compute every output
-    element by the same code and no kernel sums across loop iterations, so their results are
-    the same bits; the serial build compiles in about half the time (numba's parfor passes
+    as cores, a one-core machine), the parallel one elsewhere. The serial build takes the
+    parallel loop body's error model (``numpy``: a division by zero gives inf, as in the
+    parallel build, instead of raising). Both compute every output element by the same code
+    and no kernel sums across loop iterations, so their results are the same bits, checked on
+    whole sequences (``tests/golden_set.py`` against the parallel builds: every file of four
+    targets × three presets byte for byte); a kernel whose fastmath sums LLVM vectorises
+    differently in the two builds is ``pjit_parallel_only`` instead (``environment._direction_cells``:
+    a last bit of a few ``balanced`` pixels). The serial build compiles in about half the time (numba's parfor passes
     and the loop body's gufunc wrappers are what ``parallel=True`` adds), which is most of a
     fresh install's first run (BENCHMARKS.md, "Compiling the main job's kernels on a fresh
     install"), and a process compiles or loads only the build its threads call.
@@ -211,7 +216,7 @@ class ThreadedKernel:
     def __init__(self, py_func, **options):
         self.py_func = py_func
         self.parallel = numba.njit(parallel=True, **options)(py_func)
-        self.serial = numba.njit(**options)(serial_copy(py_func))
+        self.serial = numba.njit(error_model="numpy", **options)(serial_copy(py_func))
         self.__name__, self.__qualname__ = py_func.__name__, py_func.__qualname__
         self.__module__, self.__doc__ = py_func.__module__, py_func.__doc__
 
@@ -252,4 +257,8 @@ jit = numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
 pjit = _threaded(cache=True, fastmath=FASTMATH, nogil=True)
 jit_exact = numba.njit(cache=True, nogil=True)
 pjit_exact = _threaded(cache=True, nogil=True)
+pjit_parallel_only = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, parallel=True)
+"""``pjit`` without the serial build, for a kernel whose fastmath sums LLVM vectorises one way in
+the parallel loop's body and another in a plain loop (a last bit of difference): one build, the
+same bits in every process whatever its thread count."""
 inline = numba.njit(cache=True, nogil=True, inline="always")

@@ -22,7 +22,7 @@ import math
 import numba
 import numpy as np
 
-from ._jit import inline, jit, pjit
+from ._jit import inline, jit, pjit, pjit_parallel_only
 
 # parameter vector layout
 P_HAS_EARTH, P_EX, P_EY, P_EZ, P_DIST, P_RADIUS, P_ALBEDO = 0, 1, 2, 3, 4, 5, 6
@@ -230,7 +230,7 @@ def env_cells(p, texture, n, sub):
 
 
 # ---------------------------------------------------------------- unoccluded irradiance table
-@pjit
+@pjit_parallel_only  # its serial build sums the cell's samples in another order (balanced frames' last bits)
 def _direction_cells(p, texture, k_t, k_p, sub, L, W, D):
     """Lat-long direction cells (k_t equal steps of θ, k_p of φ): the mean environment
     radiance minus the sky's over each cell (sub×sub samples, equal-area within the cell), its

@@ -83,14 +83,16 @@ def test_a_frame_is_the_same_bits_on_the_serial_and_the_parallel_builds(quality)
     from raytrace.shade import render
     from raytrace.targets import load_target
     cam = Camera(160, 120, 200.0, 200.0, 79.5, 59.5)
-    scene = Scene(load_target("cassini"))
-    rho = np.array([3.0, -25.0, 8.0])
-    rho *= 0.6 * scene.scale_m / np.linalg.norm(rho)  # the body and antenna in view, ~15 % of the pixels
-    R = look_at(rho)
     sun = np.array([0.6, 0.3, 0.74])
-    light = Lighting(sun_dir_body=tuple(sun / np.linalg.norm(sun)), earth=Earth((0, 0, -1), 6.778e6, albedo=0.3))
     frames = {}
     for threads in (1, 2):
+        # a scene and a light of its own for each: nothing one render computed (the radiance
+        # cache, the environment's tables) is reused by the other
+        scene = Scene(load_target("cassini"))
+        rho = np.array([3.0, -25.0, 8.0])
+        rho *= 0.6 * scene.scale_m / np.linalg.norm(rho)  # the body and antenna in view, ~15 % of the pixels
+        R = look_at(rho)
+        light = Lighting(sun_dir_body=tuple(sun / np.linalg.norm(sun)), earth=Earth((0, 0, -1), 6.778e6, albedo=0.3))
         with _threads(threads):
             frames[threads] = render(scene, cam, R, -R @ rho, light, quality=quality, seed=3,
                                      samples=8 if quality == "balanced" else None)
