@@ -133,7 +133,7 @@ def _EMPTY_CSR3(n_rows):
 
 # the cache rays go in chunks of about _CAST_CHUNK_RAYS rays (RadianceCache._cast), two at a time
 # on a side pool (raytrace._threads.submit); False: one after the other. The same cache bit for
-# bit (tests/raytrace/test_cache_solve.py); the four built-in targets' caches built in 0.64–0.85×
+# bit (tests/raytrace/test_cache_solve.py); the four built-in targets' caches built in 0.71–0.85×
 # the time (BENCHMARKS.md, "Building the radiance cache").
 _CAST_CHUNK_RAYS = 1 << 18
 _CAST_CHUNKS_ON_TWO_THREADS = True
@@ -143,7 +143,7 @@ _CAST_CHUNKS_ON_TWO_THREADS = True
 # (BENCHMARKS.md, "Building the radiance cache of a user's mesh"). False: from the lists.
 _ASSEMBLE_CONTACT_PER_CHUNK = True
 # over-relaxation of the solve's Gauss–Seidel sweeps (RadianceCache.solve; 1: none). ω = 1.2 took
-# the 1/90 caches of the built-in targets 13–15 → 9–11 sweeps (Spacedragon 7 → 6) to the same
+# the 1/90 caches of the built-in targets 12–15 → 9–11 sweeps (Spacedragon 5–7 → 6) to the same
 # tolerance, nearer the exact solution; ω = 1.3–1.4 failed on Cassini, so a sweep whose residual
 # grows drops back to ω = 1 (BENCHMARKS.md, "Over-relaxed sweeps for the radiance cache")
 _SOR_OMEGA = 1.2
