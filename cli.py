@@ -647,8 +647,8 @@ def _explicit_pattern(cfg: dict, given: set, n: float, band, radius_m: float):
     s0 = state_from_kappa(A, kappa, gamma, n, z_amp=z_amp, z_phase=z_phase, tau0=tau0)
     params = parameters(s0, n)
     # the class is that of the kappa given (|kappa| = kappa* is drip-drop, 1 drift: docs/orbit.md, "Patterns and
-    # their thresholds"); kappa recomputed from
-    # the state can fall an ulp on the other side of a boundary (kappa* gave "spiral")
+    # their thresholds"); kappa recomputed from the state can fall an ulp on the other side of a boundary
+    # (kappa* gave "spiral")
     pattern = _class_of(kappa)
     if params.pattern != pattern and params.pattern in PATTERNS:
         params = replace(params, pattern=pattern)
@@ -1366,9 +1366,8 @@ def _scenario(plan: dict) -> dict:
         scen["motion_blur"] = ("auto: per frame, a straight line along the principal axis v of the target's hull "
                                "vertices' image positions over the exposure, of length min(sqrt(12 lambda), E) "
                                "(lambda: their mean variance along v; E: the RMS of their paths' extents along v), the "
-                               "largest "
-                               "over centred parts of the exposure, at most the image diagonal; motion_blur_px and "
-                               "motion_angle_deg in labels")
+                               "largest over centred parts of the exposure, at most the image diagonal; "
+                               "motion_blur_px and motion_angle_deg in labels")
     scen["random_streams"] = ("frame i: SeedSequence(seed).spawn(n)[i]; render seed = generate_state(1)[0] mod 2^31, "
                               "degradation rng = its first spawned child")
     return scen

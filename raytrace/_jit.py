@@ -204,11 +204,12 @@ class ThreadedKernel:
     and no kernel sums across loop iterations, so their results are the same bits, checked on
     whole sequences (``tests/golden_set.py`` against the parallel builds: every file of four
     targets × three presets byte for byte); a kernel whose fastmath sums LLVM vectorises
-    differently in the two builds is ``pjit_parallel_only`` instead (``environment._direction_cells``:
-    a last bit of a few ``balanced`` pixels). The serial build compiles in about half the time (numba's parfor passes
-    and the loop body's gufunc wrappers are what ``parallel=True`` adds), which is most of a
-    fresh install's first run (BENCHMARKS.md, "Compiling the main job's kernels on a fresh
-    install"), and a process compiles or loads only the build its threads call.
+    differently in the two builds is ``pjit_parallel_only`` instead
+    (``environment._direction_cells``: a last bit of a few ``balanced`` pixels). The serial
+    build compiles in about half the time (numba's parfor passes and the loop body's gufunc
+    wrappers are what ``parallel=True`` adds), which is most of a fresh install's first run
+    (BENCHMARKS.md, "Compiling the main job's kernels on a fresh install"), and a process
+    compiles or loads only the build its threads call.
 
     Called from Python only: a numba kernel cannot call it (none does; it would call a
     ``jit`` helper instead)."""
