@@ -95,7 +95,6 @@ def _record_here(out_dir: str) -> dict:
     kernel's own compile time (:func:`_compile_time_recorder`): {group: {qualname: (seconds,
     [signature reprs new in the group])}}."""
     from numba.core import event
-    sys.path.insert(0, str(ROOT))
     import cli
     from raytrace import scene, shade
     cli._kernels_not_compiled = lambda *a, **k: []  # compile here, where the recorder sees it
