@@ -3,6 +3,9 @@
     git worktree add /tmp/before <commit>
     python tests/golden_set.py /tmp/before . [--out DIR] [--keep]
 
+With ``--out DIR``, a tree already rendered completely into ``DIR/a`` (it holds the marker
+``.complete``) is reused, so one rendering of the checkout before serves many checks after.
+
 Each checkout's ``cli.py`` runs as a process (its own packages first on ``sys.path``) and
 writes, under ``OUT/<a|b>/``:
 
@@ -108,7 +111,7 @@ def digest(path: Path) -> str:
 def compare(a: Path, b: Path) -> list:
     """The differences between the trees ``a`` and ``b``: files only in one, files that differ."""
     def files(root):
-        return {p.relative_to(root).as_posix(): p for p in root.rglob("*") if p.is_file()}
+        return {p.relative_to(root).as_posix(): p for p in root.rglob("*") if p.is_file() and p.name != ".complete"}
     fa, fb = files(a), files(b)
     out = [f"only in a: {k}" for k in sorted(fa.keys() - fb.keys())]
     out += [f"only in b: {k}" for k in sorted(fb.keys() - fa.keys())]
@@ -126,10 +129,17 @@ def main() -> int:
     root = args.out or Path(tempfile.mkdtemp(prefix="golden-"))
     try:
         for name, tree in (("a", args.a.resolve()), ("b", args.b.resolve())):
+            done = root / name / ".complete"
+            if name == "a" and args.out is not None and done.is_file():
+                print(f"reusing the golden set in {root / name}", flush=True)
+                continue
+            if (root / name).exists():
+                shutil.rmtree(root / name)
             print(f"rendering the golden set of {tree} ...", flush=True)
             render(tree, root / name)
+            done.write_text(str(tree))
         diffs = compare(root / "a", root / "b")
-        n = sum(1 for _ in (root / "a").rglob("*"))
+        n = sum(1 for p in (root / "a").rglob("*") if p.name != ".complete")
         print("\n".join(diffs) if diffs else f"the same: {n} paths")
         return 1 if diffs else 0
     finally:
