@@ -33,7 +33,7 @@ with status 2, leaving nothing behind.
 from __future__ import annotations
 
 import argparse
-import contextlib
+import functools
 import json
 import math
 import os
@@ -49,9 +49,18 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 
+from degrade.paper import PAPER_GROUPS
+from degrade.presets import PRESETS as DEGRADE_PRESETS
+from degrade.sensor import DEMOSAIC_ALGORITHMS
 from orbit.attitude import ATTITUDE_MODES
 from orbit.patterns import PATTERNS
+from raytrace.constants import EARTH_TEXTURES as EARTH_TEXTURE_NAMES
 from raytrace.constants import SOLAR_CONSTANT_W_M2
+from raytrace.dataset import UsageError as CLIError
+from raytrace.dataset import folder, jit, pool, scenes, snapshots
+from raytrace.dataset import run as runner
+from raytrace.dataset.modalities import NAMES as MODALITIES
+from raytrace.presets import QUALITIES
 from raytrace.targets import BUILTIN_TARGETS as TARGETS
 
 PROG = "cli.py"
@@ -65,22 +74,10 @@ every frame of every pattern lit and in view."""
 DEFAULT_FRAMES = 48
 """Frames of the main job: it finishes in under a minute on 2 cores at 1280×960 (README, "The main job")."""
 DATASET_FRAMES = 500
-MODALITIES = ("rgb", "rgb_degraded", "mask", "depth", "normal", "hdr")
-"""Per-frame image files a sequence can hold (folder names)."""
 DATASET_MODALITIES = ("rgb", "mask", "depth", "normal")
-DEGRADE_PRESETS = ("none", "paper", "physical")
 EXPOSURE_MODES = ("fixed", "auto")
-EARTH_TEXTURES = ("procedural", "uniform", "none")
-QUALITIES = ("fast", "balanced", "reference")
-PAPER_GROUP_NAMES = ("D1", "D2", "D3", "D4")
-_WHITE_BALANCE_M = 530e-9
-"""Photon energy used for every channel in the camera equation: a white-balanced sensor (a grey
-surface gives equal R, G, B signals) [m]."""
-_EXT = {"rgb": ".png", "rgb_degraded": ".png", "mask": ".png", "depth": ".exr", "normal": ".exr", "hdr": ".exr"}
-
-
-class CLIError(Exception):
-    """A user-facing error: printed as one line, exit status 2."""
+EARTH_TEXTURES = (*EARTH_TEXTURE_NAMES, "none")
+PAPER_GROUP_NAMES = tuple(PAPER_GROUPS)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -349,7 +346,7 @@ def _options() -> tuple:
         O("--offset-dn", "degrade", _float_in(0.0, 65535.0, unit="DN"), 0.0, "physical preset: ADC black level"),
         O("--dark-current-e-s", "degrade", _float_in(0.0, 1e9, unit="e-/s"), 0.0,
           "physical preset: dark current [e-/s]"),
-        O("--demosaic", "degrade", _choice(("MHC", "linear")), "MHC",
+        O("--demosaic", "degrade", _choice(DEMOSAIC_ALGORITHMS), "MHC",
           "physical preset: OpenImageIO demosaic algorithm of the RGGB mosaic"),
         O("--motion-blur", "degrade", _choice(("fixed", "auto")), "fixed",
           "physical preset: 'fixed' blurs every frame by --motion-blur-px at --motion-angle-deg; 'auto' takes "
@@ -573,32 +570,6 @@ def _toml_value(value) -> str:
 
 
 # --------------------------------------------------------------------------- planning (orbit → pose → light)
-def _load_model(spec: tuple, warn: bool = False):
-    """The target model of a model spec: ("builtin", name) or ("mesh", path, unit_scale_m);
-    ``warn``: one line on stderr when the mesh file needed more than routine repair."""
-    if spec[0] == "builtin":
-        from raytrace.targets import load_target
-        return load_target(spec[1])
-    from raytrace.meshio import load_mesh
-    model, report = load_mesh(spec[1], unit_scale_m=spec[2])
-    if warn and report.non_finite_note():
-        sys.stderr.write(f"{PROG}: warning: --mesh {report.non_finite_note()}\n")
-    return model
-
-
-_ATTITUDE_FLAGS = {"spin_axis_body": "--spin-axis", "omega0_body_rad_s": "--omega0-deg-s",
-                   "inertia_body_kg_m2": "--inertia-kg-m2", "R0_lvlh_from_body": "--attitude-ypr-deg",
-                   "spin_rate_rad_s": "--spin-rate-deg-s", "yaw_deg": "--attitude-ypr-deg",
-                   "pitch_deg": "--attitude-ypr-deg", "roll_deg": "--attitude-ypr-deg"}
-
-
-def _attitude_error(message: str) -> str:
-    """An error of :class:`orbit.attitude.TargetAttitude` in the words of the command line: the
-    field it names becomes the flag that set it."""
-    for field, flag in _ATTITUDE_FLAGS.items():
-        if message.startswith(field):
-            return f"argument {flag}: {message[len(field):].strip()}"
-    return f"argument --attitude: {message}"
 
 
 MESH_RADIUS_PLAUSIBLE_M = (0.02, 200.0)
@@ -621,449 +592,52 @@ def _mesh_unit_warning(radius_m: float, path: str) -> str | None:
     return None
 
 
-def _unit_rows(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
-
-
-def _explicit_pattern(cfg: dict, given: set, n: float, band, radius_m: float):
-    """Initial state from --amplitude-m/--kappa (and optional γ, B, phases) instead of a draw."""
-    from dataclasses import replace
-
-    from orbit import cw
-    from orbit.patterns import parameters, state_from_kappa
-    from orbit.sampling import default_window_s
-    p, seq = cfg["pattern"], cfg["sequence"]
-    if p["amplitude_m"] is None or p["kappa"] is None:
-        missing = "--amplitude-m" if p["amplitude_m"] is None else "--kappa"
-        raise CLIError(f"argument {missing}: explicit pattern parameters need both --amplitude-m and --kappa")
-    A, kappa = p["amplitude_m"], p["kappa"]
-    z_amp = p["z_amp_m"] or 0.0
-    z_phase = math.radians(p["z_phase_deg"] or 0.0)
-    tau0 = math.radians(p["tau0_deg"] or 0.0)
-    x_l = kappa * A
-    beta = 1.5 * n * x_l
-    window = seq["window_s"] or default_window_s(_class_of(kappa), n, x_l_m=x_l, scale=band.scale)
-    gamma = p["gamma_m"] if p["gamma_m"] is not None else beta * (window / 2.0 + tau0 / n)
-    s0 = state_from_kappa(A, kappa, gamma, n, z_amp=z_amp, z_phase=z_phase, tau0=tau0)
-    params = parameters(s0, n)
-    # the class is that of the kappa given (|kappa| = kappa* is drip-drop, 1 drift: docs/orbit.md, "Patterns and
-    # their thresholds"); kappa recomputed from the state can fall an ulp on the other side of a boundary
-    # (kappa* gave "spiral")
-    pattern = _class_of(kappa)
-    if params.pattern != pattern and params.pattern in PATTERNS:
-        params = replace(params, pattern=pattern)
-    if "pattern" in given and pattern != seq["pattern"]:
-        raise CLIError(f"argument --kappa: amplitude {A:g} m and kappa {kappa:g} make the pattern {pattern}, "
-                       f"not {seq['pattern']} (spiral: 0 < |kappa| < 0.2896, drip-drop: < 1, drift: >= 1)")
-    frames = seq["frames"]
-    t_s = np.linspace(0.0, window, frames) if frames > 1 else np.zeros(1)
-    r = np.linalg.norm(cw.propagate(s0, n, np.concatenate([t_s, np.linspace(0, window, 1024)]))[:, :3], axis=1)
-    if r.min() <= radius_m:
-        raise CLIError(f"argument --amplitude-m: with these pattern parameters the camera comes within {r.min():.3g} m "
-                       f"of the target centre, inside its bounding radius {radius_m:.3g} m; use a larger amplitude, "
-                       "|kappa| or --gamma-m")
-    draws = {"A_m": A, "kappa": kappa, "x_l_m": x_l, "beta_m_s": beta, "gamma_m": gamma, "tau0_rad": tau0,
-             "z_amp_m": z_amp, "z_phase_rad": z_phase}
-    return s0, t_s, window, params, draws, 0, (float(r.min()), float(r.max()))
-
-
-def _class_of(kappa: float) -> str:
-    from orbit.patterns import classify
-    c = classify(1.0, kappa)
-    return c if c in PATTERNS else "elliptical"
-
-
 def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
-    """Sample (or set), propagate and evaluate one sequence: everything but the pixels.
+    """Load and check the target, then :func:`orbit.plan.plan_orbit`: everything but the pixels.
 
     Returns a dict: ``result`` (plain-Python scenario and per-frame labels without image
     quantities, the ``--json`` document), ``model``, ``model_spec``, ``camera`` and per-frame
     ``lights`` (Sun, Earth and ν in the body frame)."""
-    from orbit import cw, pose, visibility
-    from orbit.attitude import TargetAttitude
-    from orbit.epoch import gmst_rad, to_iso_utc
-    from orbit.reference import ReferenceOrbit
-    from orbit.rotations import rot_z
-    from orbit.sampling import range_band, sample_pattern
-    from orbit.sun import sun_position_eci
+    from orbit.plan import PlanError, plan_orbit
     from raytrace.camera import Camera
 
-    seq, orb, att, cam = cfg["sequence"], cfg["orbit"], cfg["attitude"], cfg["camera"]
+    seq, cam = cfg["sequence"], cfg["camera"]
     if seq["mesh"] is not None:
         spec = ("mesh", seq["mesh"], seq["mesh_unit_m"])
         try:
-            model = _load_model(spec, warn=True)
+            model = scenes.load_model(spec, warn_repair=True)
         except ValueError as exc:
             raise CLIError(f"argument --mesh: {exc}") from None
         target = model.name
     else:
         spec = ("builtin", seq["target"])
-        model = _load_model(spec)
+        model = scenes.load_model(spec)
         target = seq["target"]
     try:
-        _scene_of(model, warn=True)  # validates the mesh (e.g. zero-area triangles) before anything is written
+        scenes.scene_of(model, warn_model=True)  # validates the mesh (e.g. zero-area triangles) before anything is written
     except ValueError as exc:
         raise CLIError(f"argument --mesh: {exc}") from None
-    _star_field(cfg)  # validates the star catalogue before anything is written
-    radius_m = model.bounding_radius_m
+    scenes.star_field(cfg)  # validates the star catalogue before anything is written
     if seq["mesh"] is not None and "mesh_unit_m" not in given:
         lo, hi = model.bounds_m  # the mesh's own size, wherever its origin lies
         note = _mesh_unit_warning(0.5 * float(np.linalg.norm(hi - lo)), seq["mesh"])
         if note:
             sys.stderr.write(f"{PROG}: warning: {note}\n")
     camera = Camera.from_focal(cam["focal_length_mm"] * 1e-3, cam["pixel_pitch_um"] * 1e-6, cam["width"], cam["height"])
-    n = ReferenceOrbit(altitude_m=orb["altitude_km"] * 1e3).n_rad_s
-    band = range_band(radius_m)
-    explicit = cfg["pattern"]["amplitude_m"] is not None or cfg["pattern"]["kappa"] is not None
-    if explicit:
-        s0, t_s, window_s, params, draws, attempts, range_m = _explicit_pattern(cfg, given, n, band, radius_m)
-        pattern = params.pattern
-    else:
-        sample = sample_pattern(seq["pattern"], n, target_radius_m=radius_m, n_frames=seq["frames"],
-                                rng=seq["seed"], window_s=seq["window_s"])
-        s0, t_s, window_s, params = sample.s0_lvlh, np.asarray(sample.t_s), sample.window_s, sample.params
-        draws, attempts, range_m, pattern = dict(sample.draws), sample.attempts, sample.range_m, seq["pattern"]
-    from orbit.epoch import to_unix_seconds
-    from orbit.sun import VALID_UTC_RANGE_S
-    if len(t_s) and to_unix_seconds(orb["epoch"]) + float(np.max(t_s)) > VALID_UTC_RANGE_S[1]:
-        raise CLIError(f"argument --epoch: the sequence ends {float(np.max(t_s)):.0f} s after {orb['epoch']}, past "
-                       "2051-01-01T00:00:00Z (the validity of the solar formulae); choose an earlier --epoch")
-    s_lvlh = cw.propagate(s0, n, t_s)
-    ref, chosen = _reference_orbit(orb, s_lvlh, t_s)
-    r_obs_eci, _ = ref.observer_state_eci(s_lvlh, t_s)
-    r_tgt_eci, _ = ref.target_state_eci(t_s)
-    unix_s = ref.unix_s(t_s)
-    r_sun_eci = sun_position_eci(unix_s)
-    vis = visibility.visibility(r_obs_eci, r_tgt_eci, r_sun_eci, sun_margin_rad=math.radians(orb["sun_margin_deg"]))
-
-    try:
-        attitude = TargetAttitude.from_euler_zyx_deg(
-            att["attitude"], *att["attitude_ypr_deg"], spin_axis_body=att["spin_axis"],
-            spin_rate_rad_s=math.radians(att["spin_rate_deg_s"]), omega0_body_rad_s=np.radians(att["omega0_deg_s"]),
-            inertia_body_kg_m2=np.diag(att["inertia_kg_m2"]))
-    except ValueError as exc:
-        raise CLIError(_attitude_error(str(exc))) from None
-    R_lvlh_from_body = attitude.R_lvlh_from_body(t_s, n)
-    R_cam_from_lvlh = pose.look_at(s_lvlh[:, :3], roll_rad=math.radians(cam["roll_deg"]))
-    R_cam_from_body, t_cam_m = pose.pose_from_relative(s_lvlh[:, :3], R_lvlh_from_body, R_cam_from_lvlh)
-    labels = pose.pose_labels(R_cam_from_body, t_cam_m)
-    R_lvlh_from_eci = np.swapaxes(ref.R_eci_from_lvlh(t_s), -1, -2)
-    R_cam_from_eci = R_cam_from_lvlh @ R_lvlh_from_eci
-    # directions seen from the camera (labels) ...
-    sun_dir_cam = _unit_rows((R_cam_from_eci @ (r_sun_eci - r_obs_eci)[:, :, None])[:, :, 0])
-    earth_dir_cam = _unit_rows((R_cam_from_eci @ -r_obs_eci[:, :, None])[:, :, 0])
-    # ... and from the target, in its body frame (the renderer's light)
-    R_body_from_eci = np.swapaxes(R_lvlh_from_body, -1, -2) @ R_lvlh_from_eci
-    sun_dir_body = _unit_rows((R_body_from_eci @ (r_sun_eci - r_tgt_eci)[:, :, None])[:, :, 0])
-    earth_dir_body = _unit_rows((R_body_from_eci @ -r_tgt_eci[:, :, None])[:, :, 0])
-    earth_distance_m = np.linalg.norm(r_tgt_eci, axis=1)
-    R_body_from_earth = R_body_from_eci @ rot_z(gmst_rad(unix_s))  # Earth-fixed axes (texture)
-
-    motion = None
+    points = None
     if cfg["degrade"].get("motion_blur") == "auto":
-        motion = _image_motion(model, camera, cfg["degrade"]["exposure_us"] * 1e-6, s0, n, t_s, attitude,
-                               math.radians(cam["roll_deg"]))
-    frames, lights = [], []
-    visible = vis.visible  # a property that builds the whole array: once, not per frame (a million frames)
-    for i in range(t_s.size):
-        frames.append({
-            "frame": i,
-            "t_s": float(t_s[i]),
-            "utc": to_iso_utc(float(unix_s[i])),
-            "r_lvlh": [float(v) for v in s_lvlh[i, :3]],
-            "v_lvlh": [float(v) for v in s_lvlh[i, 3:]],
-            "range_m": float(np.linalg.norm(s_lvlh[i, :3])),
-            "q_cam_from_body": [float(v) for v in labels.q_cam_from_body[i]],
-            "R_cam_from_body": [float(v) for v in R_cam_from_body[i].ravel()],
-            "t_cam_m": [float(v) for v in t_cam_m[i]],
-            "R_cam_from_eci": [float(v) for v in R_cam_from_eci[i].ravel()],
-            "sun_dir_cam": [float(v) for v in sun_dir_cam[i]],
-            "earth_dir_cam": [float(v) for v in earth_dir_cam[i]],
-            "sun_dir_body": [float(v) for v in sun_dir_body[i]],
-            "earth_dir_body": [float(v) for v in earth_dir_body[i]],
-            "line_of_sight": bool(vis.line_of_sight[i]),
-            "earth_in_background": bool(vis.earth_in_background[i]),
-            "sun_angle_deg": float(np.degrees(vis.sun_angle_rad[i])),
-            "sun_clear": bool(vis.sun_clear[i]),
-            "shadow": ("sunlit", "penumbra", "umbra")[int(vis.shadow[i])],
-            "shadow_fraction": float(vis.illuminated_fraction[i]),
-            "visible": bool(visible[i]),
-            "not_visible_because": [why for why, bad in (
-                ("earth_blocks_line_of_sight", not vis.line_of_sight[i]), ("sun_in_lens", not vis.sun_clear[i]),
-                ("earth_shadow", not vis.illuminated_fraction[i] > 0.0)) if bad],
-        })
-        lights.append({"sun_dir_body": sun_dir_body[i].tolist(), "shadow_fraction": float(vis.illuminated_fraction[i]),
-                       "earth_dir_body": earth_dir_body[i].tolist(), "earth_distance_m": float(earth_distance_m[i]),
-                       "R_body_from_earth": R_body_from_earth[i].tolist(),
-                       "R_body_from_eci": R_body_from_eci[i].tolist()})
-        if motion is not None:
-            lights[-1]["motion"] = [float(motion["length_px"][i]), float(motion["angle_deg"][i])]
-            frames[-1]["motion_blur_px"], frames[-1]["motion_angle_deg"] = lights[-1]["motion"]
-            frames[-1]["motion_path_px"] = float(motion["path_px"][i])
-            frames[-1]["motion_blur_bounded"] = bool(motion["bounded"][i])
-    result = {
-        "target": target,
-        "target_bounding_radius_m": radius_m,
-        "pattern": pattern,
-        "seed": seq["seed"],
-        "reference_orbit": {"altitude_m": ref.altitude_m, "inclination_rad": ref.inclination_rad,
-                            "raan_rad": ref.raan_rad, "arg_lat_rad": ref.arg_lat_rad, "epoch_utc": ref.epoch_utc,
-                            "a_m": ref.a_m, "period_s": ref.period_s, "chosen": chosen},
-        "n": n,
-        "s0_lvlh": [float(v) for v in s0],
-        "window_s": float(window_s),
-        "range_band_m": [band.r_min_m, band.r_max_m],
-        "range_m": [float(v) for v in range_m],
-        "pattern_parameters": params.to_dict(),
-        "pattern_source": "explicit" if explicit else "sampled",
-        "sampled": draws,
-        "attempts": attempts,
-        "t_s": [float(v) for v in t_s],
-        "frames": frames,
-    }
-    return {"result": result, "model": model, "model_spec": spec, "camera": camera, "lights": lights,
-            "cfg": cfg, "name": f"{target}_{pattern}"}
-
-
-MOTION_SAMPLES = (16, 4096)
-"""Instants per exposure at which ``--motion-blur auto`` samples the image path: doubled from the
-first until the blur changes by less than :data:`MOTION_TOL_PX` or :data:`MOTION_TOL_REL` of it,
-at most the second."""
-MOTION_TOL_PX = 1e-3
-MOTION_TOL_REL = 1e-5
-
-
-def _reference_orbit(orb: dict, s_lvlh: np.ndarray, t_s: np.ndarray) -> tuple:
-    """(the sequence's :class:`orbit.reference.ReferenceOrbit`, the names of the options chosen
-    for it): ``--raan-deg`` and ``--arg-lat-deg`` as given, or where unset the geometry of
-    :func:`orbit.viewing.sunlit_geometry` (target fully sunlit and in view in the most frames)."""
-    from orbit.reference import ReferenceOrbit
-    from orbit.viewing import sunlit_geometry
-    raan = None if orb["raan_deg"] is None else math.radians(orb["raan_deg"])
-    u0 = None if orb["arg_lat_deg"] is None else math.radians(orb["arg_lat_deg"])
-    chosen = []
-    if u0 is None:
-        g = sunlit_geometry(s_lvlh, t_s, altitude_m=orb["altitude_km"] * 1e3,
-                            inclination_rad=math.radians(orb["inclination_deg"]), epoch_utc=orb["epoch"],
-                            raan_rad=raan, sun_margin_rad=math.radians(orb["sun_margin_deg"]))
-        chosen = ["arg_lat_deg"] + (["raan_deg"] if raan is None and g.plane_searched else [])
-        raan, u0 = g.raan_rad, g.arg_lat_rad
-    ref = ReferenceOrbit(altitude_m=orb["altitude_km"] * 1e3, inclination_rad=math.radians(orb["inclination_deg"]),
-                         raan_rad=0.0 if raan is None else raan, arg_lat_rad=u0, epoch_utc=orb["epoch"])
-    return ref, chosen
-
-
-def _image_motion(model, camera, exposure_s: float, s0, n: float, t_s, attitude, roll_rad: float = 0.0) -> dict:
-    """Per frame, the straight-line blur that the target's own image motion makes during an
-    exposure of ``exposure_s`` centred on the frame time (``--motion-blur auto``).
-
-    The target's convex-hull vertices are projected at instants spread over the exposure (same
-    CW state, attitude law and look-at pointing as the frame; doubled until the blur settles,
-    :data:`MOTION_SAMPLES`), so the path each vertex sweeps is followed however it turns; each
-    is taken as moving uniformly along straight pieces between instants. A camera integrates
-    the image along those paths. The blur applied is a straight segment along the principal
-    axis v of the vertices' positions about their own means (the larger eigenvector of their
-    mean covariance), as long as the paths' spread along v allows: L = min(√(12 λ), E), with λ
-    the mean variance of the positions along v (a uniform segment of length L has L²/12) and E
-    the RMS over the vertices of each path's extent along v (a point that slows at the ends of
-    its swing would otherwise be given a blur longer than the swing). For a straight path at
-    constant speed both are its length; a target that turns a whole revolution in the
-    exposure blurs over its ring instead of (comparing the end poses alone) not at all. The
-    largest L of any centred part of the exposure is taken, so the blur never shrinks as the
-    exposure grows (a path that turns back on itself spreads less over a longer time). L is at
-    most the image diagonal (``bounded``).
-
-    Returns
-    -------
-    dict of ndarray, shape (N,)
-        ``length_px`` and ``angle_deg`` (the blur applied; angle counter-clockwise from +column
-        as :func:`degrade.psf.motion_from_velocity` reports it), ``path_px`` (RMS over the hull
-        vertices of the image path length swept during the exposure), ``bounded`` (bool: L
-        capped) and ``samples`` (instants used).
-    """
-    from scipy.spatial import ConvexHull
-
-    from orbit import cw, pose
-    pts = np.concatenate([np.asarray(c.mesh.vertices, dtype=np.float64) for c in model.components])
+        points = np.concatenate([np.asarray(c.mesh.vertices, dtype=np.float64) for c in model.components])
     try:
-        hull = ConvexHull(pts).vertices
-    except Exception:  # noqa: BLE001 - flat or tiny point sets: use every vertex
-        hull = np.arange(len(pts))
-    pts = pts[hull]
-    t_s = np.asarray(t_s, dtype=np.float64)
-    nf = t_s.size
-    out = {"length_px": np.zeros(nf), "angle_deg": np.zeros(nf), "path_px": np.zeros(nf),
-           "bounded": np.zeros(nf, dtype=bool), "samples": np.zeros(nf, dtype=np.int64)}
-    if not exposure_s > 0 or nf == 0:
-        return out
-    diagonal = math.hypot(camera.width, camera.height)
-
-    def blur(frames: np.ndarray, m: int) -> tuple:
-        """(L, θ, path) of ``frames`` from m + 1 instants (m even) over the exposure."""
-        tau = np.linspace(-0.5 * exposure_s, 0.5 * exposure_s, m + 1)
-        tt = (t_s[frames, None] + tau[None, :]).ravel()
-        s = cw.propagate(s0, n, tt)
-        R, t = pose.pose_from_relative(s[:, :3], attitude.R_lvlh_from_body(tt, n),
-                                       pose.look_at(s[:, :3], roll_rad=roll_rad))
-        p = pts[None] @ np.swapaxes(R, -1, -2) + t[:, None, :]          # (F·(m+1), K, 3)
-        z = np.where(p[..., 2] > 1e-9, p[..., 2], np.nan)
-        uv = np.stack([camera.fx * p[..., 0] / z, camera.fy * p[..., 1] / z], -1)
-        uv = uv.reshape(len(frames), m + 1, len(pts), 2)               # (F, instants, K, 2)
-        seen = np.all(np.isfinite(uv), axis=(1, 3))                     # in front all along
-        uv = np.where(seen[:, None, :, None], uv, 0.0)
-        w = seen / np.maximum(seen.sum(axis=1, keepdims=True), 1)       # (F, K): mean over the seen vertices
-        a, b = uv[:, :-1], uv[:, 1:]                                    # the m straight pieces
-        path = np.sqrt(np.einsum("fk,fk->f", w, np.linalg.norm(b - a, axis=-1).sum(axis=1) ** 2))
-        # the whole exposure's covariance (uniform motion on each piece) gives the axis v
-        m1 = 0.5 * (a + b).mean(axis=1)                                 # (F, K, 2)
-        m2 = ((a[..., :, None] * a[..., None, :] + b[..., :, None] * b[..., None, :]) / 3.0
-              + (a[..., :, None] * b[..., None, :] + b[..., :, None] * a[..., None, :]) / 6.0).mean(axis=1)
-        cov = np.einsum("fk,fkij->fij", w, m2 - m1[..., :, None] * m1[..., None, :])
-        v = np.linalg.eigh(cov)[1][..., -1]                             # (F, 2)
-        q = np.einsum("fikc,fc->fik", uv, v)                            # positions along v
-        # centred parts j = 1 .. m/2 of the exposure: the pieces c-j .. c+j-1 about the centre c
-        c = m // 2
-        qa, qb = q[:, :-1], q[:, 1:]
-        e1 = 0.5 * (qa + qb)
-        e2 = (qa * qa + qb * qb + qa * qb) / 3.0
-        j = np.arange(1, c + 1, dtype=np.float64)[None, :, None]
-        s1 = (np.cumsum(e1[:, c - 1::-1] + e1[:, c:], axis=1)) / (2 * j)  # (F, m/2, K)
-        s2 = (np.cumsum(e2[:, c - 1::-1] + e2[:, c:], axis=1)) / (2 * j)
-        lam = np.einsum("fk,fjk->fj", w, np.maximum(s2 - s1 * s1, 0.0))
-        hi = np.maximum(np.maximum.accumulate(q[:, c - 1::-1], axis=1), np.maximum.accumulate(q[:, c + 1:], axis=1))
-        lo = np.minimum(np.minimum.accumulate(q[:, c - 1::-1], axis=1), np.minimum.accumulate(q[:, c + 1:], axis=1))
-        ext = np.maximum(hi, q[:, c:c + 1]) - np.minimum(lo, q[:, c:c + 1])
-        E = np.sqrt(np.einsum("fk,fjk->fj", w, ext * ext))
-        L = np.minimum(np.sqrt(12.0 * lam), E).max(axis=1)
-        theta = np.degrees(np.arctan2(-v[:, 1], v[:, 0]))             # rows grow downward
-        theta = np.where(theta <= -90.0, theta + 180.0, np.where(theta > 90.0, theta - 180.0, theta))
-        return L, theta, path
-
-    chunk = max(1, int(4_000_000 // (len(pts) * (MOTION_SAMPLES[1] + 1))))
-    for a0 in range(0, nf, chunk):
-        frames = np.arange(a0, min(nf, a0 + chunk))
-        m = MOTION_SAMPLES[0]
-        L, theta, path = blur(frames, m)
-        while m < MOTION_SAMPLES[1]:
-            L2, theta2, path2 = blur(frames, 2 * m)
-            m *= 2
-            settled = np.all(np.abs(L2 - L) <= np.maximum(MOTION_TOL_PX, MOTION_TOL_REL * L2))
-            L, theta, path = L2, theta2, path2
-            if settled:
-                break
-        out["length_px"][frames] = np.minimum(L, diagonal)
-        out["bounded"][frames] = L > diagonal
-        out["angle_deg"][frames] = np.where(L > 0, theta, 0.0)
-        out["path_px"][frames] = path
-        out["samples"][frames] = m + 1
-    return out
-
-
-def _num(value) -> str:
-    return "undefined" if value is None else (value if isinstance(value, str) else f"{value:.8g}")
-
-
-def _print_table(result: dict, out) -> None:
-    pp = result["pattern_parameters"]
-    ro = result["reference_orbit"]
-    w = out.write
-    w(f"# target {result['target']} (bounding radius {result['target_bounding_radius_m']:.2f} m), "
-      f"pattern {result['pattern']} {pp['side']}, seed {result['seed']}\n")
-    w(f"# reference orbit: altitude {ro['altitude_m'] / 1e3:g} km, i {math.degrees(ro['inclination_rad']):g} deg, "
-      f"RAAN {math.degrees(ro['raan_rad']):g} deg, u0 {math.degrees(ro['arg_lat_rad']):g} deg, "
-      f"epoch {ro['epoch_utc']}, n {result['n']:.10e} rad/s, T {ro['period_s']:.3f} s\n")
-    w(f"# A {pp['A']:.4f} m, x_l {pp['x_l']:.4f} m, beta {pp['beta']:.6e} m/s, gamma {pp['gamma']:.4f} m, "
-      f"sigma {_num(pp['sigma'])}, kappa {_num(pp['kappa'])}, t_p {pp['t_p']:.3f} s\n")
-    w(f"# s0_lvlh [m, m/s] = {' '.join(f'{v:.9g}' for v in result['s0_lvlh'])}\n")
-    w(f"# window {result['window_s']:.3f} s, {len(result['frames'])} frames, range band "
-      f"{result['range_band_m'][0]:g}-{result['range_band_m'][1]:g} m\n")
-    w(f"{'frame':>5} {'t_s':>10} {'x_m':>10} {'y_m':>10} {'z_m':>10} {'vx_m_s':>10} {'vy_m_s':>10} "
-      f"{'vz_m_s':>10} {'range_m':>9} {'los':>3} {'earth_bg':>8} {'sun_deg':>7} {'sun_ok':>6} "
-      f"{'shadow':>8} {'nu':>6} {'visible':>7}\n")
-    yn = ("no", "yes")
-    for f in result["frames"]:
-        x, y, z = f["r_lvlh"]
-        vx, vy, vz = f["v_lvlh"]
-        w(f"{f['frame']:5d} {f['t_s']:10.3f} {x:10.4f} {y:10.4f} {z:10.4f} {vx:10.6f} {vy:10.6f} {vz:10.6f} "
-          f"{f['range_m']:9.3f} {yn[f['line_of_sight']]:>3} {yn[f['earth_in_background']]:>8} "
-          f"{f['sun_angle_deg']:7.2f} {yn[f['sun_clear']]:>6} {f['shadow']:>8} {f['shadow_fraction']:6.4f} "
-          f"{yn[f['visible']]:>7}\n")
-    n_vis = sum(f["visible"] for f in result["frames"])
-    w(f"# {n_vis} of {len(result['frames'])} frames visible (line of sight, Sun clear of the lens, target lit)\n")
+        plan = plan_orbit(cfg, given, target=target, radius_m=model.bounding_radius_m, points_body_m=points,
+                          intrinsics=(camera.fx, camera.fy, camera.width, camera.height))
+    except PlanError as exc:
+        raise CLIError(f"argument --{exc.key.replace('_', '-')}: {exc}") from None
+    plan.update({"model": model, "model_spec": spec, "camera": camera, "cfg": cfg,
+                 "name": f"{target}_{plan['result']['pattern']}"})
+    return plan
 
 
 # --------------------------------------------------------------------------- one frame (runs in a worker)
-_SCENES: dict = {}
-_STARS: dict = {}
-_SCENE_LOCK = None
-# A pool's workers load the scenes (BVH aside) and radiance caches this process built once on
-# every core (_prebuild_scenes) rather than each building its own; False: each builds its own.
-_PREBUILD_SCENES = True
-
-
-def _scene(spec: tuple, prebuilt: str | None = None):
-    """The Scene of a model spec, built once per process (Embree BVH and radiance cache);
-    ``prebuilt``: a file of :func:`_prebuild_scenes` holding it with its radiance cache."""
-    global _SCENE_LOCK
-    import threading
-    if _SCENE_LOCK is None:
-        _SCENE_LOCK = threading.Lock()
-    with _SCENE_LOCK:
-        scene = _SCENES.get(spec)
-        if scene is None:
-            scene = _load_prebuilt(prebuilt) if prebuilt else None
-            if scene is None:
-                scene = _scene_of(_load_model(spec), warn=False)
-            scene.embree  # noqa: B018 - build now, under the lock
-            _SCENES[spec] = scene
-        return scene
-
-
-def _load_prebuilt(path: str):
-    """The Scene pickled by :func:`_prebuild_scenes` at ``path``, its radiance cache attached;
-    None (and the worker builds its own) if the file cannot be read."""
-    import pickle
-    try:
-        with open(path, "rb") as fh:
-            scene, cache, options = pickle.load(fh)  # noqa: S301 - our own file, in our own private folder
-        scene.adopt_radiance_cache(cache, **options)
-        return scene
-    except (OSError, pickle.UnpicklingError, EOFError, ValueError) as exc:
-        sys.stderr.write(f"{PROG}: warning: building the scene in the worker ({exc})\n")
-        return None
-
-
-def _prebuild_scenes(tasks: list, folder: str) -> dict:
-    """Build each target's Scene and radiance cache once, here, on every core, and pickle them
-    into ``folder`` for the pool's workers: {model spec: file}. Each worker would otherwise
-    build its own on its share of the cores (Cassini: ~5 s on one core, 2–3.5 s on two; the
-    same cache bit for bit, tests/raytrace/test_cache_solve.py). Only for tasks that shade (the
-    ``fast`` and ``balanced`` presets with an image modality); nothing is built for the others."""
-    import pickle
-    out = {}
-    for task in tasks:
-        spec = task["model_spec"]
-        if spec in out or task["cfg"]["render"]["quality"] == "reference":
-            continue
-        if not _shades(task):
-            continue
-        from raytrace.presets import preset_cache_options, quality_preset
-        scene = _scene_of(_load_model(spec), warn=False)  # not kept here: only the workers render
-        r = task["cfg"]["render"]
-        # the cache the preset's frames ask for (balanced from 12 rays: a finer lattice)
-        options = preset_cache_options(quality_preset(r["quality"], r.get("samples")), scene.scale_m)
-        cache = scene.radiance_cache(**options)
-        path = os.path.join(folder, f"scene{len(out)}.pickle")
-        with open(path, "wb") as fh:
-            pickle.dump((scene, cache, options), fh, protocol=pickle.HIGHEST_PROTOCOL)
-        out[spec] = path
-        del scene, cache
-    return out
-
-
-def _shades(task: dict) -> bool:
-    """Whether a frame task needs the radiance (an image modality), not the geometry alone."""
-    return bool(task.get("want_rgb")) or bool(set(task["modalities"]) & {"rgb", "rgb_degraded", "hdr"})
 
 
 def _worker_ready(quality: str) -> None:
@@ -1075,74 +649,10 @@ def _worker_ready(quality: str) -> None:
     import raytrace.shade  # noqa: F401
     from raytrace import _precompile
     from raytrace.brdf import split_sum_table
-    _precompile.load_here(_precompile_groups(quality))
+    from raytrace.dataset.jit import precompile_groups
+    _precompile.load_here(precompile_groups(quality))
     if quality != "reference":
         split_sum_table()
-
-
-def _scene_of(model, warn: bool):
-    """``raytrace.scene.Scene(model)``; its warnings about the model (a mesh far from its origin)
-    as one line each on stderr when ``warn`` (planning, once), else dropped (the workers, which
-    build the scene the plan already built)."""
-    import warnings
-    from raytrace.scene import Scene
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        scene = Scene(model)
-    for w in caught if warn else ():
-        sys.stderr.write(f"{PROG}: warning: {' '.join(str(w.message).split())}\n")
-    return scene
-
-
-def _worker_init(threads: int) -> None:
-    """Process-pool initializer: share the cores between the workers; stop on SIGINT or
-    SIGTERM (:func:`_worker_stop`) and when the parent is gone (:func:`_abandon_frame`)."""
-    import signal
-    global _IN_POOL_WORKER
-    _IN_POOL_WORKER = True
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, _worker_stop)
-    from raytrace._threads import exit_with_parent
-    exit_with_parent(os.getppid(), _PARENT_POLL_S, _abandon_frame)
-    try:
-        import numba
-        numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
-    except Exception as exc:  # noqa: BLE001 - a thread count is an optimisation, never an error
-        sys.stderr.write(f"{PROG}: warning: could not set the worker's thread count ({exc})\n")
-
-
-_IN_POOL_WORKER = False  # set in the pool's worker processes
-_IN_FRAME = False  # run_frame is running (in a worker: what _abandon_frame waits for)
-_WORKER_STOPPING = False
-_PARENT_POLL_S = 0.5
-_STOP_GRACE_S = 30.0  # a worker whose parent died exits by then even if its frame has not let go
-
-
-def _worker_stop(signum, frame) -> None:
-    """A pool worker's SIGINT or SIGTERM (Ctrl-C reaches the whole process group; the parent
-    stops its pool on SIGTERM; a batch scheduler may signal every process): the frame in flight
-    is abandoned where it stands, its temporary files removed on the way out
-    (:func:`raytrace.files.atomic_write_image`), then :func:`run_frame` exits the worker. Once:
-    a second signal must not interrupt that clean-up (it stays handled, as a no-op: a handler
-    set to SIG_IGN while the signal is pending makes Python raise OSError)."""
-    global _WORKER_STOPPING
-    if _WORKER_STOPPING:
-        return
-    _WORKER_STOPPING = True
-    raise KeyboardInterrupt
-
-
-def _abandon_frame() -> None:
-    """In a pool worker whose parent is gone (killed with SIGKILL, crashed; run by
-    :func:`raytrace._threads.exit_with_parent` before the worker exits, instead of its waiting
-    for its next task for ever with the target's scene in memory): stop as on SIGTERM and wait
-    until the frame in flight has removed its temporaries."""
-    import signal
-    os.kill(os.getpid(), signal.SIGTERM)
-    deadline = time.monotonic() + _STOP_GRACE_S
-    time.sleep(0.05)  # the main thread takes the signal at its next bytecode
-    while _IN_FRAME and time.monotonic() < deadline:  # the abandoned frame removes its temporaries
-        time.sleep(0.05)
 
 
 def frame_seeds(seed: int, frame: int) -> tuple:
@@ -1151,24 +661,6 @@ def frame_seeds(seed: int, frame: int) -> tuple:
     degradation stream its first child."""
     child = np.random.SeedSequence(seed, spawn_key=(frame,))
     return int(child.generate_state(1)[0] % 2**31), np.random.SeedSequence(seed, spawn_key=(frame, 0))
-
-
-def _star_field(cfg: dict):
-    """The sequence's star field (None without stars), read or drawn once per process."""
-    r = cfg["render"]
-    key = (r.get("star_catalogue"), r.get("star_limit_mag"), cfg["sequence"]["seed"])
-    if key[0] is None and key[1] is None:
-        return None
-    if key not in _STARS:
-        from raytrace.stars import StarField
-        if key[0] is not None:
-            try:
-                _STARS[key] = StarField.from_csv(key[0], math.inf if key[1] is None else key[1])
-            except ValueError as exc:
-                raise CLIError(f"argument --star-catalogue: {exc}") from None
-        else:  # one sky per seed: the same stars in every frame
-            _STARS[key] = StarField.procedural(key[1], key[2])
-    return _STARS[key]
 
 
 def _lighting(light: dict, r: dict, stars=None):
@@ -1183,49 +675,10 @@ def _lighting(light: dict, r: dict, stars=None):
                     R_body_from_eci=None if stars is None else light["R_body_from_eci"])
 
 
-def _physical_config(d: dict, cam: dict, motion=None):
-    """The physical chain's settings; ``motion`` = (L [px], θ [deg]) of the frame overrides the
-    constant blur when ``--motion-blur auto``."""
-    from degrade.chain import DegradeConfig, OpticsConfig
-    from degrade.sensor import SensorConfig
-    f_m = cam["focal_length_mm"] * 1e-3
-    length, angle = d["motion_blur_px"], d["motion_angle_deg"]
-    if d.get("motion_blur") == "auto" and motion is not None:
-        length, angle = motion
-    optics = OpticsConfig(focal_length_m=f_m, aperture_m=f_m / d["f_number"], pixel_pitch_m=cam["pixel_pitch_um"] * 1e-6,
-                          aberration_sigma_px=d["aberration_sigma_px"], motion_length_px=length,
-                          motion_angle_deg=angle, defocus_radius_px=d["defocus_radius_px"],
-                          corner_sigma_px=d["corner_sigma_px"] or None)
-    sensor = SensorConfig(quantum_efficiency=d["quantum_efficiency"], full_well_e=d["full_well_e"],
-                          read_noise_e=d["read_noise_e"], bit_depth=d["bit_depth"], exposure_s=d["exposure_us"] * 1e-6,
-                          offset_dn=d["offset_dn"], dark_current_e_per_s=d["dark_current_e_s"], demosaic=d["demosaic"])
-    return DegradeConfig(optics=optics, sensor=sensor, encoding="srgb8")
-
-
 def degrade_frame(cfg: dict, task: dict, rgb8, radiance, degrade_seq) -> np.ndarray:
-    """The degraded 8-bit RGB of one frame (``cfg["degrade"]["degrade"]`` is ``paper`` or
-    ``physical``): the paper's group applied to the clean 8-bit image ``rgb8``, or the camera
-    equation and imaging chain applied to the linear ``radiance`` [W/(m²·sr)], with the random
-    stream ``degrade_seq`` (:func:`frame_seeds`); ``task`` gives the frame's motion (the
-    ``auto`` motion blur)."""
-    from degrade.encode import quantise
-    d = cfg["degrade"]
-    rng = np.random.default_rng(degrade_seq)
-    if d["degrade"] == "paper":
-        from degrade.paper import PaperConfig, paper_degrade
-        paper = PaperConfig(length_px=d["paper_blur_px"], angle_deg=d["paper_angle_deg"],
-                            gaussian_var=d["paper_gaussian_var"])
-        out = paper_degrade(np.asarray(rgb8).astype(np.float32) / np.float32(255.0), d["paper_group"], paper, rng=rng)
-    else:
-        from degrade.chain import degrade
-        from degrade.exposure import physical_exposure
-        cam = cfg["camera"]
-        signal = physical_exposure(radiance, f_number=d["f_number"], exposure_s=d["exposure_us"] * 1e-6,
-                                   pixel_pitch_m=cam["pixel_pitch_um"] * 1e-6,
-                                   quantum_efficiency=d["quantum_efficiency"], full_well_e=d["full_well_e"],
-                                   wavelengths_m=(_WHITE_BALANCE_M,) * 3)
-        out = degrade(signal, _physical_config(d, cam, task["light"].get("motion")), rng=rng)
-    return quantise(out, 8)
+    """:func:`degrade.presets.degrade_frame` of one frame task, with its motion blur."""
+    from degrade.presets import degrade_frame as degrade_one
+    return degrade_one(cfg["degrade"], cfg["camera"], rgb8, radiance, degrade_seq, task["light"].get("motion"))
 
 
 def render_frame_images(task: dict) -> tuple[dict, dict]:
@@ -1238,18 +691,18 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
     from raytrace.shade import render
     cfg = task["cfg"]
     mods = set(task["modalities"])
-    scene = _scene(task["model_spec"], task.get("prebuilt"))
+    scene = scenes.scene(task["model_spec"], task.get("prebuilt"))
     camera = Camera(*task["camera"])
     R = np.asarray(task["R_cam_from_body"], dtype=np.float64).reshape(3, 3)
     t = np.asarray(task["t_cam_m"], dtype=np.float64)
     render_seed, degrade_seq = frame_seeds(cfg["sequence"]["seed"], task["frame"])
     d = cfg["degrade"]
     need_rgb = task.get("want_rgb") or "rgb" in mods or ("rgb_degraded" in mods and d["degrade"] == "paper")
-    need_radiance = _shades(task)
+    need_radiance = scenes.shades(task)
     images, info = {}, {}
     if need_radiance:
         r = cfg["render"]
-        frame = render(scene, camera, R, t, _lighting(task["light"], r, _star_field(cfg)), quality=r["quality"],
+        frame = render(scene, camera, R, t, _lighting(task["light"], r, scenes.star_field(cfg)), quality=r["quality"],
                        samples=r["samples"], seed=render_seed)
         geo, radiance = frame.geometry, frame.radiance
     else:  # geometry-only modalities: no shading at all
@@ -1282,736 +735,28 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
 
 
 def run_frame(task: dict) -> dict:
-    """Render, degrade and write one frame (files atomically, then its manifest record);
-    returns the frame's label. With ``task["write"]`` false, returns the images instead.
-
-    A pool worker told to stop (:func:`_worker_stop`) abandons its frame, and exits rather than
-    start the frame already queued for it."""
-    global _IN_FRAME
-    if _IN_POOL_WORKER and _WORKER_STOPPING:
-        os._exit(1)
-    _IN_FRAME = True
-    try:
-        return _run_frame(task)
-    finally:
-        _IN_FRAME = False
-
-
-def _run_frame(task: dict) -> dict:
-    from raytrace import files as F
+    """Render, degrade and write one frame (files atomically, then its manifest record:
+    :func:`raytrace.dataset.folder.write_frame`); returns the frame's label. With
+    ``task["write"]`` false, returns the images instead."""
     images, info = render_frame_images(task)
     if not task.get("write", True):
         return {"frame": task["frame"], "index": task.get("index"), "images": images, "info": info}
-    seq_dir, name = task["out"], f"{task['frame']:06d}"
-    rel = {m: f"{m}/{name}{_EXT[m]}" for m in task["modalities"]}
-    digests = {}
-    for m in task["modalities"]:
-        path = os.path.join(seq_dir, rel[m])
-        F.atomic_write_image(path, images[m], noisy=m == "rgb_degraded")
-        digests[rel[m]] = F.sha256_file(path)
-    label = dict(task["label"])
-    label.update(info)
-    label["files"] = rel
-    F.write_frame_record(seq_dir, task["frame"], {"frame": task["frame"], "label": label, "files": digests})
-    return label
-
-
-# --------------------------------------------------------------------------- sequence folders
-def _versions() -> dict:
-    import platform
-    from importlib import metadata
-    out = {"python": platform.python_version()}
-    for dist in ("orbitsynth", "numpy", "scipy", "numba", "embreex", "trimesh", "OpenImageIO", "scikit-image"):
-        try:
-            out[dist] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            out[dist] = None
-    return out
-
-
-def _camera_json(camera, cfg: dict) -> dict:
-    K = camera.K.tolist()
-    cam = cfg["camera"]
-    return {"K": K, "width": camera.width, "height": camera.height,
-            "fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
-            "focal_length_m": cam["focal_length_mm"] * 1e-3, "pixel_pitch_m": cam["pixel_pitch_um"] * 1e-6,
-            "convention": "OpenCV: x right, y down, z forward; integer pixel coordinates are pixel centres",
-            # SPEED+-style keys
-            "cameraMatrix": K, "distCoeffs": [0.0, 0.0, 0.0, 0.0, 0.0], "Nu": camera.width, "Nv": camera.height,
-            "ppx": cam["pixel_pitch_um"] * 1e-6, "ppy": cam["pixel_pitch_um"] * 1e-6}
-
-
-def _frames_to_write(plan: dict) -> list:
-    frames = plan["result"]["frames"]
-    only = plan["cfg"]["output"]["only_visible"]
-    return [f["frame"] for f in frames if f["visible"] or not only]
-
-
-def _scenario(plan: dict) -> dict:
-    res, cfg, model = plan["result"], plan["cfg"], plan["model"]
-    scen = {"format": "orbitsynth sequence 1", "config": cfg, "seed": cfg["sequence"]["seed"],
-            "versions": _versions()}
-    scen.update({k: v for k, v in res.items() if k != "frames"})
-    scen["target_model"] = {
-        "file": f"model/{res['target']}.ply",
-        "n_triangles": model.n_triangles,
-        "components": [{"id": k + 1, "name": c.name, "material": c.material, "semantic": c.semantic}
-                       for k, c in enumerate(model.components)]}
-    scen["visible"] = [f["visible"] for f in res["frames"]]
-    scen["frames_written"] = _frames_to_write(plan)
-    scen["exposure"] = ("fixed: linear = radiance * pi / 1361 W/m2 (a white Lambertian surface facing the Sun "
-                        "is 1.0), sRGB 8-bit" if cfg["render"]["exposure"] == "fixed" else
-                        "auto: per frame, 99.5th luminance percentile of the target -> 0.9 (exposure_scale in labels)")
-    if cfg["degrade"]["degrade"] == "physical" and cfg["degrade"]["motion_blur"] == "auto":
-        scen["motion_blur"] = ("auto: per frame, a straight line along the principal axis v of the target's hull "
-                               "vertices' image positions over the exposure, of length min(sqrt(12 lambda), E) "
-                               "(lambda: their mean variance along v; E: the RMS of their paths' extents along v), the "
-                               "largest over centred parts of the exposure, at most the image diagonal; "
-                               "motion_blur_px and motion_angle_deg in labels")
-    scen["random_streams"] = ("frame i: SeedSequence(seed).spawn(n)[i]; render seed = generate_state(1)[0] mod 2^31, "
-                              "degradation rng = its first spawned child")
-    return scen
-
-
-def _json(obj) -> str:
-    return json.dumps(obj, indent=1, allow_nan=False) + "\n"
-
-
-def _first_missing(path: str) -> str | None:
-    path = os.path.abspath(path)
-    missing = None
-    while not os.path.exists(path):
-        missing = path
-        parent = os.path.dirname(path)
-        if parent == path:
-            break
-        path = parent
-    return missing
-
-
-def _read_bytes(path: str) -> bytes:
-    with open(path, "rb") as fh:
-        return fh.read()
-
-
-SCENARIO_FORMAT = "orbitsynth sequence 1"
-_SCENARIO_LIMIT = 256 << 20  # bytes; a million frames' scenario.json is ~30 MB
-
-
-def _own_entry(name: str, path: str) -> bool:
-    """Whether ``name`` in a folder without ``scenario.json`` may be left by this tool: its lock
-    file, a temporary file of an interrupted write, or one of its sub-folders, empty."""
-    from raytrace import files as F
-    if name == F.LOCK_NAME or F.is_temporary(name):
-        return True
-    if name in MODALITIES or name in ("model", F.MANIFEST_DIR):
-        try:
-            return os.path.isdir(path) and not os.path.islink(path) and not os.listdir(path)
-        except OSError:
-            return False
-    return False
-
-
-def judge_sequence_folder(seq_dir: str, scenario: str) -> bool:
-    """Decide, before anything is written, whether the main job may write the sequence whose
-    ``scenario.json`` text is ``scenario`` into ``seq_dir``: True if the folder holds that very
-    sequence (it is resumed), False if it is missing or empty (or holds only this tool's
-    leftovers of an interrupted start).
-
-    Raises
-    ------
-    CLIError
-        The path is not a writable folder; the folder holds another sequence, a
-        ``scenario.json`` that is not one of this tool's, or other files.
-    """
-    from raytrace import files as F
-    if not os.path.lexists(seq_dir):
-        return False
-    if not os.path.isdir(seq_dir):
-        raise CLIError(f"--out: {seq_dir} exists and is not a folder")
-    if not os.access(seq_dir, os.W_OK | os.X_OK):
-        raise CLIError(f"--out: {seq_dir} is not writable")
-    scen_path = os.path.join(seq_dir, "scenario.json")
-    foreign = f"--out: {seq_dir} holds something that is not a sequence of this tool"
-    if os.path.lexists(scen_path):
-        try:
-            data = F.read_regular_file(scen_path, limit_bytes=_SCENARIO_LIMIT, what="scenario.json")
-        except ValueError as exc:
-            raise CLIError(f"{foreign} ({exc}); choose another --out") from None
-        try:
-            doc = json.loads(data.decode("utf-8"))
-        except ValueError:  # UnicodeDecodeError too
-            doc = None
-        if not isinstance(doc, dict) or doc.get("format") != SCENARIO_FORMAT:
-            raise CLIError(f"{foreign} (its scenario.json is not an orbitsynth scenario); choose another --out")
-        if data.decode("utf-8") != scenario:
-            raise CLIError(f"--out: {seq_dir} holds another sequence (its scenario.json differs from these "
-                           "options); choose another --out or delete it")
-        return True
-    try:
-        names = sorted(os.listdir(seq_dir))
-    except OSError as exc:
-        raise CLIError(f"--out: cannot read {seq_dir} ({exc.strerror or exc})") from None
-    other = [n for n in names if not _own_entry(n, os.path.join(seq_dir, n))]
-    if other:
-        shown = ", ".join(other[:3]) + (f" and {len(other) - 3} more" if len(other) > 3 else "")
-        raise CLIError(f"--out: {seq_dir} is not empty and holds no sequence of this tool ({shown}); give a new or "
-                       "empty folder, or a sequence folder this tool wrote")
-    return False
-
-
-class SequenceClaim:
-    """A sequence folder this run writes into: its lock (:class:`raytrace.files.FolderLock`,
-    held until :meth:`release`) and what this run created in preparing it, which
-    :meth:`undo` removes when the run is refused or fails before any frame."""
-
-    def __init__(self, seq_dir: str, lock, created_dir: str | None):
-        self.seq_dir = seq_dir
-        self.lock = lock
-        self.created_dir = created_dir  # the outermost folder this run made (the sequence folder or a parent)
-        self.created: list = []  # files and folders this run made inside an existing sequence folder
-
-    def undo(self) -> None:
-        """Remove what this run created, where no other run shares the folder (a shard of the
-        same sequence may have started on it), and release the lock: a refused run leaves the
-        folder as it found it."""
-        import shutil
-        alone = self.lock.fd is None or self.lock.try_exclusive()
-        if alone:
-            for path in reversed(self.created):
-                try:
-                    os.rmdir(path) if os.path.isdir(path) and not os.path.islink(path) else os.unlink(path)
-                except OSError:
-                    pass
-        self.lock.release(remove=alone and self.lock.created)
-        if alone and self.created_dir is not None:
-            shutil.rmtree(self.created_dir, ignore_errors=True)
-
-    def release(self) -> None:
-        """Release the lock at the end of the run; its file goes with it where no other run
-        holds it."""
-        self.lock.release(remove=True)
-
-
-def prepare_sequence(plan: dict, seq_dir: str, *, shared: bool = False) -> SequenceClaim:
-    """Claim the sequence folder: judge it before writing anything
-    (:func:`judge_sequence_folder`), take its lock (exclusive for a whole run, ``shared`` for a
-    shard), then create ``scenario.json`` (atomically: of shards starting at once, one creates
-    it and the others must find the same text), ``camera.json``, ``config.toml``, ``model/``
-    and the modality folders. Returns the claim; the caller releases it when the run ends.
-
-    Raises
-    ------
-    CLIError
-        The folder is refused (another sequence, foreign files, in use by another run, not
-        writable); whatever this call created is removed first.
-    """
-    from raytrace import files as F
-    scenario = _json(_scenario(plan))
-    judge_sequence_folder(seq_dir, scenario)
-    created_dir = _first_missing(seq_dir)
-    try:
-        os.makedirs(seq_dir, exist_ok=True)
-    except OSError as exc:
-        if created_dir is not None and os.path.isdir(created_dir):
-            import shutil
-            shutil.rmtree(created_dir, ignore_errors=True)
-        raise CLIError(f"--out: cannot create {seq_dir} ({exc.strerror or exc})") from None
-    lock = F.FolderLock(seq_dir, shared=shared)
-    try:
-        lock.acquire()
-    except F.FolderLockBusy:
-        # another run owns the folder now (even if this one made it a moment ago): touch nothing
-        raise CLIError(f"--out: {seq_dir} is in use by another run writing into it (it holds the folder's lock "
-                       f"{F.LOCK_NAME}); wait for it to end or choose another --out") from None
-    except OSError as exc:
-        if created_dir is not None:
-            import shutil
-            shutil.rmtree(created_dir, ignore_errors=True)
-        raise CLIError(f"--out: cannot write into {seq_dir} ({exc.strerror or exc})") from None
-    if lock.unsupported:
-        sys.stderr.write(f"{PROG}: warning: --out: {seq_dir} cannot be locked ({lock.unsupported}); another run "
-                         "writing into it at the same time would not be refused\n")
-    claim = SequenceClaim(seq_dir, lock, created_dir)
-    try:
-        judge_sequence_folder(seq_dir, scenario)  # again, under the lock: another run may have prepared it
-        F.remove_stale_temporaries(seq_dir)
-
-        def made(path: str) -> None:
-            if created_dir is None:
-                claim.created.append(path)
-
-        scen_path = os.path.join(seq_dir, "scenario.json")
-        if not os.path.exists(scen_path):
-            if F.create_new_text(scen_path, scenario):
-                made(scen_path)
-            else:  # a shard of another run created it first: it must be this sequence
-                judge_sequence_folder(seq_dir, scenario)
-        for rel in [*plan["cfg"]["output"]["modalities"], "model"]:
-            path = os.path.join(seq_dir, rel)
-            if not os.path.isdir(path):
-                os.makedirs(path, exist_ok=True)
-                made(path)
-        scen = json.loads(scenario)
-        blobs = {scen["target_model"]["file"]: F.model_ply_bytes(plan["model"]),
-                 "camera.json": _json(_camera_json(plan["camera"], plan["cfg"])).encode("utf-8"),
-                 "config.toml": config_toml(plan["cfg"]).encode("utf-8")}
-        for rel, data in blobs.items():
-            path = os.path.join(seq_dir, rel)
-            if not (os.path.isfile(path) and _read_bytes(path) == data):
-                existed = os.path.lexists(path)
-                F.atomic_write_bytes(path, data)
-                if not existed:
-                    made(path)
-    except BaseException as exc:
-        claim.undo()
-        if isinstance(exc, OSError):
-            raise CLIError(f"--out: cannot write into {seq_dir} ({exc.strerror or exc})") from None
-        raise
-    return claim
-
-
-def _frame_files(seq_dir: str, frame: int, modalities) -> list:
-    return [os.path.join(seq_dir, m, f"{frame:06d}{_EXT[m]}") for m in modalities]
-
-
-def remove_incomplete_frames(tasks: list) -> int:
-    """After a failed or interrupted run: delete the image files of this run's frames that have
-    no manifest record (written before the failure; a rerun renders them again), so that no
-    half-written frame stays. Returns how many files were removed."""
-    from raytrace import files as F
-    removed = 0
-    for task in tasks:
-        if not task.get("write", True) or F.read_frame_record(task["out"], task["frame"]) is not None:
-            continue
-        for path in _frame_files(task["out"], task["frame"], task["modalities"]):
-            try:
-                os.unlink(path)
-                removed += 1
-            except OSError:
-                pass
-    return removed
-
-
-def finish_sequence(plan: dict, seq_dir: str, verified=frozenset()) -> dict:
-    """Write labels.json and manifest.json if every frame of the sequence is complete (from
-    any run or shard). Frames not in ``verified`` (those this run neither rendered nor checked
-    before skipping: other shards') are checked against their records' SHA-256 first; a frame
-    whose files do not match is not complete. Where the sequence is not complete, a
-    labels.json and manifest.json left from an earlier state are removed: they would disagree
-    with the files. Returns counts and the frames found corrupt."""
-    from raytrace import files as F
-    wanted = _frames_to_write(plan)
-    records, corrupt = {}, []
-    for i in wanted:
-        rec = F.read_frame_record(seq_dir, i)
-        if rec is None:
-            continue
-        bad = [rel for rel, digest in rec["files"].items()
-               if not os.path.isfile(os.path.join(seq_dir, rel))
-               or (i not in verified and F.sha256_file(os.path.join(seq_dir, rel)) != digest)]
-        if bad:
-            corrupt.append((i, bad[0]))
-        else:
-            records[i] = rec
-    done = len(records) == len(wanted)
-    if done:
-        labels = [records[i]["label"] for i in wanted]
-        files = {}
-        for rel in ("scenario.json", "camera.json", "config.toml", _scenario(plan)["target_model"]["file"]):
-            files[rel] = F.sha256_file(os.path.join(seq_dir, rel))
-        for i in wanted:
-            files.update(records[i]["files"])
-        labels_text = _json(labels)
-        F.atomic_write_text(os.path.join(seq_dir, "labels.json"), labels_text)
-        files["labels.json"] = F.sha256_file(os.path.join(seq_dir, "labels.json"))
-        F.atomic_write_text(os.path.join(seq_dir, "manifest.json"),
-                            _json({"format": "orbitsynth manifest 1", "algorithm": "sha256", "files": files}))
-    else:
-        for rel in ("manifest.json", "labels.json"):
-            try:
-                os.unlink(os.path.join(seq_dir, rel))
-            except FileNotFoundError:
-                pass
-    return {"complete": done, "present": len(records), "wanted": len(wanted), "corrupt": corrupt}
-
-
-def _tasks_for(plan: dict, seq_dir: str, shard: tuple | None, *, write: bool = True, frames=None) -> tuple:
-    """(tasks to run, frames skipped as complete) for the frames of this shard."""
-    from raytrace import files as F
-    cfg, cam = plan["cfg"], plan["camera"]
-    wanted = _frames_to_write(plan) if frames is None else list(frames)
-    if shard is not None:
-        k, n = shard
-        wanted = [i for i in wanted if i % n == k - 1]
-    tasks, skipped = [], 0
-    for i in wanted:
-        if write and F.frame_complete(seq_dir, i) is not None:
-            skipped += 1
-            continue
-        label = plan["result"]["frames"][i]
-        tasks.append({"frame": i, "out": seq_dir, "write": write, "cfg": cfg, "model_spec": plan["model_spec"],
-                      "camera": (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy),
-                      "R_cam_from_body": label["R_cam_from_body"], "t_cam_m": label["t_cam_m"],
-                      "light": plan["lights"][i], "label": label,
-                      "modalities": cfg["output"]["modalities"] if write else [], "want_rgb": not write})
-    return tasks, skipped
-
-
-# --------------------------------------------------------------------------- execution
-def default_workers() -> int:
-    """All cores this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:
-        return max(1, os.cpu_count() or 1)
-
-
-def frame_threads(workers: int, tasks: int) -> int:
-    """The numba threads each frame of :func:`execute` runs on: the pool's workers share the
-    cores; one worker (or one frame) renders in this process, on numba's threads."""
-    import numba
-    if workers <= 1 or tasks <= 1:
-        return numba.config.NUMBA_NUM_THREADS
-    return max(1, min(default_workers() // min(workers, tasks), numba.config.NUMBA_NUM_THREADS))
-
-
-@contextlib.contextmanager
-def _prebuild_threads(threads: int, quality: str):
-    """The threads :func:`_prebuild_scenes` runs on here: all of numba's, unless the workers run
-    one each (the kernels' serial builds) and numba's cache lacks the parallel builds (a fresh
-    install): then one thread, on the serial builds the workers use, rather than compiling
-    the parallel ones for this alone (their recorded compile times, ``_jit_signatures.py``, add
-    up to over 10 CPU s; a Cassini cache takes ~4.5 s on one thread, ~2.4 s on two). The same
-    scene and cache either way (``raytrace._jit.ThreadedKernel``)."""
-    if threads != 1 or not _kernels_not_compiled(quality, serial=False):
-        yield
-        return
-    import numba
-    before = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(before)
-
-
-def connect_scheduler(scheduler: str):
-    """A dask.distributed client of ``--scheduler``, connected before anything is written (a
-    scheduler that cannot be reached leaves no folder behind)."""
-    try:
-        from distributed import Client
-    except ImportError:
-        raise CLIError("--scheduler needs dask.distributed: pip install 'orbitsynth[dask]'") from None
-    try:
-        return Client(scheduler, timeout="10s")
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise CLIError(f"--scheduler: cannot connect to {scheduler} ({exc})") from None
-
-
-def execute(tasks: list, *, workers: int, progress=None, client=None):
-    """Run :func:`run_frame` on every task: in this process (1 worker), on a pool of
-    ``workers`` spawned processes, or on a dask.distributed cluster (``client``, connected by
-    :func:`connect_scheduler`); yields results as they complete and advances ``progress`` (a
-    tqdm bar) by one per frame."""
-    if not tasks:
-        return
-    if client is not None:
-        from distributed import as_completed
-        for fut in as_completed(client.map(run_frame, tasks, pure=False)):
-            res = fut.result()
-            if progress is not None:
-                progress.update(1)
-            yield res
-        return
-    if workers <= 1 or len(tasks) == 1:
-        for task in tasks:
-            res = run_frame(task)
-            if progress is not None:
-                progress.update(1)
-            yield res
-        return
-    import multiprocessing
-    import shutil
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    n = min(workers, len(tasks))
-    threads = frame_threads(workers, len(tasks))
-    pool = ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_worker_init, initargs=(threads,))
-    folder = None
-    try:
-        # the workers start and import while this process builds the scenes they will load
-        ready = [pool.submit(_worker_ready, tasks[0]["cfg"]["render"]["quality"]) for _ in range(n)]
-        if _PREBUILD_SCENES:
-            import pickle
-            from raytrace.files import process_folder
-            try:
-                folder = process_folder(_SCENES_FOLDER)
-                with _prebuild_threads(threads, tasks[0]["cfg"]["render"]["quality"]):
-                    prebuilt = _prebuild_scenes(tasks, folder)
-            except (OSError, pickle.PicklingError) as exc:  # e.g. no room in the temporary folder
-                sys.stderr.write(f"{PROG}: warning: the workers build their own scenes ({exc})\n")
-                prebuilt = {}
-            tasks = [dict(t, prebuilt=prebuilt.get(t["model_spec"])) for t in tasks]
-        for fut in ready:
-            fut.result()
-        pending = {pool.submit(run_frame, t) for t in tasks}
-        while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in done:
-                res = fut.result()
-                if progress is not None:
-                    progress.update(1)
-                yield res
-    except BaseException as exc:  # Ctrl-C or Terminated, or what failed as it unwound the wait
-        if _interruption(exc) is not None:
-            _stop_workers(pool)
-        raise
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-        if folder is not None:
-            shutil.rmtree(folder, ignore_errors=True)
-
-
-_SCENES_FOLDER = "orbitsynth-scenes-"  # + host.pid-XXXXXXXX in the temporary directory
-
-
-def _remove_stale_scene_folders() -> None:
-    """Delete the pools' scene folders (:func:`execute`) of runs that were killed before they
-    could (SIGKILL, a crash): every run does it as it starts, whatever it renders and on how
-    many workers, so a killed run's ~100 MB never outlive the next run."""
-    try:
-        from raytrace.files import remove_stale_process_folders
-        remove_stale_process_folders(_SCENES_FOLDER)
-    except OSError:
-        pass
-
-
-def _stop_workers(pool) -> None:
-    """Stop the pool's workers now (an interrupt): pending frames cancelled,
-    each worker sent SIGTERM (it abandons its frame, removes that frame's temporary files and
-    exits: :func:`_worker_stop`), and killed if it has not exited within _STOP_GRACE_S."""
-    import signal
-    from raytrace._threads import pool_processes
-    # the pool's own processes, not multiprocessing.active_children(): cli.main may run inside a
-    # program with children of its own
-    procs = pool_processes(pool)
-    pool.shutdown(wait=False, cancel_futures=True)
-    for p in procs:
-        try:
-            os.kill(p.pid, signal.SIGTERM)
-        except OSError:
-            pass
-    deadline = time.monotonic() + _STOP_GRACE_S
-    for p in procs:
-        p.join(max(0.0, deadline - time.monotonic()))
-        if p.is_alive():
-            p.kill()
-            p.join()
-
-
-def _progress(total: int, initial: int, desc: str, quiet: bool):
-    from tqdm import tqdm
-    return tqdm(total=total, initial=initial, desc=desc, unit="frame", disable=quiet, file=sys.stderr,
-                dynamic_ncols=True, smoothing=0.1, mininterval=0.5)
-
-
-def _precompile_groups(quality: str) -> list:
-    """The kernel groups of raytrace._precompile a ``quality`` frame calls: the main job's, the
-    preset's own, and for ``balanced`` on an embreex wheel without Embree 4 the batched
-    fallback's."""
-    groups = ["fast"]
-    if quality == "balanced":
-        from raytrace import _embree
-        groups += ["balanced"] if _embree.available() else ["balanced", "batched"]
-    elif quality == "reference":
-        groups.append("reference")
-    return groups
-
-
-def _kernels_not_compiled(quality: str = "fast", serial: bool = False) -> list:
-    """The groups of :func:`_precompile_groups` whose kernels numba's on-disk cache does not
-    hold yet, in their serial builds (``serial``: for processes on one numba thread each) or
-    their parallel ones (a fresh install, a new NUMBA_CACHE_DIR, a first ``balanced`` run):
-    judged by the cache index of one kernel per group, where numba's own cache locator puts it
-    (next to the source when writable, else the user's cache directory). Empty if numba's
-    cache internals cannot be read (no guess then)."""
-    try:
-        from raytrace._precompile import dispatcher, probe
-        missing = []
-        for group in _precompile_groups(quality):
-            name = probe(group)
-            if name is not None and not os.path.exists(dispatcher(name, serial)._cache._cache_file._index_path):
-                missing.append(group)
-        return missing
-    except Exception:  # noqa: BLE001 (numba internals of another version)
-        return []
-
-
-SERIAL_COMPILE_RATIO = 0.57
-"""Compile time of the kernels' serial builds over their parallel builds' (which
-``raytrace/_jit_signatures.py`` records): the ``fast`` group, CPU seconds of the two compiling
-processes, 40.3 against 70.2 (``python -m raytrace._precompile --time-serial 2 fast`` and
-``--time 2 fast``, medians of 3 alternated, 2-core AMD EPYC; BENCHMARKS.md)."""
-
-
-def _compile_kernels(groups: list, quiet: bool, serial: bool = False) -> None:
-    """A fresh install (or a preset's first run): compile the numba kernels of ``groups``, in
-    the builds the frames will call (``serial``: the pool's workers run one numba thread each),
-    into numba's cache on all cores at once (:func:`raytrace._precompile.precompile`), before
-    the workers start and would each compile all of them, under a progress bar: its unit is
-    the kernels' recorded compile time, so its rate and remaining time are measured on this
-    machine as it goes. A kernel this misses compiles on its first call, as it would anyway."""
-    processes = max(1, min(default_workers(), 4))
-    try:
-        from raytrace._precompile import group_signatures
-        total = float(sum(c for c, _ in group_signatures(groups).values()))
-    except Exception:  # noqa: BLE001 (the estimate only)
-        total = 0.0
-    if not quiet:
-        seconds = total * (SERIAL_COMPILE_RATIO if serial else 1.0) / processes
-        about = f"about {5 * max(1, round(seconds / 5))} s on idle cores" if total else "a minute or two"
-        print(f"first run: compiling the ray-tracing kernels ({', '.join(groups)}) into numba's cache, once, on "
-              f"{processes} core{'s' if processes > 1 else ''} ({about}; the bar measures it as it goes)",
-              file=sys.stderr)
-    from tqdm import tqdm
-    bar = tqdm(total=total or None, desc="compiling", disable=quiet, file=sys.stderr, dynamic_ncols=True,
-               mininterval=0.5, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed} elapsed, {remaining} left")
-
-    def progress(done: float, _total: float) -> None:
-        bar.update(done - bar.n)
-
-    try:
-        from raytrace._precompile import precompile
-        precompile(processes, groups, progress=progress, serial=serial)
-    except Exception:  # noqa: BLE001 (an optimisation: without it the kernels compile lazily)
-        pass
-    finally:
-        bar.close()
-
-
-FRAME_BYTES_PER_PIXEL = 160
-"""Peak memory of one worker per pixel of its frame [bytes]: measured 137–139 B/px (peak RSS of a
-one-frame run with one worker, 320×240 to 2560×1920, ``fast`` and ``balanced``, default
-modalities and ``physical`` degradation), with room on top."""
-WORKER_BASE_BYTES = 700 << 20
-"""Peak memory of one worker besides its frame's pixels (libraries, scene, radiance cache) [bytes]."""
-
-
-def memory_bytes() -> tuple:
-    """(physical memory, memory available now) of this machine [bytes], from /proc/meminfo or
-    sysconf; (None, None) where neither tells."""
-    try:
-        info = {}
-        with open("/proc/meminfo", encoding="ascii") as fh:
-            for line in fh:
-                key, _, rest = line.partition(":")
-                info[key] = int(rest.split()[0]) * 1024
-        return info["MemTotal"], info.get("MemAvailable", info["MemTotal"])
-    except (OSError, KeyError, ValueError, IndexError):
-        pass
-    try:
-        page = os.sysconf("SC_PAGE_SIZE")
-        total = os.sysconf("SC_PHYS_PAGES") * page
-        try:
-            return total, os.sysconf("SC_AVPHYS_PAGES") * page
-        except (ValueError, OSError):
-            return total, total
-    except (ValueError, OSError, AttributeError):
-        return None, None
-
-
-def fit_workers(cameras: list, workers: int) -> int:
-    """The worker count whose frames (of the largest of ``cameras``) fit in this machine's
-    memory: refuses up front (one line naming --width/--height) a frame that one worker could
-    not render in all of it, and lowers ``workers`` (with a warning) where their frames would
-    not fit in the memory available now. Frames are byte-identical whatever the worker count."""
-    total, available = memory_bytes()
-    if total is None or not cameras:
-        return workers
-    cam = max(cameras, key=lambda c: c.width * c.height)
-    need = WORKER_BASE_BYTES + FRAME_BYTES_PER_PIXEL * cam.width * cam.height
-    if need > total:
-        raise CLIError(f"argument --width/--height: a {cam.width}x{cam.height} frame needs about "
-                       f"{need / 2**30:.1f} GiB "
-                       f"of memory to render, more than this machine's {total / 2**30:.1f} GiB; render a smaller image "
-                       "(or crop it: a longer --focal-length-mm at a smaller size)")
-    fit = max(1, int(available // need))
-    if fit < workers:
-        sys.stderr.write(f"{PROG}: warning: rendering on {fit} worker{'s' if fit > 1 else ''} instead of {workers}: "
-                         f"each needs about {need / 2**30:.1f} GiB for a {cam.width}x{cam.height} frame and "
-                         f"{available / 2**30:.1f} GiB is available\n")
-        return fit
-    return workers
+    return folder.write_frame(task, images, info)
 
 
 def run_plans(jobs: list, args: argparse.Namespace, *, desc: str | None = None) -> list:
-    """Render the (plan, sequence folder) pairs: prepare folders, run every missing frame of
-    this shard on the chosen backend (one progress bar), then assemble labels and manifests.
-    Returns one stats dict per sequence."""
-    workers = args.workers or default_workers()
-    if args.scheduler is None:
-        workers = fit_workers([plan["camera"] for plan, _ in jobs], workers)
-    client = connect_scheduler(args.scheduler) if args.scheduler is not None else None
-    try:
-        return _run_plans(jobs, args, desc, workers, client)
-    finally:
-        if client is not None:
-            client.close()
+    """:func:`raytrace.dataset.run.run_plans` of the (plan, sequence folder) pairs with
+    :func:`run_frame`, as the parsed ``args`` ask (workers, shard, scheduler, quiet)."""
+    quality = jobs[0][0]["cfg"]["render"]["quality"] if jobs else "fast"
+    return runner.run_plans(jobs, run_frame, config_text=config_toml, workers=args.workers, shard=args.shard,
+                            scheduler=args.scheduler, quiet=args.quiet, quality=getattr(args, "quality", "fast"),
+                            desc=desc, ready=functools.partial(_worker_ready, quality))
 
 
-def _run_plans(jobs: list, args: argparse.Namespace, desc: str | None, workers: int, client) -> list:
-    claims = []
-    try:
-        for plan, seq_dir in jobs:
-            claims.append(prepare_sequence(plan, seq_dir, shared=args.shard is not None))
-    except BaseException:
-        for claim in reversed(claims):  # a refused dataset leaves none of its other folders behind
-            claim.undo()
-        raise
-    try:
-        return _render_claimed(jobs, args, desc, workers, client)
-    finally:
-        for claim in claims:
-            claim.release()
+# --------------------------------------------------------------------------- sequence folders
 
 
-def _shard_frames(plan: dict, shard: tuple | None) -> set:
-    wanted = _frames_to_write(plan)
-    return set(wanted) if shard is None else {i for i in wanted if i % shard[1] == shard[0] - 1}
-
-
-def _render_claimed(jobs: list, args: argparse.Namespace, desc: str | None, workers: int, client) -> list:
-    all_tasks, stats = [], []
-    for plan, seq_dir in jobs:
-        tasks, skipped = _tasks_for(plan, seq_dir, args.shard)
-        all_tasks += tasks
-        stats.append({"name": plan["name"], "dir": seq_dir, "rendered": len(tasks), "skipped": skipped,
-                      "frames": len(plan["result"]["frames"]),
-                      "visible": sum(f["visible"] for f in plan["result"]["frames"])})
-    skipped = sum(s["skipped"] for s in stats)
-    t0 = time.perf_counter()
-    serial = frame_threads(workers, len(all_tasks)) == 1
-    missing = (_kernels_not_compiled(getattr(args, "quality", "fast"), serial)
-               if all_tasks and args.scheduler is None else [])
-    if missing:
-        _compile_kernels(missing, quiet=args.quiet, serial=serial)
-    bar = _progress(len(all_tasks) + skipped, skipped, desc or jobs[0][0]["name"], args.quiet)
-    try:
-        for _ in execute(all_tasks, workers=workers, client=client, progress=bar):
-            pass
-    except BaseException:
-        remove_incomplete_frames(all_tasks)  # the workers have stopped: no frame is written any more
-        raise
-    finally:
-        bar.close()
-    elapsed = time.perf_counter() - t0
-    for (plan, seq_dir), s in zip(jobs, stats):
-        # this run rendered its frames or checked their files before skipping them
-        s.update(finish_sequence(plan, seq_dir, verified=_shard_frames(plan, args.shard)))
-        s["seconds"] = elapsed
-        s["shard"] = args.shard
-    return stats
+# --------------------------------------------------------------------------- execution
 
 
 def _summary_line(s: dict, elapsed: float) -> str:
@@ -2031,61 +776,11 @@ def _summary_line(s: dict, elapsed: float) -> str:
 
 
 # --------------------------------------------------------------------------- termination
-class Terminated(KeyboardInterrupt):
-    """SIGTERM or SIGHUP (``kill``, a batch scheduler's time limit, a closed terminal), raised in
-    the main thread where Ctrl-C raises KeyboardInterrupt, so that the same clean-up runs: the
-    pool's workers stopped (:func:`_stop_workers`), frames in flight abandoned without leaving
-    temporary files, the pool's temporary scenes deleted. Exit status 128 + the signal."""
-
-    def __init__(self, signum: int):
-        import signal
-        super().__init__(signal.Signals(signum).name)
-        self.signum = int(signum)
-
-
-def _termination_signals() -> list:
-    import signal
-    return [sig for sig in (getattr(signal, name, None) for name in ("SIGTERM", "SIGHUP")) if sig is not None]
-
-
-_TERMINATING = False
-
-
-def _on_termination(signum, frame) -> None:
-    global _TERMINATING
-    if _TERMINATING:  # once: a second signal must not interrupt the clean-up
-        return
-    _TERMINATING = True
-    raise Terminated(signum)
-
-
-def install_termination_handlers() -> None:
-    """SIGTERM and SIGHUP raise :class:`Terminated` in the main thread (``cli.py`` as a
-    program), unless the process was started with them ignored (``nohup``)."""
-    import signal
-    for sig in _termination_signals():
-        if signal.getsignal(sig) == signal.SIG_DFL:
-            signal.signal(sig, _on_termination)
-
-
-def _interruption(exc: BaseException) -> KeyboardInterrupt | None:
-    """The Ctrl-C or :class:`Terminated` behind ``exc``, if any: itself, or one it was raised
-    while handling (``__context__``). The signal's exception lands wherever the main thread is,
-    and code it interrupts can fail in turn as it unwinds (a lock released twice in
-    ``threading``: "release unlocked lock"); that failure is the signal's doing, not the
-    render's."""
-    seen = set()
-    while exc is not None and id(exc) not in seen:
-        if isinstance(exc, KeyboardInterrupt):
-            return exc
-        seen.add(id(exc))
-        exc = exc.__cause__ or exc.__context__
-    return None
 
 
 def _interrupted(exc: KeyboardInterrupt, after: str) -> int:
     """One line for Ctrl-C or :class:`Terminated`; the exit status, 128 + the signal."""
-    how = f"terminated by {exc}" if isinstance(exc, Terminated) else "interrupted"
+    how = f"terminated by {exc}" if isinstance(exc, pool.Terminated) else "interrupted"
     sys.stderr.write(f"{PROG}: {how}; {after}\n")
     return 128 + getattr(exc, "signum", 2)  # Ctrl-C: SIGINT
 
@@ -2113,7 +808,7 @@ def _guarded(run, usage_errors=(CLIError,)) -> tuple:
     except usage_errors as exc:
         return None, _fail(exc)
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - a failure while rendering: one line
-        signal_exc = _interruption(exc)  # Ctrl-C or Terminated, or a failure raised as it unwound the job
+        signal_exc = pool.interruption(exc)  # Ctrl-C or Terminated, or a failure raised as it unwound the job
         if signal_exc is not None:
             return None, _interrupted(signal_exc, "complete frames are kept, rerun the same command to resume")
         return None, _render_failed(exc)
@@ -2133,7 +828,8 @@ def main_job(argv: list) -> int:
                 json.dump(plan["result"], sys.stdout, indent=1, allow_nan=False)
                 sys.stdout.write("\n")
             else:
-                _print_table(plan["result"], sys.stdout)
+                from orbit.plan import plan_table
+                plan_table(plan["result"], sys.stdout)
             sys.stdout.flush()
         except BrokenPipeError:  # e.g. `python cli.py --dry-run | head`: the reader left, not an error
             sys.stdout = None
@@ -2223,6 +919,7 @@ def ablation_main(argv: list) -> int:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
     from degrade.ablation import format_ablation, run_ablation
+    from degrade.presets import physical_config
     from raytrace.camera import Camera
     try:
         tasks, labels = [], []
@@ -2235,21 +932,21 @@ def ablation_main(argv: list) -> int:
             plan = plan_sequence(cfg, given)
             visible = [f["frame"] for f in plan["result"]["frames"] if f["visible"]] or [0]
             pick = sorted({visible[round(j)] for j in np.linspace(0, len(visible) - 1, args.frames)})
-            t, _ = _tasks_for(plan, "", None, write=False, frames=pick)
+            t, _ = folder.tasks_for(plan, "", None, write=False, frames=pick)
             for task in t:
                 task["index"] = len(tasks)
                 tasks.append(task)
             labels += [target] * len(t)
-        workers = fit_workers([Camera(*tasks[0]["camera"])], args.workers or default_workers())
-        bar = _progress(len(tasks), 0, "ablation", args.quiet)
+        workers = pool.fit_workers([Camera(*tasks[0]["camera"])], args.workers or pool.default_workers())
+        bar = runner.progress_bar(len(tasks), 0, "ablation", args.quiet)
         rgb = [None] * len(tasks)
         try:
-            for res in execute(tasks, workers=workers, progress=bar):
+            for res in pool.execute(tasks, run_frame, workers=workers, progress=bar):
                 rgb[res["index"]] = res["images"]["rgb"]  # results arrive as they complete
         finally:
             bar.close()
         imgs = [im.astype(np.float32) / np.float32(255.0) for im in rgb]
-        physical = None if args.mode == "paper" else _physical_config(cfg["degrade"], cfg["camera"])
+        physical = None if args.mode == "paper" else physical_config(cfg["degrade"], cfg["camera"])
         report = run_ablation(imgs, labels, seed=args.seed, physical=physical)
         if args.mode == "physical":
             import dataclasses
@@ -2276,15 +973,6 @@ def frame_images(frame, *, name: str = "000000") -> dict:
             f"hdr/{name}.exr": frame.radiance.astype(np.float32)}, scale
 
 
-def write_files_atomically(out_dir: str, files: dict, texts: dict) -> None:
-    """:func:`raytrace.files.write_files_atomically`, failures as a one-line CLIError naming --out."""
-    from raytrace.files import write_files_atomically as write
-    try:
-        write(out_dir, files, texts)
-    except OSError as exc:
-        raise CLIError(f"--out: {exc}") from None
-
-
 def geometric_shadow_fraction(lighting) -> float | None:
     """The fraction of the solar disc that a :class:`raytrace.lighting.Lighting`'s Earth leaves
     visible at the target (:func:`orbit.visibility.illuminated_fraction`, with that Earth's
@@ -2305,66 +993,6 @@ def geometric_shadow_fraction(lighting) -> float | None:
     return float(illuminated_fraction(r_target, r_sun))
 
 
-def check_out_folder(out_dir: str, option: str = "--out") -> None:
-    """Fail before any work when ``option`` (``--out``) cannot become a writable folder: it exists
-    and is not a folder or not writable, or its nearest existing parent is not a writable folder."""
-    if not str(out_dir).strip():
-        raise CLIError(f"{option} must name a folder, got an empty string")
-    path = os.path.abspath(out_dir)
-    if os.path.exists(path):
-        if not os.path.isdir(path):
-            raise CLIError(f"{option}: {out_dir} exists and is not a folder")
-        if not os.access(path, os.W_OK | os.X_OK):
-            raise CLIError(f"{option}: {out_dir} is not writable")
-        return
-    parent = os.path.dirname(path)
-    while not os.path.exists(parent):
-        parent = os.path.dirname(parent)
-    if not os.path.isdir(parent) or not os.access(parent, os.W_OK | os.X_OK):
-        raise CLIError(f"{option}: cannot create {out_dir} ({parent} is not a writable folder)")
-    # os.access says yes to root everywhere, /proc and /sys included: make (and remove) a
-    # folder there to be sure before the render
-    import tempfile
-    try:
-        os.rmdir(tempfile.mkdtemp(prefix=".probe-", dir=parent))
-    except OSError as exc:
-        raise CLIError(f"{option}: cannot create {out_dir} ({parent}: {exc.strerror})") from None
-
-
-_SCENE_DIRS = ("rgb", "mask", "depth", "normal", "hdr")
-
-
-def check_scene_out(out_dir: str) -> None:
-    """``render-scene`` writes frame 000000's five modality files and ``frame.json`` into a new folder, a
-    folder without them, or over its own earlier frame. A folder holding a sequence (its
-    ``scenario.json``, ``labels.json`` or ``manifest.json``), modality folders with other files, or
-    those files without a ``frame.json`` is refused before the render, so nothing of it is
-    overwritten or mixed with this frame. Unrelated files beside them are left alone."""
-    path = os.path.abspath(out_dir)
-    if not os.path.isdir(path):
-        return
-    own = {f"{d}/000000.{'png' if d in ('rgb', 'mask') else 'exr'}" for d in _SCENE_DIRS}
-    found, other = set(), []
-    for name in ("scenario.json", "labels.json", "manifest.json"):
-        if os.path.exists(os.path.join(path, name)):
-            other.append(name)
-    for d in _SCENE_DIRS:
-        if not os.path.isdir(os.path.join(path, d)):
-            continue
-        for sub in os.scandir(os.path.join(path, d)):
-            name = f"{d}/{sub.name}"
-            if name in own and sub.is_file():
-                found.add(name)
-            else:
-                other.append(name)
-            if len(other) >= 3:
-                break
-    if other or (found and not os.path.isfile(os.path.join(path, "frame.json"))):
-        what = ", ".join(sorted(other)[:3]) if other else f"{', '.join(sorted(found)[:2])} without a frame.json"
-        raise CLIError(f"--out: {out_dir} holds files render-scene did not write ({what}); give a new folder, or "
-                       "one holding an earlier render-scene frame")
-
-
 def render_scene_main(argv: list[str]) -> int:
     """``cli.py render-scene SCENE.json --out DIR``: render one frame of an explicit scene."""
     parser = _Parser(prog=f"{PROG} render-scene",
@@ -2383,9 +1011,9 @@ def render_scene_main(argv: list[str]) -> int:
     from raytrace.shade import render
     try:
         spec = load_scene_file(args.scene)
-        fit_workers([spec.camera], 1)
-        check_out_folder(args.out)
-        check_scene_out(args.out)
+        pool.fit_workers([spec.camera], 1)
+        folder.check_out_folder(args.out)
+        folder.check_scene_out(args.out)
         for note in spec.notes:
             sys.stderr.write(f"{PROG}: warning: {note}\n")
         quality = args.quality or spec.quality
@@ -2396,10 +1024,10 @@ def render_scene_main(argv: list[str]) -> int:
             sys.stderr.write(f"{PROG}: warning: sun.shadow_fraction is {spec.lighting.shadow_fraction:g} but the "
                              f"scene's Earth leaves {nu_geo:.3g} of the solar disc visible from the target; the "
                              "render uses shadow_fraction (set it to match if the eclipse is meant)\n")
-        serial = frame_threads(1, 1) == 1
-        missing = _kernels_not_compiled(quality, serial)
+        serial = pool.frame_threads(1, 1) == 1
+        missing = jit.kernels_not_compiled(quality, serial)
         if missing:
-            _compile_kernels(missing, quiet=False, serial=serial)
+            jit.compile_kernels(missing, quiet=False, serial=serial)
         t0 = time.perf_counter()
         frame = render(Scene(spec.model), spec.camera, spec.R_cam_from_body, spec.t_cam_m, spec.lighting,
                        quality=quality, samples=samples, seed=seed)
@@ -2419,7 +1047,7 @@ def render_scene_main(argv: list[str]) -> int:
                 "pixel_counts": geo.pixel_counts.tolist(), "bbox_xywh": geo.bbox_xywh,
                 "visible_fraction": None if math.isnan(geo.visible_fraction) else geo.visible_fraction,
                 "shadow_fraction": spec.lighting.shadow_fraction, "geometric_shadow_fraction": nu_geo}
-        write_files_atomically(args.out, files, {"frame.json": json.dumps(info, indent=1) + "\n"})
+        folder.write_files_atomically(args.out, files, {"frame.json": json.dumps(info, indent=1) + "\n"})
     except (CLIError, ValueError) as exc:
         sys.stderr.write(f"{PROG}: error: {exc}\n")
         return 2
@@ -2427,7 +1055,7 @@ def render_scene_main(argv: list[str]) -> int:
         sys.stderr.write(f"{PROG}: error: {exc}\n")
         return 1
     except Exception as exc:  # noqa: BLE001 - any other failure: one line, nothing written (as the main job)
-        signal_exc = _interruption(exc)
+        signal_exc = pool.interruption(exc)
         if signal_exc is not None:  # raised as a signal's exception unwound the render: main() reports it
             raise signal_exc from None
         msg = " ".join(str(exc).split()) or type(exc).__name__
@@ -2573,27 +1201,6 @@ def preview_main(argv: list) -> int:
 # --------------------------------------------------------------------------- render snapshots
 SNAPSHOT_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "tests", "snapshots")
 """Committed reference renders (``python cli.py snapshots --update`` rewrites them)."""
-SNAPSHOT_SETTINGS = {
-    "width": 160, "height": 120, "focal_length_mm": 1.0, "pixel_pitch_um": 3.45,
-    "frames": 5, "kept_frames": [1, 2, 3], "quality": "fast", "seed": 0, "degrade_presets": ["paper", "physical"],
-    "epoch": "2026-03-20T12:00:00Z", "raan_deg": 0.0, "arg_lat_deg": 0.0,
-}
-"""What a snapshot renders: for each target × pattern, frames 1-3 of a 5-frame sequence at 160×120
-(the default 3.45 µm pixels, so the physical exposure is the main job's, and a 1 mm lens: half
-the default camera's field of view), clean RGB, mask, depth, normals and RGB degraded by both
-presets (paper D4, physical), on a fixed orbit geometry (the equinox epoch, Ω = u₀ = 0: the
-main job's automatic phase would move the references with any change to its search)."""
-SNAPSHOT_MODALITIES = ("rgb", "rgb_paper", "rgb_physical", "mask", "depth", "normal")
-SNAPSHOT_PSNR_DB = 45.0
-"""RGB passes when its PSNR, over every frame and over the target's window in it, is at least this [dB]."""
-SNAPSHOT_DEPTH_TOL = (1e-4, 1e-5)
-"""Depth passes when |Δ| <= atol + rtol · depth (atol [m], rtol [-]) and misses stay misses."""
-SNAPSHOT_NORMAL_ATOL = 1e-4
-"""Normals pass when every component differs by at most this [-] (background stays 0)."""
-SNAPSHOT_MASK_TIES = 0.01
-"""Mask pixels may differ by ties between touching parts (:func:`_mask_ties`) on at most this
-fraction of the target's pixels [-]; beyond it every differing pixel fails."""
-_WINDOW_MARGIN_PX = 8
 
 
 def snapshot_cases(targets=None, patterns=None) -> list:
@@ -2607,7 +1214,7 @@ def _snapshot_plan(name: str) -> tuple:
     if target not in TARGETS or pattern not in PATTERNS:
         raise ValueError(f"snapshot name must be TARGET_PATTERN with a target of {', '.join(TARGETS)} and a pattern "
                          f"of {', '.join(PATTERNS)}; got {name!r}")
-    s = SNAPSHOT_SETTINGS
+    s = snapshots.SNAPSHOT_SETTINGS
     ns = argparse.Namespace(**{o.key: None for o in OPTIONS}, config=None)
     ns.target, ns.pattern, ns.frames, ns.seed, ns.quality = target, pattern, s["frames"], s["seed"], s["quality"]
     ns.width, ns.height = s["width"], s["height"]
@@ -2615,7 +1222,7 @@ def _snapshot_plan(name: str) -> tuple:
     ns.epoch, ns.raan_deg, ns.arg_lat_deg = s["epoch"], s["raan_deg"], s["arg_lat_deg"]  # a fixed orbit geometry
     cfg, given = resolve_config(ns)
     plan = plan_sequence(cfg, given)
-    tasks, _ = _tasks_for(plan, "", None, write=False, frames=s["kept_frames"])
+    tasks, _ = folder.tasks_for(plan, "", None, write=False, frames=s["kept_frames"])
     return cfg, tasks
 
 
@@ -2630,8 +1237,8 @@ def render_snapshot(name: str) -> dict:
     :func:`render_frame_images`: modality → the kept frames side by side (one strip), and
     ``radiance``, the linear radiance the physical degradation starts from."""
     cfg, tasks = _snapshot_plan(name)
-    presets = SNAPSHOT_SETTINGS["degrade_presets"]
-    out = {m: [] for m in SNAPSHOT_MODALITIES + ("radiance",)}
+    presets = snapshots.SNAPSHOT_SETTINGS["degrade_presets"]
+    out = {m: [] for m in snapshots.SNAPSHOT_MODALITIES + ("radiance",)}
     for task in tasks:
         for preset in presets:
             t = dict(task)
@@ -2652,9 +1259,9 @@ def degrade_snapshot(name: str, images: dict) -> dict:
     (:func:`degrade_frame`, each frame's own random stream) makes of the clean ``rgb`` and
     ``radiance`` strips in ``images`` (a snapshot's references, say)."""
     cfg, tasks = _snapshot_plan(name)
-    width = SNAPSHOT_SETTINGS["width"]
+    width = snapshots.SNAPSHOT_SETTINGS["width"]
     out = {}
-    for preset in SNAPSHOT_SETTINGS["degrade_presets"]:
+    for preset in snapshots.SNAPSHOT_SETTINGS["degrade_presets"]:
         c = _with_preset(cfg, preset)
         strips = []
         for j, task in enumerate(tasks):
@@ -2663,297 +1270,6 @@ def degrade_snapshot(name: str, images: dict) -> dict:
             strips.append(degrade_frame(c, task, images["rgb"][:, cols], images["radiance"][:, cols], degrade_seq))
         out[f"rgb_{preset}"] = np.concatenate(strips, axis=1)
     return out
-
-
-def _snapshot_files(folder: str, name: str) -> dict:
-    base = os.path.join(folder, name)
-    return {"rgb": f"{base}.rgb.webp", "rgb_paper": f"{base}.rgb_paper.webp", "rgb_physical": f"{base}.rgb_physical.webp",
-            "mask": f"{base}.mask.png", "geometry": f"{base}.geometry.npz"}
-
-
-def _write_lossless_webp(path: str, rgb: np.ndarray) -> None:
-    """8-bit RGB as lossless WebP (a quarter smaller than PNG on the degraded images' noise),
-    checked by reading it back."""
-    import OpenImageIO as oiio
-
-    from raytrace import files as F
-    rgb = np.ascontiguousarray(rgb, dtype=np.uint8)
-    tmp = f"{path}.tmp{os.getpid()}.webp"
-    spec = oiio.ImageSpec(rgb.shape[1], rgb.shape[0], 3, oiio.UINT8)
-    spec.attribute("compression", "lossless")
-    out = oiio.ImageOutput.create(tmp)
-    ok = out is not None and out.open(tmp, spec) and out.write_image(rgb)
-    err = oiio.geterror() if out is None else out.geterror()
-    if out is not None:
-        out.close()
-    if not ok or not np.array_equal(F.read_image(tmp), rgb):
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise OSError(f"cannot write {path} as lossless WebP ({err or 'pixels changed on reading back'})")
-    os.replace(tmp, path)
-
-
-def _byte_planes(a: np.ndarray) -> np.ndarray:
-    """float32 → its four little-endian byte planes, shape (4, *a.shape): zlib finds the
-    runs in the sign/exponent bytes (a sixth smaller than plain float32)."""
-    return np.moveaxis(np.ascontiguousarray(a, dtype="<f4").view(np.uint8).reshape(a.shape + (4,)), -1, 0).copy()
-
-
-def _from_byte_planes(planes: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(np.moveaxis(planes, 0, -1)).view("<f4")[..., 0].astype(np.float32)
-
-
-def write_snapshot(folder: str, name: str, images: dict) -> list:
-    """Write one snapshot's references: the RGB strips as lossless 8-bit WebP, the mask strip as
-    16-bit PNG, depth, normals and the linear radiance as float32 byte planes in a compressed
-    .npz (all lossless); returns the paths."""
-    import io
-
-    from raytrace import files as F
-    paths = _snapshot_files(folder, name)
-    os.makedirs(folder, exist_ok=True)
-    for m in ("rgb", "rgb_paper", "rgb_physical"):
-        _write_lossless_webp(paths[m], images[m])
-    F.atomic_write_image(paths["mask"], images["mask"])
-    buf = io.BytesIO()
-    np.savez_compressed(buf, depth=_byte_planes(images["depth"]), normal=_byte_planes(images["normal"]),
-                        radiance=_byte_planes(images["radiance"]))
-    F.atomic_write_bytes(paths["geometry"], buf.getvalue())
-    return list(paths.values())
-
-
-def read_snapshot(folder: str, name: str) -> dict:
-    """The references of one snapshot, as :func:`render_snapshot` returns them.
-
-    Raises
-    ------
-    FileNotFoundError
-        A reference file is missing (its path in the message).
-    """
-    from raytrace import files as F
-    paths = _snapshot_files(folder, name)
-    missing = [p for p in paths.values() if not os.path.isfile(p)]
-    if missing:
-        raise FileNotFoundError(f"snapshot {name}: missing reference {missing[0]} (python cli.py snapshots --update "
-                                "writes the references)")
-    out = {m: F.read_image(paths[m]) for m in ("rgb", "rgb_paper", "rgb_physical", "mask")}
-    with np.load(paths["geometry"]) as z:
-        if "radiance" not in z.files:
-            raise FileNotFoundError(f"snapshot {name}: {paths['geometry']} holds no radiance (references of an older "
-                                    "format: python cli.py snapshots --update)")
-        for key in ("depth", "normal", "radiance"):
-            out[key] = _from_byte_planes(z[key])
-    return out
-
-
-def _psnr_db(a: np.ndarray, b: np.ndarray) -> float:
-    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
-    return math.inf if mse == 0.0 else 10.0 * math.log10(255.0**2 / mse)
-
-
-def snapshot_image(modality: str, a: np.ndarray) -> np.ndarray:
-    """A uint8 RGB picture of a modality: RGB as is; mask ids in distinct colours (0 black);
-    depth near bright, far dark (misses black); normals as (n + 1)/2 (background black)."""
-    a = np.asarray(a)
-    if modality.startswith("rgb"):
-        return a.astype(np.uint8)
-    if modality == "mask":
-        ids = a.astype(np.int64)
-        golden = (ids[..., None] * np.array([0.618034, 0.381966, 0.7548777])) % 1.0
-        rgb = (55 + 200 * golden).astype(np.uint8)
-        rgb[ids == 0] = 0
-        return rgb
-    if modality == "depth":
-        hit = np.isfinite(a)
-        out = np.zeros(a.shape + (3,), np.uint8)
-        if hit.any():
-            lo, hi = float(a[hit].min()), float(a[hit].max())
-            v = 1.0 - (a[hit] - lo) / max(hi - lo, 1e-9)
-            out[hit] = (40 + 215 * v)[:, None].astype(np.uint8)
-        return out
-    if modality == "normal":
-        out = np.round((a + 1.0) * 127.5).clip(0, 255).astype(np.uint8)
-        out[np.all(a == 0, axis=-1)] = 0
-        return out
-    raise ValueError(f"modality must be one of {', '.join(SNAPSHOT_MODALITIES)}; got {modality!r}")
-
-
-def _write_diff(diff_dir: str, name: str, modality: str, ref: np.ndarray, new: np.ndarray,
-                bad: np.ndarray) -> str:
-    """Reference, candidate and failing pixels (red on grey, in a yellow box) stacked, at twice
-    the size, as one PNG; returns its path."""
-    from raytrace import files as F
-    a, b = snapshot_image(modality, ref), snapshot_image(modality, new)
-    grey = (0.3 * (a.astype(np.float32).mean(-1) + b.astype(np.float32).mean(-1)) / 2).astype(np.uint8)
-    d = np.repeat(grey[..., None], 3, axis=-1)
-    rows, cols = np.nonzero(bad)
-    if rows.size:  # a yellow box around the failing pixels, so a single one is found at a glance
-        y0, y1 = max(rows.min() - 3, 0), min(rows.max() + 3, bad.shape[0] - 1)
-        x0, x1 = max(cols.min() - 3, 0), min(cols.max() + 3, bad.shape[1] - 1)
-        d[[y0, y1], x0:x1 + 1] = (255, 220, 0)
-        d[y0:y1 + 1, [x0, x1]] = (255, 220, 0)
-    d[bad] = (255, 0, 0)
-    os.makedirs(diff_dir, exist_ok=True)
-    path = os.path.join(diff_dir, f"{name}.{modality}.diff.png")
-    F.write_image(path, np.concatenate([a, b, d], axis=0).repeat(2, axis=0).repeat(2, axis=1))
-    return path
-
-
-def compare_snapshot(name: str, ref: dict, new: dict, *, diff_dir: str) -> list:
-    """Compare a fresh snapshot with its references; returns one readable message per failing
-    modality (empty: identical within the tolerances) and writes a diff image for each into
-    ``diff_dir`` (reference above candidate above the failing pixels in red).
-
-    Masks (instance ids) must match exactly, but for ties between touching parts
-    (:func:`_mask_ties`, on at most :data:`SNAPSHOT_MASK_TIES` of the target); depth within
-    :data:`SNAPSHOT_DEPTH_TOL` with misses in the same pixels; normals within
-    :data:`SNAPSHOT_NORMAL_ATOL`; each RGB image must reach :data:`SNAPSHOT_PSNR_DB` in every
-    frame, over the whole frame and over the target's window (its mask's box grown by 8 px), so
-    a few changed pixels on a small target cannot hide in the black sky. The degraded images
-    are compared when their input (clean RGB for ``paper``, radiance for ``physical``) is the
-    reference's bit for bit: otherwise their noise is another draw."""
-    msgs = []
-    shapes = {m: (ref[m].shape, new[m].shape) for m in SNAPSHOT_MODALITIES if ref[m].shape != new[m].shape}
-    if shapes:
-        return [f"{name}: {m}: shape {b} differs from the reference's {a} (snapshot settings changed? "
-                "python cli.py snapshots --update)" for m, (a, b) in shapes.items()]
-
-    def fail(modality: str, text: str, bad: np.ndarray) -> None:
-        path = _write_diff(diff_dir, name, modality, ref[modality], new[modality], bad)
-        msgs.append(f"{name}: {modality}: {text}; diff image {path}")
-
-    d0, d1 = ref["depth"].astype(np.float64), new["depth"].astype(np.float64)
-    f0, f1 = np.isfinite(d0), np.isfinite(d1)
-    both = f0 & f1
-    err = np.zeros_like(d0)
-    err[both] = np.abs(d1[both] - d0[both])
-    atol, rtol = SNAPSHOT_DEPTH_TOL
-    depth_bad = (f0 != f1) | (both & (err > atol + rtol * np.where(both, np.abs(d0), 0.0)))
-    m0, m1 = ref["mask"], new["mask"]
-    bad = m0 != m1
-    if bad.any():
-        tie = _mask_ties(m0, m1, both & ~depth_bad) & bad
-        n_target = max(int(np.count_nonzero(m0 > 0)), 1)
-        if np.count_nonzero(tie) <= SNAPSHOT_MASK_TIES * n_target:
-            bad &= ~tie  # a tie between two parts at the same depth, decided otherwise here
-    if bad.any():
-        ious = []
-        for k in np.union1d(np.unique(m0), np.unique(m1)):
-            if k:
-                a, b = m0 == k, m1 == k
-                ious.append((np.count_nonzero(a & b) / np.count_nonzero(a | b), int(k)))
-        iou, k = min(ious) if ious else (1.0, 0)
-        fail("mask", f"{np.count_nonzero(bad)} of {bad.size} pixels have other instance ids (must match exactly "
-             f"but for ties between touching parts; lowest instance IoU {iou:.4f}, id {k})", bad)
-    bad = depth_bad
-    if bad.any():
-        fail("depth", f"{np.count_nonzero(bad)} pixels outside |Δ| <= {atol:g} m + {rtol:g}·depth or hit/miss "
-             f"changed ({np.count_nonzero(f0 != f1)}); max |Δ| {err.max():.3g} m", bad)
-    n0, n1 = ref["normal"].astype(np.float64), new["normal"].astype(np.float64)
-    nerr = np.abs(n1 - n0).max(axis=-1)
-    bad = nerr > SNAPSHOT_NORMAL_ATOL
-    if bad.any():
-        fail("normal", f"{np.count_nonzero(bad)} pixels differ by more than {SNAPSHOT_NORMAL_ATOL:g}; "
-             f"max |Δ| {nerr.max():.3g}", bad)
-    # the degraded copies draw their noise from the clean image (paper) or the radiance
-    # (physical): where those moved at all, even by float rounding on another CPU, the
-    # draws run out of step and the noise is another realisation, so they are compared only
-    # when their input is the reference's bit for bit (check_snapshot_degradation checks the
-    # chain itself from the reference's inputs)
-    same_input = {"rgb_paper": np.array_equal(ref["rgb"], new["rgb"]),
-                  "rgb_physical": np.array_equal(ref["radiance"], new["radiance"])}
-    for m in ("rgb", "rgb_paper", "rgb_physical"):
-        if same_input.get(m, True):
-            _compare_rgb(m, ref[m], new[m], m0, m1, fail)
-    return msgs
-
-
-def _compare_rgb(modality: str, a_strip: np.ndarray, b_strip: np.ndarray, m0: np.ndarray, m1: np.ndarray,
-                 fail) -> None:
-    """Call ``fail(modality, text, bad)`` when the 8-bit strips ``a_strip`` (reference) and
-    ``b_strip`` fall below :data:`SNAPSHOT_PSNR_DB` in a frame or in a frame's target window
-    (the box of the masks ``m0``, ``m1`` grown by 8 px)."""
-    width = SNAPSHOT_SETTINGS["width"]
-    n_frames = m0.shape[1] // width
-    worst = []
-    for j in range(n_frames):
-        cols = slice(j * width, (j + 1) * width)
-        a, b = a_strip[:, cols], b_strip[:, cols]
-        worst.append((_psnr_db(a, b), f"frame {j + 1} of {n_frames}"))
-        support = (m0[:, cols] > 0) | (m1[:, cols] > 0)
-        if support.any():
-            rows, cs = np.flatnonzero(support.any(axis=1)), np.flatnonzero(support.any(axis=0))
-            y0, y1 = max(rows[0] - _WINDOW_MARGIN_PX, 0), rows[-1] + _WINDOW_MARGIN_PX + 1
-            x0, x1 = max(cs[0] - _WINDOW_MARGIN_PX, 0), cs[-1] + _WINDOW_MARGIN_PX + 1
-            worst.append((_psnr_db(a[y0:y1, x0:x1], b[y0:y1, x0:x1]),
-                          f"frame {j + 1} of {n_frames}, target window rows {y0}:{y1} cols {x0}:{x1}"))
-    psnr, where = min(worst)
-    if psnr < SNAPSHOT_PSNR_DB:
-        bad = np.any(a_strip != b_strip, axis=-1)
-        fail(modality, f"PSNR {psnr:.1f} dB < {SNAPSHOT_PSNR_DB:g} dB ({where}); {np.count_nonzero(bad)} pixels "
-             f"differ, max |Δ| {int(np.abs(a_strip.astype(int) - b_strip.astype(int)).max())} DN", bad)
-
-
-def check_snapshot_degradation(name: str, ref: dict, *, diff_dir: str) -> list:
-    """The degradation chain against a snapshot's references: both presets applied by
-    :func:`degrade_snapshot` to the reference's own clean RGB and radiance must give its
-    degraded strips (within :data:`SNAPSHOT_PSNR_DB`, as :func:`compare_snapshot` compares RGB).
-    The inputs are the stored ones, so this holds on any CPU, whatever float rounding does to a
-    fresh render; returns one message per failing preset (a diff image each in ``diff_dir``)."""
-    again = degrade_snapshot(name, ref)
-    msgs = []
-
-    def fail(modality: str, text: str, bad: np.ndarray) -> None:
-        path = _write_diff(diff_dir, name, modality, ref[modality], again[modality], bad)
-        msgs.append(f"{name}: {modality}: degrading the reference's own input: {text}; diff image {path}")
-
-    for m, img in again.items():
-        if img.shape != ref[m].shape:
-            msgs.append(f"{name}: {m}: shape {img.shape} differs from the reference's {ref[m].shape} (snapshot "
-                        "settings changed? python cli.py snapshots --update)")
-        else:
-            _compare_rgb(m, ref[m], img, ref["mask"], ref["mask"], fail)
-    return msgs
-
-
-def _mask_ties(m0: np.ndarray, m1: np.ndarray, same_depth: np.ndarray) -> np.ndarray:
-    """Pixels where two masks may differ by a tie: both hit, at the same depth (``same_depth``:
-    both depths finite and within :data:`SNAPSHOT_DEPTH_TOL`), and each one's id is found among
-    the other mask's 3×3 neighbours there. Where two parts touch or overlap in one plane (a mounting face sunk a few
-    millimetres into its mount), a pixel centre on the shared strip hits both at one distance,
-    and which of the two Embree reports depends on its traversal order, i.e. on the CPU's
-    vector width (AVX2 and AVX-512 differ)."""
-    h, w = m0.shape
-    p0 = np.pad(m0, 1)
-    p1 = np.pad(m1, 1)
-    in0 = np.zeros((h, w), dtype=bool)  # m1's id among m0's neighbours
-    in1 = np.zeros((h, w), dtype=bool)
-    for dy in range(3):
-        for dx in range(3):
-            in0 |= p0[dy:dy + h, dx:dx + w] == m1
-            in1 |= p1[dy:dy + h, dx:dx + w] == m0
-    return same_depth & (m0 > 0) & (m1 > 0) & in0 & in1
-
-
-def _snapshot_settings_json() -> str:
-    return json.dumps({"format": "orbitsynth snapshots 2", **SNAPSHOT_SETTINGS,
-                       "psnr_db": SNAPSHOT_PSNR_DB, "depth_atol_m_rtol": list(SNAPSHOT_DEPTH_TOL),
-                       "normal_atol": SNAPSHOT_NORMAL_ATOL, "mask_ties": SNAPSHOT_MASK_TIES}, indent=1) + "\n"
-
-
-def snapshot_settings_message(folder: str) -> str | None:
-    """None when ``folder``'s ``settings.json`` records the current snapshot settings and
-    tolerances, else a message saying what to do."""
-    path = os.path.join(folder, "settings.json")
-    try:
-        with open(path, encoding="utf-8") as fh:
-            stored = fh.read()
-    except OSError:
-        return f"snapshots: missing {path} (python cli.py snapshots --update writes the references)"
-    if stored != _snapshot_settings_json():
-        return (f"snapshots: {path} records other snapshot settings or tolerances than cli.SNAPSHOT_SETTINGS; "
-                "the references are stale: python cli.py snapshots --update")
-    return None
 
 
 def snapshots_main(argv: list) -> int:
@@ -2978,12 +1294,12 @@ def snapshots_main(argv: list) -> int:
     names = snapshot_cases(args.targets, args.patterns)
     try:  # the folders are checked before the renders (a bad one failed after them, blamed on --dir)
         if args.update:
-            check_out_folder(args.dir, option="--dir")
+            folder.check_out_folder(args.dir, option="--dir")
         elif not os.path.isdir(args.dir):
             raise CLIError(f"--dir: {args.dir} is not a folder of snapshot references (python cli.py snapshots "
                            "--update --dir DIR writes them)")
         if args.diff_dir:
-            check_out_folder(args.diff_dir, option="--diff-dir")
+            folder.check_out_folder(args.diff_dir, option="--diff-dir")
     except CLIError as exc:
         return _fail(exc)
     diff_dir = args.diff_dir or tempfile.mkdtemp(prefix="orbitsynth-snapshots-")
@@ -3001,24 +1317,24 @@ def _snapshots_run(args, names: list, diff_dir: str) -> int:
     t0 = time.perf_counter()
     failures, nbytes = [], 0
     try:
-        stale = None if args.update else snapshot_settings_message(args.dir)
+        stale = None if args.update else snapshots.snapshot_settings_message(args.dir)
         if stale:
             sys.stdout.write(f"FAIL {stale}\n")
             return 1
         for name in names:
             new = render_snapshot(name)
             if args.update:
-                nbytes += sum(os.path.getsize(q) for q in write_snapshot(args.dir, name, new))
+                nbytes += sum(os.path.getsize(q) for q in snapshots.write_snapshot(args.dir, name, new))
                 sys.stdout.write(f"{name}: reference written\n")
                 continue
-            ref = read_snapshot(args.dir, name)
-            msgs = (compare_snapshot(name, ref, new, diff_dir=diff_dir)
-                    + check_snapshot_degradation(name, ref, diff_dir=diff_dir))
+            ref = snapshots.read_snapshot(args.dir, name)
+            msgs = (snapshots.compare_snapshot(name, ref, new, diff_dir=diff_dir)
+                    + snapshots.check_snapshot_degradation(name, ref, degrade_snapshot(name, ref), diff_dir=diff_dir))
             failures += msgs
             sys.stdout.write("".join(f"FAIL {m}\n" for m in msgs) or f"{name}: ok\n")
         if args.update:
             from raytrace.files import atomic_write_text
-            atomic_write_text(os.path.join(args.dir, "settings.json"), _snapshot_settings_json())
+            atomic_write_text(os.path.join(args.dir, "settings.json"), snapshots._snapshot_settings_json())
     except (CLIError, ValueError, FileNotFoundError) as exc:
         return _fail(exc)
     except OSError as exc:
@@ -3072,7 +1388,7 @@ def _attach_negative_values(argv: list) -> list:
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the process exit status."""
     argv = _attach_negative_values(sys.argv[1:] if argv is None else list(argv))
-    _remove_stale_scene_folders()
+    pool.remove_stale_scene_folders()
     try:
         if argv and argv[0] in COMMANDS:
             return COMMANDS[argv[0]](argv[1:])
@@ -3086,5 +1402,5 @@ def main(argv: list[str] | None = None) -> int:
 if __name__ == "__main__":
     # run as the module `cli`, so worker processes (spawned, or dask) find run_frame by name
     import cli
-    cli.install_termination_handlers()
+    pool.install_termination_handlers()
     sys.exit(cli.main())

@@ -30,6 +30,7 @@ import cli  # noqa: E402
 from raytrace import _shading as K  # noqa: E402
 from raytrace import shade  # noqa: E402
 from raytrace.camera import Camera  # noqa: E402
+from raytrace.dataset.scenes import load_model  # noqa: E402
 from raytrace.scene import Scene  # noqa: E402
 
 
@@ -44,7 +45,7 @@ def main() -> None:
                                            "--frames", str(args.frames)])
     cfg, given = cli.resolve_config(cargs)
     plan = cli.plan_sequence(cfg, given)
-    scene = Scene(cli._load_model(plan["model_spec"]))
+    scene = Scene(load_model(plan["model_spec"]))
     cam = plan["camera"]
     cam = Camera(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
     times = {1: [], shade._BACKGROUND_STEP: []}

@@ -28,6 +28,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 import cli
 from raytrace import files as F
+from raytrace.dataset import folder
+from raytrace.dataset.snapshots import snapshot_image
 
 TILE = (320, 240)
 CAPTIONS = ("clean RGB", "degraded RGB (physical)", "instance mask", "depth (near bright)", "normals (camera frame)")
@@ -49,7 +51,7 @@ def _best_frame(plan: dict) -> int:
     frames = plan["result"]["frames"]
     visible = ([f["frame"] for f in frames if f["visible"] and not f["earth_in_background"]]
                or [f["frame"] for f in frames if f["visible"]] or [0])
-    tasks, _ = cli._tasks_for(plan, "", None, write=False, frames=visible)
+    tasks, _ = folder.tasks_for(plan, "", None, write=False, frames=visible)
     best, best_px = visible[0], -1
     for task in tasks:
         task["modalities"], task["want_rgb"] = ["mask"], False  # geometry only: cheap
@@ -89,11 +91,11 @@ def gallery_image(target: str, pattern: str, seed: int) -> tuple:
     cfg, given = _cfg(target, pattern, seed)
     plan = cli.plan_sequence(cfg, given)
     frame = _best_frame(plan)
-    (task,), _ = cli._tasks_for(plan, "", None, write=False, frames=[frame])
+    (task,), _ = folder.tasks_for(plan, "", None, write=False, frames=[frame])
     task["modalities"] = ["rgb", "rgb_degraded", "mask", "depth", "normal"]
     images, _info = cli.render_frame_images(task)
-    tiles = [images["rgb"], images["rgb_degraded"], cli.snapshot_image("mask", images["mask"]),
-             _depth_image(images["depth"]), cli.snapshot_image("normal", images["normal"])]
+    tiles = [images["rgb"], images["rgb_degraded"], snapshot_image("mask", images["mask"]),
+             _depth_image(images["depth"]), snapshot_image("normal", images["normal"])]
     return _captioned(tiles), plan["result"]["frames"][frame]
 
 

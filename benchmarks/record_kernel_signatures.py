@@ -97,7 +97,8 @@ def _record_here(out_dir: str) -> dict:
     from numba.core import event
     import cli
     from raytrace import scene, shade
-    cli._kernels_not_compiled = lambda *a, **k: []  # compile here, where the recorder sees it
+    from raytrace.dataset import jit
+    jit.kernels_not_compiled = lambda *a, **k: []  # compile here, where the recorder sees it
     seen: dict = {}
     result = {}
     for group in GROUPS:

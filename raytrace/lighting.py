@@ -14,12 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import environment as env
-from .constants import EARTH_RADIUS_M, SOLAR_CONSTANT_W_M2, SUN_ANGULAR_DIAMETER_RAD
+from .constants import EARTH_RADIUS_M, EARTH_TEXTURES, SOLAR_CONSTANT_W_M2, SUN_ANGULAR_DIAMETER_RAD
 from .stars import StarField
 
 __all__ = ["EARTH_RADIUS_M", "SOLAR_CONSTANT_W_M2", "SUN_ANGULAR_DIAMETER_RAD", "Earth", "Lighting"]
 
-EARTH_TEXTURES = ("uniform", "procedural")
 
 MAX_IRRADIANCE_W_M2 = 1e6
 """Largest accepted solar irradiance [W/m²] and ambient radiance [W/(m²·sr)]: above the Sun's

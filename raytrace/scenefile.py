@@ -346,7 +346,7 @@ def load_scene_file(path) -> SceneSpec:
     version = data.get("version", 1)
     if isinstance(version, bool) or version != 1:
         raise _err(f"version must be 1 (the only schema so far), got {version!r}")
-    from .shade import QUALITIES
+    from .presets import QUALITIES
     quality = data.get("quality", "balanced")
     if quality not in QUALITIES:
         raise _err(f"quality must be one of {', '.join(QUALITIES)}, got {quality!r}")

@@ -14,6 +14,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import cli
+from raytrace.dataset import pool
 from orbit import cw
 from orbit.patterns import parameters
 
@@ -141,7 +142,7 @@ def test_render_scene_reports_a_signal_whose_unwinding_failed(tmp_path, monkeypa
 
     def interrupted(*a, **k):
         try:
-            raise cli.Terminated(signal.SIGTERM)
+            raise pool.Terminated(signal.SIGTERM)
         except KeyboardInterrupt:
             raise RuntimeError("release unlocked lock")
 
@@ -462,16 +463,16 @@ def test_render_scene_stars_in_the_background_only(tmp_path):
 
 
 def test_a_fresh_numba_cache_is_detected_and_filled_by_the_precompile_step(tmp_path):
-    """cli._kernels_not_compiled in a process whose numba cache directory is empty: every group
+    """jit.kernels_not_compiled in a process whose numba cache directory is empty: every group
     a ``reference`` frame calls; after raytrace._precompile compiled the kernel standing for
     the main job's group into that directory, the preset's group only; after its own, none."""
-    code = ("import cli, sys; from raytrace import _precompile as P; "
-            "a = cli._kernels_not_compiled('reference'); "
+    code = ("import cli, sys; from raytrace import _precompile as P; from raytrace.dataset import jit; "
+            "a = jit.kernels_not_compiled('reference'); "
             "bad = P._compile_share([(n, P.group_signatures(['fast', 'reference'])[n][1]) for n in [P.probe('fast')]]); "
-            "b = cli._kernels_not_compiled('reference'); "
+            "b = jit.kernels_not_compiled('reference'); "
             "bad += P._compile_share([(n, P.group_signatures(['fast', 'reference'])[n][1]) "
             "for n in [P.probe('reference')]]); "
-            "print(','.join(a), bad, ','.join(b), ','.join(cli._kernels_not_compiled('reference')) or '-')")
+            "print(','.join(a), bad, ','.join(b), ','.join(jit.kernels_not_compiled('reference')) or '-')")
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300,
                        check=False)

@@ -14,6 +14,7 @@ import pytest
 import cli
 from orbit.patterns import PATTERNS
 from raytrace import files as F
+from raytrace.dataset import jit, pool
 from raytrace.targets import BUILTIN_TARGETS
 from tests.cli_helpers import run_main
 
@@ -209,16 +210,16 @@ def test_the_first_run_compile_shows_a_progress_bar_to_its_end(monkeypatch, caps
         return []
 
     monkeypatch.setattr(_precompile, "precompile", fake_precompile)
-    cli._compile_kernels(["fast"], quiet=False)
+    jit.compile_kernels(["fast"], quiet=False)
     err = capsys.readouterr().err
     assert calls and calls[0][1] == ("fast",)
     assert "compiling the ray-tracing kernels (fast)" in err and "about" in err
     frames = [f for f in err.replace("\r", "\n").splitlines() if f.startswith("compiling:")]
     assert frames and "100%" in frames[-1], err
-    cli._compile_kernels(["fast"], quiet=True)  # --quiet: nothing
+    jit.compile_kernels(["fast"], quiet=True)  # --quiet: nothing
     assert capsys.readouterr().err == ""
     assert [c[2] for c in calls] == [False, False]
-    cli._compile_kernels(["fast"], quiet=True, serial=True)
+    jit.compile_kernels(["fast"], quiet=True, serial=True)
     assert calls[-1][2] is True
 
 
@@ -227,13 +228,13 @@ def test_the_compile_is_of_the_builds_the_frames_will_call(tmp_path, monkeypatch
     (raytrace._jit.ThreadedKernel), so the first run compiles those; one worker rendering in
     this process on several threads calls the parallel builds."""
     asked = []
-    monkeypatch.setattr(cli, "_kernels_not_compiled", lambda quality="fast", serial=False: ["fast"])
-    monkeypatch.setattr(cli, "_compile_kernels", lambda groups, quiet, serial=False: asked.append(serial))
+    monkeypatch.setattr(jit, "kernels_not_compiled", lambda quality="fast", serial=False: ["fast"])
+    monkeypatch.setattr(jit, "compile_kernels", lambda groups, quiet, serial=False: asked.append(serial))
     small = ["--target", "icesat", "--frames", "4", "--width", "64", "--height", "48", "--modalities", "mask"]
     assert run_main(*small, "--workers", "2", "--out", tmp_path / "w2") == 0
     assert run_main(*small, "--workers", "1", "--out", tmp_path / "w1") == 0
     import numba
-    per_worker = max(1, min(cli.default_workers() // 2, numba.config.NUMBA_NUM_THREADS))
+    per_worker = max(1, min(pool.default_workers() // 2, numba.config.NUMBA_NUM_THREADS))
     assert asked == [per_worker == 1, numba.config.NUMBA_NUM_THREADS == 1]
-    assert cli.frame_threads(2, 4) == per_worker
-    assert cli.frame_threads(4, 1) == cli.frame_threads(1, 9) == numba.config.NUMBA_NUM_THREADS
+    assert pool.frame_threads(2, 4) == per_worker
+    assert pool.frame_threads(4, 1) == pool.frame_threads(1, 9) == numba.config.NUMBA_NUM_THREADS

@@ -20,6 +20,7 @@ import pytest
 
 import cli
 from raytrace import files as F
+from raytrace.dataset import pool
 from tests.cli_helpers import run_main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -277,10 +278,10 @@ def test_every_kind_of_run_removes_the_scene_folder_a_killed_run_left(tmp_path, 
                           text=True, check=True)
     pid = int(dead.stdout)
     for argv in (["--dry-run", "--frames", "2"], [*TINY, "--out", tmp_path / "seq"]):
-        stale = tmp_path / f"{cli._SCENES_FOLDER}{F._HOST}.{pid}-abcdefgh"
+        stale = tmp_path / f"{pool._SCENES_FOLDER}{F._HOST}.{pid}-abcdefgh"
         stale.mkdir()
         (stale / "scene0.pickle").write_bytes(b"x" * 1000)
-        live = tmp_path / f"{cli._SCENES_FOLDER}{F._HOST}.{os.getpid()}-live"
+        live = tmp_path / f"{pool._SCENES_FOLDER}{F._HOST}.{os.getpid()}-live"
         live.mkdir(exist_ok=True)
         assert run_main(*argv) == 0
         assert not stale.exists()
@@ -398,8 +399,8 @@ def test_a_frame_too_large_for_memory_is_refused_up_front(tmp_path, capsys):
 def test_workers_are_lowered_to_what_memory_holds(monkeypatch, capsys):
     from raytrace.camera import Camera
     cam = Camera.from_focal(4e-3, 3.45e-6, 1280, 960)
-    need = cli.WORKER_BASE_BYTES + cli.FRAME_BYTES_PER_PIXEL * 1280 * 960
-    monkeypatch.setattr(cli, "memory_bytes", lambda: (64 * need, 2.5 * need))
-    assert cli.fit_workers([cam], 8) == 2
+    need = pool.WORKER_BASE_BYTES + pool.FRAME_BYTES_PER_PIXEL * 1280 * 960
+    monkeypatch.setattr(pool, "memory_bytes", lambda: (64 * need, 2.5 * need))
+    assert pool.fit_workers([cam], 8) == 2
     assert "2 workers instead of 8" in capsys.readouterr().err
-    assert cli.fit_workers([cam], 2) == 2
+    assert pool.fit_workers([cam], 2) == 2

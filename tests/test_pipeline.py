@@ -21,6 +21,7 @@ import pytest
 
 import cli
 from raytrace import files as F
+from raytrace.dataset import pool, scenes
 from tests.cli_helpers import run_main
 from tests.raytrace.oracles import png_chunks
 
@@ -222,7 +223,7 @@ def test_two_workers_and_shards_give_the_same_bytes(ref, tmp_path):
 
 def test_two_workers_load_the_scene_this_process_built(ref, tmp_path, monkeypatch):
     """With a pool, this process builds the scene and radiance cache once and pickles them
-    for the workers (cli._prebuild_scenes; what a worker does with the file:
+    for the workers (scenes.prebuild_scenes; what a worker does with the file:
     test_a_prebuilt_scene_renders_the_same_bits): the bytes are those of one worker, and the
     temporary folder is gone afterwards."""
     import tempfile
@@ -236,14 +237,14 @@ def test_two_workers_load_the_scene_this_process_built(ref, tmp_path, monkeypatc
 
     monkeypatch.setattr(tempfile, "mkdtemp", mkdtemp)
     seen = []
-    real_prebuild = cli._prebuild_scenes
+    real_prebuild = scenes.prebuild_scenes
 
     def prebuild(tasks, folder):
         out = real_prebuild(tasks, folder)
         seen.append({spec: os.path.getsize(path) for spec, path in out.items()})
         return out
 
-    monkeypatch.setattr(cli, "_prebuild_scenes", prebuild)
+    monkeypatch.setattr(scenes, "prebuild_scenes", prebuild)
     assert run_main(*SMALL, *MODS, "--workers", "2", "--out", tmp_path / "w2") == 0
     assert_same_tree(ref, tmp_path / "w2")
     assert seen == [{("builtin", "icesat"): seen[0][("builtin", "icesat")]}] and seen[0][("builtin", "icesat")] > 1e6
@@ -273,8 +274,8 @@ def test_a_prebuilt_scene_renders_the_same_bits(tmp_path):
 
     spec = ("builtin", "icesat")
     task = {"model_spec": spec, "cfg": {"render": {"quality": "fast"}}, "modalities": ["rgb"]}
-    paths = cli._prebuild_scenes([task], str(tmp_path))
-    loaded = cli._load_prebuilt(paths[spec])
+    paths = scenes.prebuild_scenes([task], str(tmp_path))
+    loaded = scenes.load_prebuilt(paths[spec])
     assert loaded is not None and len(loaded._caches) == 1
     fresh = Scene(load_target("icesat"))
     cam = Camera(160, 120, 150.0, 150.0, 79.5, 59.5)
@@ -300,7 +301,7 @@ def test_a_prebuilt_scene_carries_the_cache_its_preset_asks_for(tmp_path):
 
     spec = ("builtin", "cassini")
     task = {"model_spec": spec, "cfg": {"render": {"quality": "balanced", "samples": 16}}, "modalities": ["rgb"]}
-    loaded = cli._load_prebuilt(cli._prebuild_scenes([task], str(tmp_path))[spec])
+    loaded = scenes.load_prebuilt(scenes.prebuild_scenes([task], str(tmp_path))[spec])
     fresh = Scene(load_target("cassini"))
     options = preset_cache_options(quality_preset("balanced", 16), fresh.scale_m)
     assert options and list(loaded._caches) == [tuple(sorted(options.items()))]
@@ -312,8 +313,8 @@ def test_a_prebuilt_scene_carries_the_cache_its_preset_asks_for(tmp_path):
     assert a.geometry.mask.any() and np.array_equal(a.radiance, b.radiance)
     assert len(loaded._caches) == 1  # the adopted cache served the frame: none was built
     # geometry-only and reference tasks build nothing
-    assert cli._prebuild_scenes([dict(task, modalities=["mask", "depth"])], str(tmp_path)) == {}
-    assert cli._prebuild_scenes([dict(task, cfg={"render": {"quality": "reference"}})], str(tmp_path)) == {}
+    assert scenes.prebuild_scenes([dict(task, modalities=["mask", "depth"])], str(tmp_path)) == {}
+    assert scenes.prebuild_scenes([dict(task, cfg={"render": {"quality": "reference"}})], str(tmp_path)) == {}
 
 
 def test_config_round_trip_reproduces_the_bytes(ref, tmp_path):
@@ -760,7 +761,7 @@ def test_atomic_writes_leave_no_temporary(tmp_path):
 
 def test_signal_during_an_image_write_is_raised_after_the_file_is_closed(tmp_path, capfd, monkeypatch):
     """A SIGTERM that reaches a pool worker between OpenImageIO's ``open`` and ``write_image``
-    (its handler raises, ``cli._worker_stop``) is held back until the writer is closed, then
+    (its handler raises, ``pool._worker_stop``) is held back until the writer is closed, then
     raised: the PNG is complete, the temporary is removed, and libpng prints nothing (it said
     "No IDATs written into file" when the interrupted writer was destroyed unwritten, a second
     line beside the CLI's one-line message: seen in a fresh-clone CI run)."""
@@ -924,7 +925,7 @@ def test_a_failure_while_a_signal_unwinds_the_job_reports_the_signal(signum, cap
     Such a failure reports the signal and its status; a failure of its own stays a failure."""
     def run():
         try:
-            raise cli.Terminated(signum) if signum is not None else KeyboardInterrupt()
+            raise pool.Terminated(signum) if signum is not None else KeyboardInterrupt()
         except KeyboardInterrupt:
             raise RuntimeError("release unlocked lock")
 

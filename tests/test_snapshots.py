@@ -20,6 +20,7 @@ import pytest
 
 import cli
 from raytrace import files as F
+from raytrace.dataset import snapshots as S
 
 SNAPS = Path(cli.SNAPSHOT_DIR)
 CASES = cli.snapshot_cases()
@@ -34,10 +35,10 @@ def test_every_target_and_pattern_has_small_references():
     assert files == want
     total = sum(p.stat().st_size for p in SNAPS.iterdir())
     assert total < 5_000_000, f"references take {total / 1e6:.2f} MB, the budget is 5 MB"
-    assert cli.snapshot_settings_message(str(SNAPS)) is None
-    ref = cli.read_snapshot(str(SNAPS), CASES[0])
-    w = cli.SNAPSHOT_SETTINGS["width"] * len(cli.SNAPSHOT_SETTINGS["kept_frames"])
-    h = cli.SNAPSHOT_SETTINGS["height"]
+    assert S.snapshot_settings_message(str(SNAPS)) is None
+    ref = S.read_snapshot(str(SNAPS), CASES[0])
+    w = S.SNAPSHOT_SETTINGS["width"] * len(S.SNAPSHOT_SETTINGS["kept_frames"])
+    h = S.SNAPSHOT_SETTINGS["height"]
     assert ref["rgb"].shape == ref["rgb_paper"].shape == ref["rgb_physical"].shape == (h, w, 3)
     assert ref["rgb"].dtype == np.uint8 and ref["mask"].dtype == np.uint16 and ref["mask"].shape == (h, w)
     assert ref["depth"].dtype == np.float32 and ref["normal"].dtype == np.float32 and ref["normal"].shape == (h, w, 3)
@@ -56,8 +57,8 @@ def test_references_round_trip_bit_for_bit(tmp_path):
               "rgb_paper": rng.integers(0, 256, (h, w, 3), dtype=np.uint8),
               "rgb_physical": rng.integers(0, 256, (h, w, 3), dtype=np.uint8), "depth": depth, "normal": normal,
               "radiance": rng.lognormal(0.0, 3.0, (h, w, 3)).astype(np.float32)}
-    cli.write_snapshot(str(tmp_path), "x", images)
-    back = cli.read_snapshot(str(tmp_path), "x")
+    S.write_snapshot(str(tmp_path), "x", images)
+    back = S.read_snapshot(str(tmp_path), "x")
     for m, a in images.items():
         assert back[m].dtype == a.dtype and back[m].shape == a.shape, m
         assert back[m].tobytes() == a.tobytes(), m  # bit for bit: lossless WebP, PNG, float32 byte planes
@@ -67,11 +68,11 @@ def test_references_round_trip_bit_for_bit(tmp_path):
 @pytest.mark.parametrize("name", CASES)
 def test_render_matches_reference(name, tmp_path_factory):
     new = cli.render_snapshot(name)
-    ref = cli.read_snapshot(str(SNAPS), name)
+    ref = S.read_snapshot(str(SNAPS), name)
     assert (ref["mask"] > 0).any(), f"{name}: the reference shows no target; the snapshot would guard nothing"
     diff_dir = tmp_path_factory.mktemp(f"snapshot-diff-{name}")
-    msgs = cli.compare_snapshot(name, ref, new, diff_dir=str(diff_dir))
-    msgs += cli.check_snapshot_degradation(name, ref, diff_dir=str(diff_dir))
+    msgs = S.compare_snapshot(name, ref, new, diff_dir=str(diff_dir))
+    msgs += S.check_snapshot_degradation(name, ref, cli.degrade_snapshot(name, ref), diff_dir=str(diff_dir))
     assert not msgs, ("render snapshots moved (if intended: python cli.py snapshots --update):\n"
                       + "\n".join(msgs))
 
@@ -79,7 +80,7 @@ def test_render_matches_reference(name, tmp_path_factory):
 # --------------------------------------------------------------------------- the comparison itself
 @pytest.fixture(scope="module")
 def ref():
-    return cli.read_snapshot(str(SNAPS), SMALL_TARGET)
+    return S.read_snapshot(str(SNAPS), SMALL_TARGET)
 
 
 def _copy(images: dict) -> dict:
@@ -92,7 +93,7 @@ def _target_pixel(ref: dict) -> tuple:
 
 
 def test_identical_snapshot_passes(ref, tmp_path):
-    assert cli.compare_snapshot(SMALL_TARGET, ref, _copy(ref), diff_dir=str(tmp_path)) == []
+    assert S.compare_snapshot(SMALL_TARGET, ref, _copy(ref), diff_dir=str(tmp_path)) == []
     assert not any(tmp_path.iterdir())
 
 
@@ -100,7 +101,7 @@ def test_one_changed_mask_pixel_fails_with_a_diff_image(ref, tmp_path):
     new = _copy(ref)
     y, x = _target_pixel(ref)
     new["mask"][y, x] = 0
-    msgs = cli.compare_snapshot(SMALL_TARGET, ref, new, diff_dir=str(tmp_path))
+    msgs = S.compare_snapshot(SMALL_TARGET, ref, new, diff_dir=str(tmp_path))
     assert len(msgs) == 1 and msgs[0].startswith(f"{SMALL_TARGET}: mask: 1 of {ref['mask'].size} pixels")
     path = tmp_path / f"{SMALL_TARGET}.mask.diff.png"
     assert str(path) in msgs[0]
@@ -116,7 +117,7 @@ def test_one_changed_rgb_pixel_on_the_target_fails(ref, tmp_path, modality):
     new = _copy(ref)
     y, x = _target_pixel(ref)
     new[modality][y, x] = np.where(ref[modality][y, x] > 127, 0, 255)  # a large change of one pixel
-    msgs = cli.compare_snapshot(SMALL_TARGET, ref, new, diff_dir=str(tmp_path))
+    msgs = S.compare_snapshot(SMALL_TARGET, ref, new, diff_dir=str(tmp_path))
     assert len(msgs) == 1 and msgs[0].startswith(f"{SMALL_TARGET}: {modality}: PSNR ")
     assert "target window" in msgs[0] and "1 pixels differ" in msgs[0]
     assert (tmp_path / f"{SMALL_TARGET}.{modality}.diff.png").is_file()
@@ -125,13 +126,13 @@ def test_one_changed_rgb_pixel_on_the_target_fails(ref, tmp_path, modality):
 def test_a_dimmer_image_fails_and_one_dn_of_noise_passes(ref, tmp_path):
     dim = _copy(ref)
     dim["rgb"] = (ref["rgb"] * 0.9).astype(np.uint8)  # e.g. a changed exposure or BRDF
-    msgs = cli.compare_snapshot(SMALL_TARGET, ref, dim, diff_dir=str(tmp_path))
+    msgs = S.compare_snapshot(SMALL_TARGET, ref, dim, diff_dir=str(tmp_path))
     assert len(msgs) == 1 and "rgb: PSNR" in msgs[0]
     noisy = _copy(ref)  # what float noise across machines may do: 1 DN on some pixels
     rng = np.random.default_rng(0)
     flip = rng.random(ref["rgb"].shape) < 0.2
     noisy["rgb"] = np.where(flip & (ref["rgb"] < 255), ref["rgb"] + 1, ref["rgb"]).astype(np.uint8)
-    assert cli.compare_snapshot(SMALL_TARGET, ref, noisy, diff_dir=str(tmp_path)) == []
+    assert S.compare_snapshot(SMALL_TARGET, ref, noisy, diff_dir=str(tmp_path)) == []
 
 
 def test_depth_and_normals_fail_on_one_pixel_and_absorb_float_noise(ref, tmp_path):
@@ -143,22 +144,22 @@ def test_depth_and_normals_fail_on_one_pixel_and_absorb_float_noise(ref, tmp_pat
                           "normal")):
         new = _copy(ref)
         change(new)
-        msgs = cli.compare_snapshot(SMALL_TARGET, ref, new, diff_dir=str(tmp_path))
+        msgs = S.compare_snapshot(SMALL_TARGET, ref, new, diff_dir=str(tmp_path))
         assert len(msgs) == 1 and msgs[0].startswith(f"{SMALL_TARGET}: {name}: 1 pixels"), msgs
     new = _copy(ref)
     hit = np.isfinite(ref["depth"])
     new["depth"][hit] *= np.float32(1 + 2e-6)  # far below 1e-4 m + 1e-5 depth
     new["normal"] += np.float32(1e-6) * (ref["normal"] != 0)
-    assert cli.compare_snapshot(SMALL_TARGET, ref, new, diff_dir=str(tmp_path)) == []
+    assert S.compare_snapshot(SMALL_TARGET, ref, new, diff_dir=str(tmp_path)) == []
 
 
 def test_other_shapes_or_settings_are_reported_as_stale(ref, tmp_path, monkeypatch):
     new = _copy(ref)
     new["rgb"] = new["rgb"][:, :-1]
-    msgs = cli.compare_snapshot(SMALL_TARGET, ref, new, diff_dir=str(tmp_path))
+    msgs = S.compare_snapshot(SMALL_TARGET, ref, new, diff_dir=str(tmp_path))
     assert msgs and "snapshot settings changed" in msgs[0] and "--update" in msgs[0]
-    monkeypatch.setitem(cli.SNAPSHOT_SETTINGS, "quality", "balanced")
-    msg = cli.snapshot_settings_message(str(SNAPS))
+    monkeypatch.setitem(S.SNAPSHOT_SETTINGS, "quality", "balanced")
+    msg = S.snapshot_settings_message(str(SNAPS))
     assert msg is not None and "stale" in msg and "--update" in msg
 
 
@@ -190,17 +191,17 @@ def test_snapshots_command_fails_on_a_changed_reference_and_update_restores_it(t
     assert "review them" in capsys.readouterr().out
     assert sorted(p.name for p in refs.iterdir()) == sorted(p.name for p in SNAPS.glob(f"{SMALL_TARGET}.*")) + [
         "settings.json"]
-    new, old = cli.read_snapshot(str(refs), SMALL_TARGET), cli.read_snapshot(str(SNAPS), SMALL_TARGET)
+    new, old = S.read_snapshot(str(refs), SMALL_TARGET), S.read_snapshot(str(SNAPS), SMALL_TARGET)
     assert new.keys() == old.keys()
     again = tmp_path / "again"
     again.mkdir()
-    cli.write_snapshot(str(again), SMALL_TARGET, cli.render_snapshot(SMALL_TARGET))
-    again = cli.read_snapshot(str(again), SMALL_TARGET)
+    S.write_snapshot(str(again), SMALL_TARGET, cli.render_snapshot(SMALL_TARGET))
+    again = S.read_snapshot(str(again), SMALL_TARGET)
     assert new.keys() == again.keys()
     for key in new:
         assert new[key].dtype == again[key].dtype and np.array_equal(new[key], again[key]), key
         assert new[key].dtype == old[key].dtype and new[key].shape == old[key].shape, key
-    assert cli.compare_snapshot(SMALL_TARGET, old, new, diff_dir=str(tmp_path / "diffs2")) == []
+    assert S.compare_snapshot(SMALL_TARGET, old, new, diff_dir=str(tmp_path / "diffs2")) == []
     assert (refs / "settings.json").read_bytes() == (SNAPS / "settings.json").read_bytes()
     assert cli.main(argv) == 0
     assert "1 snapshots match" in capsys.readouterr().out
@@ -280,15 +281,15 @@ def test_a_tie_between_touching_parts_passes_and_other_id_changes_fail(ref, tmp_
     other = ref["mask"][y, x + 1]
     tie = _copy(ref)  # the neighbouring part reported at the same distance: another CPU's tie
     tie["mask"][y, x] = other
-    assert cli.compare_snapshot(SMALL_TARGET, ref, tie, diff_dir=str(tmp_path)) == []
+    assert S.compare_snapshot(SMALL_TARGET, ref, tie, diff_dir=str(tmp_path)) == []
     deeper = _copy(tie)  # the same id change, but the hit moved: not a tie
     deeper["depth"][y, x] += np.float32(0.01)
-    msgs = cli.compare_snapshot(SMALL_TARGET, ref, deeper, diff_dir=str(tmp_path))
+    msgs = S.compare_snapshot(SMALL_TARGET, ref, deeper, diff_dir=str(tmp_path))
     assert [m.split(":")[1].strip() for m in msgs] == ["mask", "depth"]
     assert msgs[0].startswith(f"{SMALL_TARGET}: mask: 1 of")
     far = _copy(ref)  # an id that no neighbour has
     far["mask"][y, x] = int(ref["mask"].max()) + 1
-    msgs = cli.compare_snapshot(SMALL_TARGET, ref, far, diff_dir=str(tmp_path))
+    msgs = S.compare_snapshot(SMALL_TARGET, ref, far, diff_dir=str(tmp_path))
     assert len(msgs) == 1 and msgs[0].startswith(f"{SMALL_TARGET}: mask: 1 of")
 
 
@@ -296,13 +297,13 @@ def test_more_ties_than_the_bound_all_fail(ref, tmp_path):
     m = ref["mask"].astype(np.int64)
     boundary = _boundary(m)  # pixels whose right-hand neighbour is another part
     n_target = np.count_nonzero(m > 0)
-    need = int(cli.SNAPSHOT_MASK_TIES * n_target) + 1
+    need = int(S.SNAPSHOT_MASK_TIES * n_target) + 1
     ys, xs = np.nonzero(boundary)
     if len(ys) < need:
         pytest.skip(f"{SMALL_TARGET} has only {len(ys)} part-boundary pixels, {need} needed")
     new = _copy(ref)
     new["mask"][ys[:need], xs[:need]] = ref["mask"][ys[:need], xs[:need] + 1]
-    msgs = cli.compare_snapshot(SMALL_TARGET, ref, new, diff_dir=str(tmp_path))
+    msgs = S.compare_snapshot(SMALL_TARGET, ref, new, diff_dir=str(tmp_path))
     assert len(msgs) == 1 and msgs[0].startswith(f"{SMALL_TARGET}: mask: {need} of")
 
 
@@ -311,27 +312,30 @@ def test_degraded_images_are_compared_only_with_the_same_input(ref, tmp_path):
     y, x = _target_pixel(ref)
     moved["rgb"][y, x] = np.where(ref["rgb"][y, x] < 255, ref["rgb"][y, x] + 1, 254)
     moved["rgb_paper"] = np.random.default_rng(5).integers(0, 256, ref["rgb_paper"].shape, dtype=np.uint8)
-    assert cli.compare_snapshot(SMALL_TARGET, ref, moved, diff_dir=str(tmp_path)) == []
+    assert S.compare_snapshot(SMALL_TARGET, ref, moved, diff_dir=str(tmp_path)) == []
     moved = _copy(ref)  # the radiance moved in its last bit: the physical noise is another draw
     moved["radiance"][y, x, 0] = np.nextafter(ref["radiance"][y, x, 0], np.float32(np.inf))
     moved["rgb_physical"] = 255 - ref["rgb_physical"]
-    assert cli.compare_snapshot(SMALL_TARGET, ref, moved, diff_dir=str(tmp_path)) == []
+    assert S.compare_snapshot(SMALL_TARGET, ref, moved, diff_dir=str(tmp_path)) == []
     moved["rgb_paper"] = 255 - ref["rgb_paper"]  # its own input (the clean RGB) did not move: compared
-    msgs = cli.compare_snapshot(SMALL_TARGET, ref, moved, diff_dir=str(tmp_path))
+    msgs = S.compare_snapshot(SMALL_TARGET, ref, moved, diff_dir=str(tmp_path))
     assert len(msgs) == 1 and msgs[0].startswith(f"{SMALL_TARGET}: rgb_paper: PSNR ")
 
 
 def test_the_chain_reproduces_the_stored_degraded_images_and_catches_a_change(ref, tmp_path):
-    assert cli.check_snapshot_degradation(SMALL_TARGET, ref, diff_dir=str(tmp_path)) == []
+    again = cli.degrade_snapshot(SMALL_TARGET, ref)
+    assert S.check_snapshot_degradation(SMALL_TARGET, ref, again, diff_dir=str(tmp_path)) == []
     for modality in ("rgb_paper", "rgb_physical"):
         changed = _copy(ref)
         y, x = _target_pixel(ref)
         changed[modality][y, x] = np.where(ref[modality][y, x] > 127, 0, 255)
-        msgs = cli.check_snapshot_degradation(SMALL_TARGET, changed, diff_dir=str(tmp_path))
+        again = cli.degrade_snapshot(SMALL_TARGET, changed)
+        msgs = S.check_snapshot_degradation(SMALL_TARGET, changed, again, diff_dir=str(tmp_path))
         assert len(msgs) == 1 and msgs[0].startswith(f"{SMALL_TARGET}: {modality}: degrading the reference's own "
                                                      "input: PSNR "), msgs
         assert (tmp_path / f"{SMALL_TARGET}.{modality}.diff.png").is_file()
     dimmer = _copy(ref)  # a chain that sees another input gives other degraded images
     dimmer["radiance"] = ref["radiance"] * np.float32(0.8)
-    msgs = cli.check_snapshot_degradation(SMALL_TARGET, dimmer, diff_dir=str(tmp_path))
+    again = cli.degrade_snapshot(SMALL_TARGET, dimmer)
+    msgs = S.check_snapshot_degradation(SMALL_TARGET, dimmer, again, diff_dir=str(tmp_path))
     assert [m.split(":")[1].strip() for m in msgs] == ["rgb_physical"]

@@ -1,0 +1,84 @@
+"""The output modalities: one table that the writers, the folder checks, the exports and
+``render-scene`` read.
+
+Each :class:`Modality` names its folder (the modality's name) and file extension, what it
+holds, whether making it needs the shaded radiance, and, for those made from the frame's
+geometry or radiance alone, the function that makes its pixels. ``rgb`` and ``rgb_degraded``
+are made by the pipeline (exposure and sRGB encoding, then the degradation chain, which live
+outside ``raytrace``) and have no producer here. A new modality is one entry here and its
+producer (docs/formats.md lists the files).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Modality", "MODALITIES", "NAMES", "needs_radiance", "produce", "relpath"]
+
+
+@dataclass(frozen=True)
+class Modality:
+    """One output modality of a frame.
+
+    Attributes
+    ----------
+    name : str
+        Its name, its folder's name and the file stem's prefix in a sequence folder.
+    ext : str
+        File extension (``.png``: 8-bit sRGB or 16-bit data; ``.exr``: float32).
+    holds : str
+        What the pixels are, in one line (units, background value).
+    shaded : bool
+        Making it needs the shaded radiance (not the geometry alone).
+    noisy : bool
+        Mostly noise (a degraded camera frame): written with the fast PNG settings
+        (:func:`raytrace.files.write_image`).
+    produce : callable or None
+        ``produce(geometry, radiance) -> pixels`` from a :class:`raytrace.scene.GeometryFrame`
+        and the linear radiance (None when not shaded); None: made by the pipeline.
+    """
+
+    name: str
+    ext: str
+    holds: str
+    shaded: bool = False
+    noisy: bool = False
+    produce: object = None
+
+
+MODALITIES = {m.name: m for m in (
+    Modality("rgb", ".png", "clean sRGB, 8 bit (exposure fixed or auto)", shaded=True),
+    Modality("rgb_degraded", ".png", "the camera's copy: the degradation preset applied, sRGB 8 bit", shaded=True,
+             noisy=True),
+    Modality("mask", ".png", "instance ids, 16 bit (component index + 1; 0 background)",
+             produce=lambda geo, radiance: geo.instance.astype(np.uint16)),
+    Modality("depth", ".exr", "z-depth along the optical axis, float32 m (inf on background)",
+             produce=lambda geo, radiance: geo.depth_m.astype(np.float32)),
+    Modality("normal", ".exr", "unit surface normal in the camera frame, float32 (0 on background)",
+             produce=lambda geo, radiance: geo.normal_cam.astype(np.float32)),
+    Modality("hdr", ".exr", "linear radiance, float32 W/(m²·sr)", shaded=True,
+             produce=lambda geo, radiance: radiance.astype(np.float32)),
+)}
+"""Every modality by name, in the order they are listed and written."""
+
+NAMES = tuple(MODALITIES)
+"""The modality names, in order."""
+
+
+def needs_radiance(names) -> bool:
+    """Whether making the modalities ``names`` needs the shaded radiance."""
+    return any(MODALITIES[n].shaded for n in names)
+
+
+def produce(name: str, geometry, radiance) -> np.ndarray:
+    """The pixels of modality ``name`` made from the frame's geometry and radiance."""
+    return MODALITIES[name].produce(geometry, radiance)
+
+
+def relpath(name: str, frame: int | str) -> str:
+    """The file of modality ``name`` of frame ``frame`` (a number or a stem) in a sequence
+    folder: ``mask/000012.png``."""
+    stem = f"{frame:06d}" if isinstance(frame, int) else frame
+    return f"{name}/{stem}{MODALITIES[name].ext}"

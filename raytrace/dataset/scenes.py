@@ -1,0 +1,131 @@
+"""Each process's scenes and star fields, and the scenes a pool's parent builds for its workers.
+
+A frame task names its target by a *model spec* — ``("builtin", name)`` or ``("mesh", path,
+unit_scale_m)`` — and :func:`scene` builds the :class:`raytrace.scene.Scene` (Embree BVH,
+radiance cache) once per process. :func:`prebuild_scenes` builds each target's scene and
+radiance cache once in the pool's parent, on every core, and pickles them for the workers,
+which load them (:func:`load_prebuilt`) instead of each building its own on its share of the
+cores.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+from . import UsageError, warn
+from .modalities import needs_radiance
+
+_SCENES: dict = {}  # model spec -> Scene, in this process
+_STARS: dict = {}  # (catalogue, limit, seed) -> StarField, in this process
+_SCENE_LOCK = None
+
+
+def load_model(spec: tuple, warn_repair: bool = False):
+    """The target model of a model spec: ("builtin", name) or ("mesh", path, unit_scale_m);
+    ``warn_repair``: one line on stderr when the mesh file needed more than routine repair."""
+    if spec[0] == "builtin":
+        from ..targets import load_target
+        return load_target(spec[1])
+    from ..meshio import load_mesh
+    model, report = load_mesh(spec[1], unit_scale_m=spec[2])
+    if warn_repair and report.non_finite_note():
+        warn(f"--mesh {report.non_finite_note()}")
+    return model
+
+
+def scene_of(model, warn_model: bool):
+    """``raytrace.scene.Scene(model)``; its warnings about the model (a mesh far from its origin)
+    as one line each on stderr when ``warn_model`` (planning, once), else dropped (the workers, which
+    build the scene the plan already built)."""
+    import warnings
+    from ..scene import Scene
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = Scene(model)
+    for w in caught if warn_model else ():
+        warn(' '.join(str(w.message).split()))
+    return scene
+
+
+def scene(spec: tuple, prebuilt: str | None = None):
+    """The Scene of a model spec, built once per process (Embree BVH and radiance cache);
+    ``prebuilt``: a file of :func:`prebuild_scenes` holding it with its radiance cache."""
+    global _SCENE_LOCK
+    import threading
+    if _SCENE_LOCK is None:
+        _SCENE_LOCK = threading.Lock()
+    with _SCENE_LOCK:
+        scene = _SCENES.get(spec)
+        if scene is None:
+            scene = load_prebuilt(prebuilt) if prebuilt else None
+            if scene is None:
+                scene = scene_of(load_model(spec), warn_model=False)
+            scene.embree  # noqa: B018 - build now, under the lock
+            _SCENES[spec] = scene
+        return scene
+
+
+def load_prebuilt(path: str):
+    """The Scene pickled by :func:`prebuild_scenes` at ``path``, its radiance cache attached;
+    None (and the worker builds its own) if the file cannot be read."""
+    import pickle
+    try:
+        with open(path, "rb") as fh:
+            scene, cache, options = pickle.load(fh)  # noqa: S301 - our own file, in our own private folder
+        scene.adopt_radiance_cache(cache, **options)
+        return scene
+    except (OSError, pickle.UnpicklingError, EOFError, ValueError) as exc:
+        warn(f"building the scene in the worker ({exc})")
+        return None
+
+
+def shades(task: dict) -> bool:
+    """Whether a frame task needs the radiance (an image modality), not the geometry alone."""
+    return bool(task.get("want_rgb")) or needs_radiance(task["modalities"])
+
+
+def prebuild_scenes(tasks: list, folder: str) -> dict:
+    """Build each target's Scene and radiance cache once, here, on every core, and pickle them
+    into ``folder`` for the pool's workers: {model spec: file}. Each worker would otherwise
+    build its own on its share of the cores (Cassini: ~5 s on one core, 2–3.5 s on two; the
+    same cache bit for bit, tests/raytrace/test_cache_solve.py). Only for tasks that shade (the
+    ``fast`` and ``balanced`` presets with an image modality); nothing is built for the others."""
+    import pickle
+    out = {}
+    for task in tasks:
+        spec = task["model_spec"]
+        if spec in out or task["cfg"]["render"]["quality"] == "reference":
+            continue
+        if not shades(task):
+            continue
+        from ..presets import preset_cache_options, quality_preset
+        scene = scene_of(load_model(spec), warn_model=False)  # not kept here: only the workers render
+        r = task["cfg"]["render"]
+        # the cache the preset's frames ask for (balanced from 12 rays: a finer lattice)
+        options = preset_cache_options(quality_preset(r["quality"], r.get("samples")), scene.scale_m)
+        cache = scene.radiance_cache(**options)
+        path = os.path.join(folder, f"scene{len(out)}.pickle")
+        with open(path, "wb") as fh:
+            pickle.dump((scene, cache, options), fh, protocol=pickle.HIGHEST_PROTOCOL)
+        out[spec] = path
+        del scene, cache
+    return out
+
+
+def star_field(cfg: dict):
+    """The sequence's star field (None without stars), read or drawn once per process."""
+    r = cfg["render"]
+    key = (r.get("star_catalogue"), r.get("star_limit_mag"), cfg["sequence"]["seed"])
+    if key[0] is None and key[1] is None:
+        return None
+    if key not in _STARS:
+        from ..stars import StarField
+        if key[0] is not None:
+            try:
+                _STARS[key] = StarField.from_csv(key[0], math.inf if key[1] is None else key[1])
+            except ValueError as exc:
+                raise UsageError(f"argument --star-catalogue: {exc}") from None
+        else:  # one sky per seed: the same stars in every frame
+            _STARS[key] = StarField.procedural(key[1], key[2])
+    return _STARS[key]
