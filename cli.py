@@ -1,30 +1,17 @@
 #!/usr/bin/env python3
-"""Command line and pipeline: orbit → pose → raytrace → degrade → files.
+"""The command line, and the one place that joins orbit → raytrace → degrade → files.
 
 ``python cli.py --target cassini --pattern spiral`` renders one sequence into
 ``output/cassini_spiral/`` (or ``--out``): clean and degraded RGB, instance masks, depth,
-normals and per-frame labels, with a progress bar and a one-line summary. Every option of the
-lower layers is a flag and a key of ``--config FILE.toml`` (flags override the file); the
-resolved configuration is written with the output (``config.toml``, ``scenario.json``).
-``--dry-run`` prints the per-frame states and visibility flags instead of rendering, ``--json``
-prints them as one JSON document (keys as in ``scenario.json`` and ``labels.json``, SI units).
+normals and per-frame labels. Other commands: ``dataset``, ``ablation``, ``render-scene``,
+``preview``, ``snapshots`` (docs/cli.md; ``python cli.py COMMAND --help``).
 
-Other commands:
-
-* ``python cli.py dataset`` — the paper's dataset in one command (4 targets × 500 frames,
-  ``--patterns`` for all four patterns per target), one progress bar, a table of counts;
-* ``python cli.py ablation --target T[,T..] --frames N`` — degradation ablation on clean renders;
-* ``python cli.py render-scene SCENE.json --out DIR`` — one frame of an explicit scene;
-* ``python cli.py preview --target T --pattern P [--out preview.png] [--all-patterns]`` — an
-  off-screen pyvista picture of the trajectory, camera frusta, Sun and Earth, in seconds;
-* ``python cli.py snapshots [--update]`` — compare (or deliberately refresh) the small render
-  snapshots that CI guards pixels with.
-
-Frames are independent and seeded per frame (``SeedSequence(seed).spawn``): the output is
-byte-identical for 1 worker, N worker processes (``--workers``), shards (``--shard K/N``) or a
-dask cluster (``--scheduler ADDRESS``). Files are written under temporary names and renamed;
-a frame is complete when its manifest record (``.manifest/NNNNNN.json``, with checksums) is
-written, and a rerun skips complete frames.
+This module holds the face — the options table, the parsers, the printing — and the
+composition: :func:`plan_sequence` loads the target and hands the configuration to
+:func:`orbit.plan.plan_orbit`; :func:`render_frame_images` renders a frame
+(:func:`raytrace.shade.render`) and degrades it (:mod:`degrade.presets`); :func:`run_frame`
+is the per-frame function that :mod:`raytrace.dataset` runs on its pool and writes into the
+sequence folder. The three packages never import each other.
 
 Errors in the arguments print one line naming the parameter and what is allowed, and exit
 with status 2, leaving nothing behind.
@@ -40,7 +27,6 @@ import os
 import re
 import sys
 import time
-from dataclasses import dataclass
 
 # one BLAS thread (unless the user set one): nothing here needs a threaded BLAS, and OpenBLAS
 # workers that spin after a product steal a core from the renderer's kernels (worker
@@ -58,7 +44,10 @@ from raytrace.constants import EARTH_TEXTURES as EARTH_TEXTURE_NAMES
 from raytrace.constants import SOLAR_CONSTANT_W_M2
 from raytrace.dataset import UsageError as CLIError
 from raytrace.dataset import folder, jit, pool, scenes, snapshots
+from raytrace.dataset import options as opt
 from raytrace.dataset import run as runner
+from raytrace.dataset.modalities import MODALITIES as MODALITY
+from raytrace.dataset.modalities import DEFAULT as DEFAULT_MODALITIES
 from raytrace.dataset.modalities import NAMES as MODALITIES
 from raytrace.presets import QUALITIES
 from raytrace.targets import BUILTIN_TARGETS as TARGETS
@@ -92,113 +81,7 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{PROG}: error: {message}\n")
 
 
-# --------------------------------------------------------------------------- value parsers
-def _int_in(lo: int, hi: int):
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer in [{lo}, {hi}], got {text!r}") from None
-        if not lo <= value <= hi:
-            raise argparse.ArgumentTypeError(f"must be an integer in [{lo}, {hi}], got {value}")
-        return value
-    parse.toml = "an integer"
-    return parse
-
-
-def _float_in(lo: float, hi: float, *, lo_open: bool = False, unit: str = ""):
-    def parse(text: str) -> float:
-        lo_txt = f"({lo:g}" if lo_open else f"[{lo:g}"
-        allowed = f"a finite number in {lo_txt}, {hi:g}]{(' ' + unit) if unit else ''}"
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text!r}") from None
-        if not math.isfinite(value) or value < lo or value > hi or (lo_open and value == lo):
-            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text}")
-        return value
-    parse.toml = "a number"
-    return parse
-
-
-def _floats(n: int, lo: float, hi: float, *, unit: str = "", nonzero: bool = False):
-    def parse(text: str) -> list:
-        what = f"{n} comma-separated finite numbers in [{lo:g}, {hi:g}]{(' ' + unit) if unit else ''}"
-        try:
-            values = [float(v) for v in str(text).split(",")]
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}") from None
-        if len(values) != n or not all(math.isfinite(v) and lo <= v <= hi for v in values):
-            raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}")
-        if nonzero and not any(values):
-            raise argparse.ArgumentTypeError(f"must be a non-zero vector, got {text!r}")
-        return values
-    parse.toml = f"an array of {n} numbers"
-    return parse
-
-
-def _choice(allowed):
-    def parse(text: str) -> str:
-        if text not in allowed:
-            raise argparse.ArgumentTypeError(f"must be one of {', '.join(allowed)}; got {text!r}")
-        return text
-    parse.choices = tuple(allowed)
-    return parse
-
-
-def _subset(allowed, *, keep_order: bool = False):
-    """A comma-separated list of names from ``allowed``, without repeats: in the canonical order
-    of ``allowed``, or with ``keep_order`` in the order given."""
-    def parse(text: str) -> list:
-        items = [s.strip() for s in str(text).split(",") if s.strip()]
-        bad = [s for s in items if s not in allowed]
-        if not items or bad:
-            raise argparse.ArgumentTypeError(f"must be a comma-separated list of {', '.join(allowed)}; "
-                                             f"got {text!r}")
-        return list(dict.fromkeys(items)) if keep_order else [a for a in allowed if a in items]
-    parse.choices = tuple(allowed)
-    return parse
-
-
-def _choices_metavar(parse, many: bool = False) -> str | None:
-    """``{a,b,c}`` (one of) or ``{a,b,c}[,..]`` (a list) for a parser of names."""
-    choices = getattr(parse, "choices", None)
-    if choices is None:
-        return None
-    return "{" + ",".join(choices) + "}" + ("[,...]" if many else "")
-
-
-def _bool(text: str) -> bool:
-    if str(text).lower() in ("true", "1", "yes"):
-        return True
-    if str(text).lower() in ("false", "0", "no"):
-        return False
-    raise argparse.ArgumentTypeError(f"must be true or false, got {text!r}")
-
-
-_bool.toml = "true or false"
-
-
-def _path(text: str) -> str:
-    if not str(text):
-        raise argparse.ArgumentTypeError("must be a file path, got ''")
-    return str(text)
-
-
-_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
-
-
-def _out_path(text: str) -> str:
-    """A path to write to: not blank (``--out " "`` made a folder named by a space) and free of
-    control characters (a pasted newline or tab)."""
-    text = str(text)
-    if not text.strip():
-        raise argparse.ArgumentTypeError(f"must name a folder or file, got {text!r}")
-    if _CONTROL.search(text):
-        raise argparse.ArgumentTypeError(f"must be a path without control characters (newline, tab, ...), got {text!r}")
-    return text
-
-
+# --------------------------------------------------------------------------- value parsers (others: raytrace.dataset.options)
 def _utc(text: str) -> str:
     from orbit.epoch import to_unix_seconds
     from orbit.sun import VALID_UTC_RANGE_S
@@ -212,150 +95,125 @@ def _utc(text: str) -> str:
     return text
 
 
-def _shard(text: str) -> tuple:
-    try:
-        k, n = (int(v) for v in text.split("/"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be K/N with integers 1 <= K <= N, got {text!r}") from None
-    if not 1 <= k <= n:
-        raise argparse.ArgumentTypeError(f"must be K/N with integers 1 <= K <= N, got {text!r}")
-    return k, n
-
-
 # --------------------------------------------------------------------------- the options
-@dataclass(frozen=True, slots=True)
-class _Opt:
-    """One scenario option: a flag, a key of a TOML table, a parser and a default."""
-
-    flag: str
-    section: str
-    parse: object
-    default: object
-    help: str
-    metavar: str | None = None
-    switch: bool = False  # a store_true flag
-
-    @property
-    def key(self) -> str:
-        return self.flag[2:].replace("-", "_")
 
 
 def _options() -> tuple:
-    O = _Opt
+    O = opt.Option
     deg = "deg"
     return (
         # [sequence]
-        O("--target", "sequence", _choice(TARGETS), "cassini", "built-in target"),
-        O("--mesh", "sequence", _path, None, "render this mesh file (glb/gltf/obj/ply/stl/off) instead of --target; "
+        O("--target", "sequence", opt.choice(TARGETS), "cassini", "built-in target"),
+        O("--mesh", "sequence", opt.path, None, "render this mesh file (glb/gltf/obj/ply/stl/off) instead of --target; "
           "body frame = the file's frame (raytrace.meshio.load_mesh)", "FILE"),
-        O("--mesh-unit-m", "sequence", _float_in(0.0, 1e3, lo_open=True, unit="m"), 1.0,
+        O("--mesh-unit-m", "sequence", opt.float_in(0.0, 1e3, lo_open=True, unit="m"), 1.0,
           "metres per mesh-file unit (0.001 for millimetres)"),
-        O("--pattern", "sequence", _choice(PATTERNS), "spiral", "relative-motion pattern"),
-        O("--frames", "sequence", _int_in(1, 1_000_000), DEFAULT_FRAMES,
+        O("--pattern", "sequence", opt.choice(PATTERNS), "spiral", "relative-motion pattern"),
+        O("--frames", "sequence", opt.int_in(1, 1_000_000), DEFAULT_FRAMES,
           "number of frames, evenly spaced over the window"),
-        O("--seed", "sequence", _int_in(0, 2**63 - 1), 0,
+        O("--seed", "sequence", opt.int_in(0, 2**63 - 1), 0,
           "seed of the pattern draw and of every frame's noise; same seed, same bytes"),
-        O("--window-s", "sequence", _float_in(0.0, 1e7, lo_open=True, unit="s"), None,
+        O("--window-s", "sequence", opt.float_in(0.0, 1e7, lo_open=True, unit="s"), None,
           "window length [s] (default: one period for elliptical, half for spiral and drip-drop, "
           "80 m of drift for drift, scaled with the target)"),
         # [pattern]
-        O("--amplitude-m", "pattern", _float_in(0.0, 1e6, lo_open=True, unit="m"), None,
+        O("--amplitude-m", "pattern", opt.float_in(0.0, 1e6, lo_open=True, unit="m"), None,
           "radial semi-amplitude A [m]; with --kappa sets the pattern instead of drawing it from --seed"),
-        O("--kappa", "pattern", _float_in(-1e3, 1e3), None, "kappa = x_l / A (0 elliptical, "
+        O("--kappa", "pattern", opt.float_in(-1e3, 1e3), None, "kappa = x_l / A (0 elliptical, "
           "|kappa| < 0.2896 spiral, < 1 drip-drop, >= 1 drift)"),
-        O("--gamma-m", "pattern", _float_in(-1e7, 1e7, unit="m"), None,
+        O("--gamma-m", "pattern", opt.float_in(-1e7, 1e7, unit="m"), None,
           "along-track position at the characteristic point [m] (default: centre the window on the target)"),
-        O("--z-amp-m", "pattern", _float_in(0.0, 1e6, unit="m"), None, "out-of-plane amplitude [m] (default 0)"),
-        O("--z-phase-deg", "pattern", _float_in(-360.0, 360.0, unit=deg), None,
+        O("--z-amp-m", "pattern", opt.float_in(0.0, 1e6, unit="m"), None, "out-of-plane amplitude [m] (default 0)"),
+        O("--z-phase-deg", "pattern", opt.float_in(-360.0, 360.0, unit=deg), None,
           "out-of-plane phase at t = 0 [deg] (default 0)"),
-        O("--tau0-deg", "pattern", _float_in(-360.0, 360.0, unit=deg), None,
+        O("--tau0-deg", "pattern", opt.float_in(-360.0, 360.0, unit=deg), None,
           "in-plane phase after the characteristic point at t = 0 [deg] (default 0)"),
         # [orbit]
-        O("--altitude-km", "orbit", _float_in(100.0, 1e6, unit="km"), 400.0, "altitude above the equatorial radius [km]"),
-        O("--inclination-deg", "orbit", _float_in(0.0, 180.0, unit=deg), 51.6, "inclination [deg]"),
-        O("--raan-deg", "orbit", _float_in(-360.0, 360.0, unit=deg), None,
+        O("--altitude-km", "orbit", opt.float_in(100.0, 1e6, unit="km"), 400.0, "altitude above the equatorial radius [km]"),
+        O("--inclination-deg", "orbit", opt.float_in(0.0, 180.0, unit=deg), 51.6, "inclination [deg]"),
+        O("--raan-deg", "orbit", opt.float_in(-360.0, 360.0, unit=deg), None,
           "right ascension of the ascending node [deg] (default: 0, or where no --arg-lat-deg alone keeps every "
           "frame lit and in view, the orbit plane that does best)"),
-        O("--arg-lat-deg", "orbit", _float_in(-360.0, 360.0, unit=deg), None,
+        O("--arg-lat-deg", "orbit", opt.float_in(-360.0, 360.0, unit=deg), None,
           "argument of latitude of the target at the epoch [deg] (default: the phase that keeps the target fully "
           "sunlit and in view in the most frames; give one to set it: 180 flies the default spiral through "
           "Earth's shadow)"),
         O("--epoch", "orbit", _utc, DEFAULT_EPOCH_UTC, "UTC epoch of frame 0, ISO 8601"),
-        O("--sun-margin-deg", "orbit", _float_in(0.0, 90.0, unit=deg), 20.0,
+        O("--sun-margin-deg", "orbit", opt.float_in(0.0, 90.0, unit=deg), 20.0,
           "stray-light margin added to the Sun's radius for the Sun-in-lens test [deg]"),
         # [attitude]
-        O("--attitude", "attitude", _choice(ATTITUDE_MODES), "lvlh-fixed", "target attitude law (orbit.attitude)"),
-        O("--attitude-ypr-deg", "attitude", _floats(3, -360.0, 360.0, unit=deg), [0.0, 0.0, 0.0],
+        O("--attitude", "attitude", opt.choice(ATTITUDE_MODES), "lvlh-fixed", "target attitude law (orbit.attitude)"),
+        O("--attitude-ypr-deg", "attitude", opt.floats(3, -360.0, 360.0, unit=deg), [0.0, 0.0, 0.0],
           "initial attitude w.r.t. LVLH as z-y-x Euler angles yaw,pitch,roll [deg]", "Y,P,R"),
-        O("--spin-axis", "attitude", _floats(3, -1e6, 1e6, nonzero=True), [0.0, 0.0, 1.0],
+        O("--spin-axis", "attitude", opt.floats(3, -1e6, 1e6, nonzero=True), [0.0, 0.0, 1.0],
           "spin axis in body axes (spin mode)", "X,Y,Z"),
-        O("--spin-rate-deg-s", "attitude", _float_in(-3600.0, 3600.0, unit="deg/s"), 0.0, "spin rate [deg/s]"),
-        O("--omega0-deg-s", "attitude", _floats(3, -3600.0, 3600.0, unit="deg/s"), [0.0, 0.0, 0.0],
+        O("--spin-rate-deg-s", "attitude", opt.float_in(-3600.0, 3600.0, unit="deg/s"), 0.0, "spin rate [deg/s]"),
+        O("--omega0-deg-s", "attitude", opt.floats(3, -3600.0, 3600.0, unit="deg/s"), [0.0, 0.0, 0.0],
           "initial body rate for tumble [deg/s]", "X,Y,Z"),
-        O("--inertia-kg-m2", "attitude", _floats(3, 1e-9, 1e12, unit="kg m2"), [1.0, 1.0, 1.0],
+        O("--inertia-kg-m2", "attitude", opt.floats(3, 1e-9, 1e12, unit="kg m2"), [1.0, 1.0, 1.0],
           "principal moments of inertia Jxx,Jyy,Jzz along the body axes for tumble [kg m^2]", "JX,JY,JZ"),
         # [camera]
-        O("--width", "camera", _int_in(1, 65535), 1280, "image width [px]"),
-        O("--height", "camera", _int_in(1, 65535), 960, "image height [px]"),
-        O("--focal-length-mm", "camera", _float_in(1e-3, 1e4, unit="mm"), 4.0, "focal length [mm]"),
-        O("--pixel-pitch-um", "camera", _float_in(0.1, 1e3, unit="um"), 3.45, "pixel pitch [um]"),
-        O("--roll-deg", "camera", _float_in(-360.0, 360.0, unit="deg"), 0.0,
+        O("--width", "camera", opt.int_in(1, 65535), 1280, "image width [px]"),
+        O("--height", "camera", opt.int_in(1, 65535), 960, "image height [px]"),
+        O("--focal-length-mm", "camera", opt.float_in(1e-3, 1e4, unit="mm"), 4.0, "focal length [mm]"),
+        O("--pixel-pitch-um", "camera", opt.float_in(0.1, 1e3, unit="um"), 3.45, "pixel pitch [um]"),
+        O("--roll-deg", "camera", opt.float_in(-360.0, 360.0, unit="deg"), 0.0,
           "camera roll about its boresight, applied after the look-at pointing [deg]"),
         # [render]
-        O("--quality", "render", _choice(QUALITIES), "fast", "shading preset (raytrace.shade)"),
-        O("--samples", "render", _int_in(1, 1 << 20), None, "overrides the preset's sample count"),
-        O("--exposure", "render", _choice(EXPOSURE_MODES), "fixed",
+        O("--quality", "render", opt.choice(QUALITIES), "fast", "shading preset (raytrace.shade)"),
+        O("--samples", "render", opt.int_in(1, 1 << 20), None, "overrides the preset's sample count"),
+        O("--exposure", "render", opt.choice(EXPOSURE_MODES), "fixed",
           "clean RGB exposure: fixed (a white Lambertian surface facing the Sun = 1.0) or auto (per frame)"),
-        O("--earth-texture", "render", _choice(EARTH_TEXTURES), "procedural", "Earth as light and backdrop"),
-        O("--earth-albedo", "render", _float_in(0.0, 1.0), 0.3, "Earth's mean albedo"),
-        O("--ambient-W-m2-sr", "render", _float_in(0.0, 1e4, unit="W/(m2 sr)"), 0.0, "constant sky radiance"),
-        O("--star-limit-mag", "render", _float_in(-1.5, 9.0, unit="mag"), None,
+        O("--earth-texture", "render", opt.choice(EARTH_TEXTURES), "procedural", "Earth as light and backdrop"),
+        O("--earth-albedo", "render", opt.float_in(0.0, 1.0), 0.3, "Earth's mean albedo"),
+        O("--ambient-W-m2-sr", "render", opt.float_in(0.0, 1e4, unit="W/(m2 sr)"), 0.0, "constant sky radiance"),
+        O("--star-limit-mag", "render", opt.float_in(-1.5, 9.0, unit="mag"), None,
           "draw the stars brighter than this visual magnitude in the background (procedural sky from --seed, or "
           "--star-catalogue) (default: no stars)", "MAG"),
-        O("--star-catalogue", "render", _path, None,
+        O("--star-catalogue", "render", opt.path, None,
           "draw the stars of this CSV catalogue (columns ra_deg, dec_deg, v_mag; J2000) instead of a procedural "
           "sky", "FILE.csv"),
         # [degrade]
-        O("--degrade", "degrade", _choice(DEGRADE_PRESETS), "physical",
+        O("--degrade", "degrade", opt.choice(DEGRADE_PRESETS), "physical",
           "degradation of rgb_degraded: none, paper (the source paper's groups D1-D4) or physical (optics + sensor "
           "chain)"),
-        O("--paper-group", "degrade", _choice(PAPER_GROUP_NAMES), "D4", "paper preset: D1 blur ... D4 blur+Poisson+Gaussian"),
-        O("--paper-blur-px", "degrade", _float_in(0.0, 1000.0, unit="px"), 15.0,
+        O("--paper-group", "degrade", opt.choice(PAPER_GROUP_NAMES), "D4", "paper preset: D1 blur ... D4 blur+Poisson+Gaussian"),
+        O("--paper-blur-px", "degrade", opt.float_in(0.0, 1000.0, unit="px"), 15.0,
           "paper preset: motion-blur length L [px] (the paper's value: 15)"),
-        O("--paper-angle-deg", "degrade", _float_in(-360.0, 360.0, unit="deg"), 30.0,
+        O("--paper-angle-deg", "degrade", opt.float_in(-360.0, 360.0, unit="deg"), 30.0,
           "paper preset: motion-blur angle θ [deg] (the paper's value: 30)"),
-        O("--paper-gaussian-var", "degrade", _float_in(0.0, 1.0), 0.01,
+        O("--paper-gaussian-var", "degrade", opt.float_in(0.0, 1.0), 0.01,
           "paper preset: variance of the Gaussian noise on [0, 1] values (the paper's value: 0.01)"),
-        O("--f-number", "degrade", _float_in(0.5, 64.0), 4.0, "physical preset: f-number N (aperture = f / N)"),
-        O("--exposure-us", "degrade", _float_in(0.0, 1e7, lo_open=True, unit="us"), 20.0,
+        O("--f-number", "degrade", opt.float_in(0.5, 64.0), 4.0, "physical preset: f-number N (aperture = f / N)"),
+        O("--exposure-us", "degrade", opt.float_in(0.0, 1e7, lo_open=True, unit="us"), 20.0,
           "physical preset: exposure time [us]"),
-        O("--quantum-efficiency", "degrade", _float_in(0.0, 1.0, lo_open=True), 0.6, "physical preset: QE"),
-        O("--full-well-e", "degrade", _float_in(1.0, 1e9, unit="e-"), 10000.0, "physical preset: full well"),
-        O("--read-noise-e", "degrade", _float_in(0.0, 1e6, unit="e-"), 5.0, "physical preset: read noise sigma"),
-        O("--bit-depth", "degrade", _int_in(1, 16), 12, "physical preset: ADC bits"),
-        O("--aberration-sigma-px", "degrade", _float_in(0.0, 100.0, unit="px"), 0.0,
+        O("--quantum-efficiency", "degrade", opt.float_in(0.0, 1.0, lo_open=True), 0.6, "physical preset: QE"),
+        O("--full-well-e", "degrade", opt.float_in(1.0, 1e9, unit="e-"), 10000.0, "physical preset: full well"),
+        O("--read-noise-e", "degrade", opt.float_in(0.0, 1e6, unit="e-"), 5.0, "physical preset: read noise sigma"),
+        O("--bit-depth", "degrade", opt.int_in(1, 16), 12, "physical preset: ADC bits"),
+        O("--aberration-sigma-px", "degrade", opt.float_in(0.0, 100.0, unit="px"), 0.0,
           "physical preset: Gaussian aberration sigma [px]"),
-        O("--motion-blur-px", "degrade", _float_in(0.0, 1000.0, unit="px"), 0.0,
+        O("--motion-blur-px", "degrade", opt.float_in(0.0, 1000.0, unit="px"), 0.0,
           "physical preset: motion-blur length [px] (constant over the sequence)"),
-        O("--motion-angle-deg", "degrade", _float_in(-360.0, 360.0, unit=deg), 0.0,
+        O("--motion-angle-deg", "degrade", opt.float_in(-360.0, 360.0, unit=deg), 0.0,
           "physical preset: motion-blur direction, counter-clockwise from +column [deg]"),
-        O("--defocus-radius-px", "degrade", _float_in(0.0, 100.0, unit="px"), 0.0,
+        O("--defocus-radius-px", "degrade", opt.float_in(0.0, 100.0, unit="px"), 0.0,
           "physical preset: defocus blur-circle radius [px] (pillbox)"),
-        O("--corner-sigma-px", "degrade", _float_in(0.0, 100.0, unit="px"), 0.0,
+        O("--corner-sigma-px", "degrade", opt.float_in(0.0, 100.0, unit="px"), 0.0,
           "physical preset: Gaussian aberration sigma reached in the image corners [px] (0: uniform)"),
-        O("--offset-dn", "degrade", _float_in(0.0, 65535.0, unit="DN"), 0.0, "physical preset: ADC black level"),
-        O("--dark-current-e-s", "degrade", _float_in(0.0, 1e9, unit="e-/s"), 0.0,
+        O("--offset-dn", "degrade", opt.float_in(0.0, 65535.0, unit="DN"), 0.0, "physical preset: ADC black level"),
+        O("--dark-current-e-s", "degrade", opt.float_in(0.0, 1e9, unit="e-/s"), 0.0,
           "physical preset: dark current [e-/s]"),
-        O("--demosaic", "degrade", _choice(DEMOSAIC_ALGORITHMS), "MHC",
+        O("--demosaic", "degrade", opt.choice(DEMOSAIC_ALGORITHMS), "MHC",
           "physical preset: OpenImageIO demosaic algorithm of the RGGB mosaic"),
-        O("--motion-blur", "degrade", _choice(("fixed", "auto")), "fixed",
+        O("--motion-blur", "degrade", opt.choice(("fixed", "auto")), "fixed",
           "physical preset: 'fixed' blurs every frame by --motion-blur-px at --motion-angle-deg; 'auto' takes "
           "each frame's blur from the target's own image motion during the exposure"),
         # [output]
-        O("--modalities", "output", _subset(MODALITIES), None,
+        O("--modalities", "output", opt.subset(MODALITIES), None,
           "files per frame, comma-separated (default: all but hdr; no rgb_degraded with --degrade none)",
           "LIST"),
-        O("--only-visible", "output", _bool, False,
+        O("--only-visible", "output", opt.boolean, False,
           "drop frames whose flags say the target cannot be seen (default: render them, flags in labels)",
           switch=True),
     )
@@ -363,42 +221,16 @@ def _options() -> tuple:
 
 OPTIONS = _options()
 SECTIONS = tuple(dict.fromkeys(o.section for o in OPTIONS))
-_BY_KEY = {(o.section, o.key): o for o in OPTIONS}
-
-
-def _add_options(p: argparse.ArgumentParser, defaults: dict, skip=()) -> None:
-    groups = {}
-    for o in OPTIONS:
-        if o.key in skip:
-            continue
-        g = groups.get(o.section) or groups.setdefault(o.section, p.add_argument_group(f"[{o.section}]"))
-        d = defaults.get(o.key, o.default)
-        # the default once: from the help text where it says what an unset option does, else shown here
-        shown = "" if o.switch or d is None or "(default" in o.help else f" (default: {_show(d)})"
-        if o.switch:
-            g.add_argument(o.flag, dest=o.key, action="store_true", default=None, help=o.help)
-        else:
-            metavar = o.metavar if o.metavar and getattr(o.parse, "choices", None) is None else (
-                _choices_metavar(o.parse, many=o.metavar == "LIST") or o.metavar)
-            g.add_argument(o.flag, dest=o.key, type=o.parse, default=None, metavar=metavar, help=o.help + shown)
-
-
-def _show(value) -> str:
-    if value is None:
-        return "automatic"
-    if isinstance(value, (list, tuple)):
-        return ",".join(_show(v) for v in value)
-    return f"{value:g}" if isinstance(value, float) else str(value)
 
 
 def _add_exec(p: argparse.ArgumentParser, *, out_help: str) -> None:
     g = p.add_argument_group("execution (not part of the scenario)")
-    g.add_argument("--config", type=_path, default=None, metavar="FILE.toml",
+    g.add_argument("--config", type=opt.path, default=None, metavar="FILE.toml",
                    help="options as TOML tables (as in a sequence's config.toml); flags override")
-    g.add_argument("--out", type=_out_path, default=None, metavar="DIR", help=out_help)
-    g.add_argument("--workers", type=_int_in(1, 4096), default=None,
+    g.add_argument("--out", type=opt.out_path, default=None, metavar="DIR", help=out_help)
+    g.add_argument("--workers", type=opt.int_in(1, 4096), default=None,
                    help="worker processes (default: all cores of this machine)")
-    g.add_argument("--shard", type=_shard, default=None, metavar="K/N",
+    g.add_argument("--shard", type=opt.shard, default=None, metavar="K/N",
                    help="render only frames i with i %% N == K - 1 (e.g. one task of a job array)")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="render on a dask.distributed cluster (tcp://host:8786) instead of local processes")
@@ -411,7 +243,7 @@ def build_parser() -> argparse.ArgumentParser:
                 "renders one sequence of the requested pattern around the target (clean and degraded RGB, "
                 "mask, depth, normals, labels). Other commands: dataset, ablation, render-scene, preview, snapshots "
                 "(`python cli.py COMMAND --help`).")
-    _add_options(p, {})
+    opt.add_options(p, OPTIONS, {})
     p.add_argument("--dry-run", action="store_true", help="print the per-frame states and flags; render nothing")
     p.add_argument("--json", action="store_true", help="print the states and flags as one JSON document; render nothing")
     _add_exec(p, out_help="sequence folder (default: output/TARGET_PATTERN)")
@@ -419,85 +251,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # --------------------------------------------------------------------------- configuration
-def _toml_text(value) -> str:
-    """A TOML value as the text a flag would take (so one parser validates both)."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, list):
-        return ",".join(_toml_text(v) for v in value)
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, (int, str)):
-        return str(value)
-    if type(value).__name__ in ("datetime", "date", "time"):  # tomllib's bare date-times
-        raise argparse.ArgumentTypeError("must be a quoted string (e.g. \"2026-03-20T12:00:00Z\"), got a bare TOML "
-                                         f"{type(value).__name__}")
-    raise argparse.ArgumentTypeError(f"has an unsupported TOML type {type(value).__name__}")
-
-
-def _toml_type_ok(kind: str | None, value) -> bool:
-    """Whether a TOML value has the type its option takes (a flag's text is parsed, but a file's
-    ``frames = "2"`` or ``only_visible = "yes"`` is a type error in TOML terms)."""
-    def number(v):
-        return isinstance(v, (int, float)) and not isinstance(v, bool)
-    if type(value).__name__ in ("datetime", "date", "time"):
-        return True  # _toml_text says how to write it
-    if kind is None:  # names, lists of names, paths, times: a string (or a list of strings)
-        return isinstance(value, str) or (isinstance(value, list) and all(isinstance(v, str) for v in value))
-    if kind == "an integer":
-        return isinstance(value, int) and not isinstance(value, bool)
-    if kind == "a number":
-        return number(value)
-    if kind == "true or false":
-        return isinstance(value, bool)
-    return isinstance(value, list) and all(number(v) for v in value)  # an array of n numbers
-
-
-CONFIG_LIMIT_BYTES = 1 << 20
-"""Largest ``--config`` file read [bytes]: a configuration is a few kB; anything else (a device,
-a pipe, a wrong file) is refused instead of read without end."""
 
 
 def read_config(path: str) -> dict:
-    """Read a TOML configuration; returns {section: {key: value}} validated like the flags.
+    """:func:`raytrace.dataset.options.read_config` of the scenario options."""
+    return opt.read_config(path, OPTIONS)
 
-    Raises
-    ------
-    CLIError
-        Unreadable or invalid TOML, an unknown table or key, or a value a flag would reject.
-    """
-    import tomllib
 
-    from raytrace.files import read_regular_file
-    try:
-        raw = read_regular_file(path, limit_bytes=CONFIG_LIMIT_BYTES, what=f"--config {path}")
-    except ValueError as exc:
-        raise CLIError(str(exc)) from None
-    try:
-        data = tomllib.loads(raw.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise CLIError(f"--config: {path} is not valid TOML ({exc})") from None
-    out = {}
-    for section, table in data.items():
-        if section not in SECTIONS:
-            raise CLIError(f"--config: {path}: unknown table [{section}]; allowed tables are "
-                           f"{', '.join(f'[{s}]' for s in SECTIONS)}")
-        if not isinstance(table, dict):
-            raise CLIError(f"--config: {path}: {section} must be a table ([{section}] and its keys below), "
-                           f"got a {type(table).__name__}")
-        for key, value in table.items():
-            opt = _BY_KEY.get((section, key))
-            if opt is None:
-                keys = ", ".join(o.key for o in OPTIONS if o.section == section)
-                raise CLIError(f"--config: {path}: unknown key {key!r} in [{section}]; allowed: {keys}")
-            if not _toml_type_ok(getattr(opt.parse, "toml", None), value):
-                kind = getattr(opt.parse, "toml", "a string (or an array of strings)")
-                raise CLIError(f"--config: {path}: [{section}] {key} must be {kind}, got {value!r}")
-            try:
-                out.setdefault(section, {})[key] = opt.parse(_toml_text(value))
-            except argparse.ArgumentTypeError as exc:
-                raise CLIError(f"--config: {path}: [{section}] {key} {exc}") from None
-    return out
+def config_toml(cfg: dict) -> str:
+    """The resolved configuration as TOML (automatic values are comments)."""
+    return opt.config_toml(cfg, SECTIONS)
 
 
 def resolve_config(args: argparse.Namespace, defaults: dict | None = None) -> tuple[dict, set]:
@@ -525,7 +288,7 @@ def resolve_config(args: argparse.Namespace, defaults: dict | None = None) -> tu
     d = cfg["degrade"]
     out = cfg["output"]
     if out["modalities"] is None:
-        mods = defaults.get("modalities") or [m for m in MODALITIES if m != "hdr"]
+        mods = defaults.get("modalities") or list(DEFAULT_MODALITIES)
         out["modalities"] = [m for m in mods if not (m == "rgb_degraded" and d["degrade"] == "none")]
     elif "rgb_degraded" in out["modalities"] and d["degrade"] == "none":
         raise CLIError("argument --modalities: rgb_degraded needs --degrade paper or physical, got --degrade none")
@@ -540,56 +303,7 @@ def resolve_config(args: argparse.Namespace, defaults: dict | None = None) -> tu
     return cfg, given
 
 
-def config_toml(cfg: dict) -> str:
-    """The resolved configuration as TOML (automatic values are comments)."""
-    lines = ["# orbitsynth: resolved options of this sequence. `python cli.py --config config.toml --out DIR`",
-             "# renders the same bytes (execution options such as --workers are not recorded).", ""]
-    for section in SECTIONS:
-        lines.append(f"[{section}]")
-        for key, value in cfg[section].items():
-            if value is None:
-                lines.append(f"# {key} = automatic")
-            else:
-                lines.append(f"{key} = {_toml_value(value)}")
-        lines.append("")
-    return "\n".join(lines)
-
-
-def _toml_value(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    raise TypeError(f"cannot write {value!r} as TOML")
-
-
 # --------------------------------------------------------------------------- planning (orbit → pose → light)
-
-
-MESH_RADIUS_PLAUSIBLE_M = (0.02, 200.0)
-"""Bounding radii of real spacecraft [m]: from a 1U CubeSat's 0.087 m to the ISS's ~55 m, with room
-on both sides. A user mesh outside the range was probably read in the wrong unit."""
-
-
-def _mesh_unit_warning(radius_m: float, path: str) -> str | None:
-    """A one-line warning when a mesh loaded with the default ``--mesh-unit-m 1`` has a size
-    (``radius_m``: half its bounding-box diagonal) no spacecraft has (a 1 m cube drawn in
-    millimetres reads as 866 m), naming the flag."""
-    lo, hi = MESH_RADIUS_PLAUSIBLE_M
-    if radius_m > hi:
-        guess = "millimetres: --mesh-unit-m 0.001" if radius_m > 1000 * lo else "centimetres: --mesh-unit-m 0.01"
-        return (f"--mesh {path}: it is {2 * radius_m:.4g} m across (a radius of {radius_m:.4g} m), larger than any "
-                f"spacecraft, read as metres (--mesh-unit-m 1); if the file is in {guess}")
-    if radius_m < lo:
-        return (f"--mesh {path}: it is {2 * radius_m:.3g} m across, smaller than any spacecraft, read as metres "
-                "(--mesh-unit-m 1); if the file is in kilometres: --mesh-unit-m 1000")
-    return None
 
 
 def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
@@ -620,7 +334,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
     scenes.star_field(cfg)  # validates the star catalogue before anything is written
     if seq["mesh"] is not None and "mesh_unit_m" not in given:
         lo, hi = model.bounds_m  # the mesh's own size, wherever its origin lies
-        note = _mesh_unit_warning(0.5 * float(np.linalg.norm(hi - lo)), seq["mesh"])
+        note = scenes.mesh_unit_warning(0.5 * float(np.linalg.norm(hi - lo)), seq["mesh"])
         if note:
             sys.stderr.write(f"{PROG}: warning: {note}\n")
     camera = Camera.from_focal(cam["focal_length_mm"] * 1e-3, cam["pixel_pitch_um"] * 1e-6, cam["width"], cam["height"])
@@ -638,8 +352,6 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
 
 
 # --------------------------------------------------------------------------- one frame (runs in a worker)
-
-
 def _worker_ready(quality: str) -> None:
     """A first task for each worker, run while the parent builds the scenes: what a first
     ``quality`` frame would otherwise wait for — the imports (scipy.signal, ~0.6 s, for the
@@ -653,26 +365,6 @@ def _worker_ready(quality: str) -> None:
     _precompile.load_here(precompile_groups(quality))
     if quality != "reference":
         split_sum_table()
-
-
-def frame_seeds(seed: int, frame: int) -> tuple:
-    """(render seed, degradation SeedSequence) of a frame: child ``frame`` of
-    ``SeedSequence(seed).spawn(...)``; the render seed is its first word mod 2³¹, the
-    degradation stream its first child."""
-    child = np.random.SeedSequence(seed, spawn_key=(frame,))
-    return int(child.generate_state(1)[0] % 2**31), np.random.SeedSequence(seed, spawn_key=(frame, 0))
-
-
-def _lighting(light: dict, r: dict, stars=None):
-    from raytrace.lighting import Earth, Lighting
-    earth = None
-    if r["earth_texture"] != "none":
-        earth = Earth(light["earth_dir_body"], light["earth_distance_m"], albedo=r["earth_albedo"],
-                      texture=r["earth_texture"], R_body_from_earth=light["R_body_from_earth"])
-    return Lighting(sun_dir_body=light["sun_dir_body"], sun_irradiance_W_m2=SOLAR_CONSTANT_W_M2,
-                    shadow_fraction=light["shadow_fraction"], earth=earth,
-                    ambient_radiance_W_m2_sr=r["ambient_W_m2_sr"], stars=stars,
-                    R_body_from_eci=None if stars is None else light["R_body_from_eci"])
 
 
 def degrade_frame(cfg: dict, task: dict, rgb8, radiance, degrade_seq) -> np.ndarray:
@@ -695,15 +387,15 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
     camera = Camera(*task["camera"])
     R = np.asarray(task["R_cam_from_body"], dtype=np.float64).reshape(3, 3)
     t = np.asarray(task["t_cam_m"], dtype=np.float64)
-    render_seed, degrade_seq = frame_seeds(cfg["sequence"]["seed"], task["frame"])
+    render_seed, degrade_seq = folder.frame_seeds(cfg["sequence"]["seed"], task["frame"])
     d = cfg["degrade"]
     need_rgb = task.get("want_rgb") or "rgb" in mods or ("rgb_degraded" in mods and d["degrade"] == "paper")
     need_radiance = scenes.shades(task)
     images, info = {}, {}
     if need_radiance:
         r = cfg["render"]
-        frame = render(scene, camera, R, t, _lighting(task["light"], r, scenes.star_field(cfg)), quality=r["quality"],
-                       samples=r["samples"], seed=render_seed)
+        lighting = scenes.lighting_of(task["light"], r, scenes.star_field(cfg))
+        frame = render(scene, camera, R, t, lighting, quality=r["quality"], samples=r["samples"], seed=render_seed)
         geo, radiance = frame.geometry, frame.radiance
     else:  # geometry-only modalities: no shading at all
         geo, radiance = scene.render_geometry(camera, R, t), None
@@ -718,14 +410,9 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
         info["exposure_scale"] = float(scale)
     if "rgb_degraded" in mods:
         images["rgb_degraded"] = degrade_frame(cfg, task, images.get("rgb"), radiance, degrade_seq)
-    if "mask" in mods:
-        images["mask"] = geo.instance.astype(np.uint16)
-    if "depth" in mods:
-        images["depth"] = geo.depth_m.astype(np.float32)
-    if "normal" in mods:
-        images["normal"] = geo.normal_cam.astype(np.float32)
-    if "hdr" in mods:
-        images["hdr"] = radiance.astype(np.float32)
+    for m in task["modalities"]:  # the rest from the geometry and radiance (raytrace.dataset.modalities)
+        if MODALITY[m].produce is not None:
+            images[m] = MODALITY[m].produce(geo, radiance)
     bbox = geo.bbox_xywh
     vf = geo.visible_fraction
     info.update({"bbox": None if bbox is None else [int(v) for v in bbox],
@@ -751,31 +438,6 @@ def run_plans(jobs: list, args: argparse.Namespace, *, desc: str | None = None) 
     return runner.run_plans(jobs, run_frame, config_text=config_toml, workers=args.workers, shard=args.shard,
                             scheduler=args.scheduler, quiet=args.quiet, quality=getattr(args, "quality", "fast"),
                             desc=desc, ready=functools.partial(_worker_ready, quality))
-
-
-# --------------------------------------------------------------------------- sequence folders
-
-
-# --------------------------------------------------------------------------- execution
-
-
-def _summary_line(s: dict, elapsed: float) -> str:
-    rate = f", {s['rendered'] / elapsed:.2f} frames/s" if s["rendered"] and elapsed > 0 else ""
-    if s["complete"]:
-        state = "labels.json and manifest.json written"
-    elif s.get("corrupt"):
-        frame, rel = s["corrupt"][0]
-        more = f" and {len(s['corrupt']) - 1} more" if len(s["corrupt"]) > 1 else ""
-        state = (f"{s['present']} of {s['wanted']} frames complete; frame {frame}{more} does not match its manifest "
-                 f"record ({rel}): rerun without --shard, or its shard, to render it again")
-    else:
-        state = (f"{s['present']} of {s['wanted']} frames present; labels.json is written when all are "
-                 "(run the other shards, or rerun without --shard)")
-    return (f"{s['name']}: {s['frames']} frames, {s['visible']} visible; rendered {s['rendered']}, "
-            f"skipped {s['skipped']} complete, in {elapsed:.1f} s{rate} -> {s['dir']}/ ({state})\n")
-
-
-# --------------------------------------------------------------------------- termination
 
 
 def _interrupted(exc: KeyboardInterrupt, after: str) -> int:
@@ -839,7 +501,7 @@ def main_job(argv: list) -> int:
     stats, status = _guarded(lambda: run_plans([(plan, seq_dir)], args))
     if status is not None:
         return status
-    sys.stdout.write(_summary_line(stats[0], time.perf_counter() - t0))
+    sys.stdout.write(runner.summary_line(stats[0], time.perf_counter() - t0))
     return 0
 
 
@@ -847,12 +509,12 @@ def dataset_main(argv: list) -> int:
     """``cli.py dataset``: the paper's dataset (targets × patterns) in one command."""
     p = _Parser(prog=f"{PROG} dataset", description="Render the paper's dataset: every target (and with --patterns "
                 "every pattern) as one sequence folder each, with one progress bar and a final table of counts.")
-    p.add_argument("--targets", type=_subset(TARGETS, keep_order=True), default=list(TARGETS),
-                   metavar=_choices_metavar(_subset(TARGETS), many=True),
+    p.add_argument("--targets", type=opt.subset(TARGETS, keep_order=True), default=list(TARGETS),
+                   metavar=opt.choices_metavar(opt.subset(TARGETS), many=True),
                    help="built-in targets, comma-separated, in the order of the table (default: all)")
     p.add_argument("--patterns", action="store_true", help="all four patterns per target (default: --pattern only)")
     defaults = {"frames": DATASET_FRAMES, "degrade": "none", "modalities": list(DATASET_MODALITIES)}
-    _add_options(p, defaults, skip=("target", "mesh", "mesh_unit_m"))
+    opt.add_options(p, OPTIONS, defaults, skip=("target", "mesh", "mesh_unit_m"))
     _add_exec(p, out_help="dataset folder; one sub-folder TARGET_PATTERN per sequence (default: output/dataset)")
     args = p.parse_args(argv)
     for key in ("target", "mesh", "mesh_unit_m"):
@@ -881,16 +543,7 @@ def dataset_main(argv: list) -> int:
     if status is not None:
         return status
     stats, modalities, root = done
-    elapsed = time.perf_counter() - t0
-    w = sys.stdout.write
-    w(f"{'sequence':<26} {'frames':>6} {'visible':>7} {'rendered':>8} {'skipped':>7} {'complete':>8}\n")
-    for s in stats:
-        w(f"{s['name']:<26} {s['frames']:6d} {s['visible']:7d} {s['rendered']:8d} {s['skipped']:7d} "
-          f"{'yes' if s['complete'] else 'no':>8}\n")
-    tot = {k: sum(s[k] for s in stats) for k in ("frames", "visible", "rendered", "skipped")}
-    w(f"{'total':<26} {tot['frames']:6d} {tot['visible']:7d} {tot['rendered']:8d} {tot['skipped']:7d}\n")
-    w(f"{len(stats)} sequences x {len(modalities)} modalities ({','.join(modalities)}) in {elapsed:.1f} s "
-      f"-> {root}/\n")
+    sys.stdout.write(runner.stats_table(stats, modalities, time.perf_counter() - t0, root))
     return 0
 
 
@@ -898,24 +551,24 @@ def ablation_main(argv: list) -> int:
     """``cli.py ablation``: degradation ablation (degrade.ablation) on clean renders."""
     p = _Parser(prog=f"{PROG} ablation", description="Render N clean frames per target through the pipeline and "
                 "measure what each degradation costs (PSNR, SSIM; LPIPS when installed).")
-    p.add_argument("--targets", type=_subset(TARGETS, keep_order=True), default=["cassini"],
-                   metavar=_choices_metavar(_subset(TARGETS), many=True),
+    p.add_argument("--targets", type=opt.subset(TARGETS, keep_order=True), default=["cassini"],
+                   metavar=opt.choices_metavar(opt.subset(TARGETS), many=True),
                    help="built-in targets, comma-separated (default: cassini)")
-    p.add_argument("--frames", type=_int_in(1, 10_000), default=4, help="clean frames per target (default: 4)")
-    p.add_argument("--mode", type=_choice(("paper", "physical", "both")), default="both",
-                   metavar=_choices_metavar(_choice(("paper", "physical", "both"))),
+    p.add_argument("--frames", type=opt.int_in(1, 10_000), default=4, help="clean frames per target (default: 4)")
+    p.add_argument("--mode", type=opt.choice(("paper", "physical", "both")), default="both",
+                   metavar=opt.choices_metavar(opt.choice(("paper", "physical", "both"))),
                    help="which study to report (default: both)")
-    p.add_argument("--pattern", type=_choice(PATTERNS), default="spiral", metavar=_choices_metavar(_choice(PATTERNS)),
+    p.add_argument("--pattern", type=opt.choice(PATTERNS), default="spiral", metavar=opt.choices_metavar(opt.choice(PATTERNS)),
                    help="pattern (default: spiral)")
     # SSIM's 7 × 7 window (skimage.metrics.structural_similarity) needs images of at least 7 px a side
-    p.add_argument("--width", type=_int_in(7, 65535), default=640, help="image width [px], >= 7 (default: 640)")
-    p.add_argument("--height", type=_int_in(7, 65535), default=480, help="image height [px], >= 7 (default: 480)")
-    p.add_argument("--focal-length-mm", type=_float_in(1e-3, 1e4, unit="mm"), default=2.0,
+    p.add_argument("--width", type=opt.int_in(7, 65535), default=640, help="image width [px], >= 7 (default: 640)")
+    p.add_argument("--height", type=opt.int_in(7, 65535), default=480, help="image height [px], >= 7 (default: 480)")
+    p.add_argument("--focal-length-mm", type=opt.float_in(1e-3, 1e4, unit="mm"), default=2.0,
                    help="focal length [mm] (default: 2, the field of view of the full-size default camera)")
-    p.add_argument("--quality", type=_choice(QUALITIES), default="fast", metavar=_choices_metavar(_choice(QUALITIES)),
+    p.add_argument("--quality", type=opt.choice(QUALITIES), default="fast", metavar=opt.choices_metavar(opt.choice(QUALITIES)),
                    help="shading preset (default: fast)")
-    p.add_argument("--seed", type=_int_in(0, 2**63 - 1), default=0, help="seed (default: 0)")
-    p.add_argument("--workers", type=_int_in(1, 4096), default=None, help="worker processes (default: all cores)")
+    p.add_argument("--seed", type=opt.int_in(0, 2**63 - 1), default=0, help="seed (default: 0)")
+    p.add_argument("--workers", type=opt.int_in(1, 4096), default=None, help="worker processes (default: all cores)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
     from degrade.ablation import format_ablation, run_ablation
@@ -941,7 +594,8 @@ def ablation_main(argv: list) -> int:
         bar = runner.progress_bar(len(tasks), 0, "ablation", args.quiet)
         rgb = [None] * len(tasks)
         try:
-            for res in pool.execute(tasks, run_frame, workers=workers, progress=bar):
+            for res in pool.execute(tasks, run_frame, workers=workers, progress=bar,
+                                    ready=functools.partial(_worker_ready, args.quality)):
                 rgb[res["index"]] = res["images"]["rgb"]  # results arrive as they complete
         finally:
             bar.close()
@@ -959,38 +613,31 @@ def ablation_main(argv: list) -> int:
 
 # --------------------------------------------------------------------------- render-scene
 def frame_images(frame, *, name: str = "000000") -> dict:
-    """The files of one rendered frame (relative path → pixels), as in a sequence folder:
-    clean sRGB 8-bit ``rgb/`` (auto exposure), 16-bit instance ``mask/`` (0 background),
-    float32 z-depth ``depth/`` (metres, inf on background), float32 camera-frame ``normal/``
-    and linear radiance ``hdr/`` [W/(m²·sr)]. Also returns the exposure scale used."""
+    """The files of one rendered frame (relative path → pixels) of the modalities ``render-scene``
+    writes (:data:`raytrace.dataset.folder.SCENE_MODALITIES`), as in a sequence folder, ``rgb``
+    with auto exposure. Also returns the exposure scale used."""
     from degrade.encode import srgb_encode
     from degrade.exposure import auto_exposure
+    from raytrace.dataset.modalities import relpath
     geo = frame.geometry
     linear, scale = auto_exposure(frame.radiance, geo.mask)
-    rgb = srgb_encode(np.clip(linear, 0.0, 1.0), bits=8)
-    return {f"rgb/{name}.png": rgb, f"mask/{name}.png": geo.instance.astype(np.uint16),
-            f"depth/{name}.exr": geo.depth_m.astype(np.float32), f"normal/{name}.exr": geo.normal_cam,
-            f"hdr/{name}.exr": frame.radiance.astype(np.float32)}, scale
+    files = {relpath("rgb", name): srgb_encode(np.clip(linear, 0.0, 1.0), bits=8)}
+    files.update({relpath(m, name): MODALITY[m].produce(geo, frame.radiance)
+                  for m in folder.SCENE_MODALITIES if m != "rgb"})
+    return files, scale
 
 
 def geometric_shadow_fraction(lighting) -> float | None:
     """The fraction of the solar disc that a :class:`raytrace.lighting.Lighting`'s Earth leaves
-    visible at the target (:func:`orbit.visibility.illuminated_fraction`, with that Earth's
-    radius and the Sun's angular diameter), or None without Earth. ``shadow_fraction`` is what
-    the renderer uses (the Earth does not shadow the Sun by itself); this tells whether the
-    two agree. Here, not in ``raytrace``, which knows nothing of orbits."""
+    visible at the target (:func:`orbit.visibility.illuminated_fraction_seen`), or None without
+    Earth. ``shadow_fraction`` is what the renderer uses (the Earth does not shadow the Sun by
+    itself); this tells whether the two agree."""
     e = lighting.earth
     if e is None:
         return None
-    from orbit.constants import R_EARTH_M, R_SUN_M
-    from orbit.visibility import illuminated_fraction
-    # the same angles in a frame scaled to orbit's Earth radius: target at −ê·d, Sun at the
-    # distance where its disc has the scene's angular diameter
-    k = R_EARTH_M / e.radius_m
-    r_target = -k * e.distance_m * np.asarray(e.earth_dir_body)
-    half = max(0.5 * lighting.sun_angular_diameter_rad, 1e-7)
-    r_sun = r_target + R_SUN_M / math.sin(half) * np.asarray(lighting.sun_dir_body)
-    return float(illuminated_fraction(r_target, r_sun))
+    from orbit.visibility import illuminated_fraction_seen
+    return float(illuminated_fraction_seen(e.earth_dir_body, e.distance_m, lighting.sun_dir_body, earth_radius_m=e.radius_m,
+                                           sun_angular_diameter_rad=lighting.sun_angular_diameter_rad))
 
 
 def render_scene_main(argv: list[str]) -> int:
@@ -998,13 +645,13 @@ def render_scene_main(argv: list[str]) -> int:
     parser = _Parser(prog=f"{PROG} render-scene",
                      description="Render one frame of the scene described by a JSON file (schema in docs/shading.md).")
     parser.add_argument("scene", help="scene file (JSON)")
-    parser.add_argument("--out", type=_out_path, required=True, help="output folder (created if missing)")
-    parser.add_argument("--quality", type=_choice(QUALITIES), default=None,
-                        metavar=_choices_metavar(_choice(QUALITIES)),
+    parser.add_argument("--out", type=opt.out_path, required=True, help="output folder (created if missing)")
+    parser.add_argument("--quality", type=opt.choice(QUALITIES), default=None,
+                        metavar=opt.choices_metavar(opt.choice(QUALITIES)),
                         help="overrides the file's quality preset (default: the file's)")
-    parser.add_argument("--samples", type=_int_in(1, 1 << 20), default=None,
+    parser.add_argument("--samples", type=opt.int_in(1, 1 << 20), default=None,
                         help="overrides the preset's sample count")
-    parser.add_argument("--seed", type=_int_in(0, 2**31 - 1), default=None, help="overrides the file's seed")
+    parser.add_argument("--seed", type=opt.int_in(0, 2**31 - 1), default=None, help="overrides the file's seed")
     args = parser.parse_args(argv)
     from raytrace.scene import Scene
     from raytrace.scenefile import load_scene_file
@@ -1038,15 +685,8 @@ def render_scene_main(argv: list[str]) -> int:
             sys.stderr.write(f"{PROG}: warning: no pixel sees the target (it is behind the camera or outside the "
                              "field of view: check camera.R_cam_from_body and t_cam_m); the frame holds only the "
                              "background\n")
-        info = {"scene": os.path.abspath(args.scene), "quality": frame.quality.name, "samples": samples,
-                "seed": seed, "render_s": elapsed, "timings_s": frame.timings_s, "exposure_scale": scale,
-                "width": spec.camera.width, "height": spec.camera.height, "K": spec.camera.K.tolist(),
-                "R_cam_from_body": spec.R_cam_from_body.ravel().tolist(),
-                "t_cam_m": spec.file_t_cam_m().tolist(), "body_offset_m": spec.body_offset_m.tolist(),
-                "components": list(spec.model.component_names),
-                "pixel_counts": geo.pixel_counts.tolist(), "bbox_xywh": geo.bbox_xywh,
-                "visible_fraction": None if math.isnan(geo.visible_fraction) else geo.visible_fraction,
-                "shadow_fraction": spec.lighting.shadow_fraction, "geometric_shadow_fraction": nu_geo}
+        info = spec.frame_record(frame, scene_path=os.path.abspath(args.scene), samples=samples, seed=seed,
+                                 render_s=elapsed, exposure_scale=scale, geometric_shadow_fraction=nu_geo)
         folder.write_files_atomically(args.out, files, {"frame.json": json.dumps(info, indent=1) + "\n"})
     except (CLIError, ValueError) as exc:
         sys.stderr.write(f"{PROG}: error: {exc}\n")
@@ -1083,36 +723,17 @@ def _size(text: str) -> tuple:
 
 
 def preview_track(plan: dict):
-    """The :class:`raytrace.preview.PreviewTrack` of a planned sequence: the frames' states,
-    camera poses, visibility flags, start-frame Sun and Earth and the target mesh, in LVLH.
-
-    The camera axes come from the renderer's pose (``R_cam_from_body`` of every frame) and
-    the look-at pointing of :func:`plan_sequence`; the target is drawn at the start frame's
-    attitude ``R_lvlh_from_body = R_lvlh_from_cam @ R_cam_from_body``."""
+    """The :class:`raytrace.preview.PreviewTrack` of a planned sequence
+    (:func:`raytrace.preview.model_track`): the camera axes from the renderer's pose and the
+    look-at pointing of :func:`orbit.plan.plan_orbit`; the target at the start frame's attitude."""
     from orbit.pose import look_at
-    from raytrace.preview import PreviewTrack
-    res, model, cam = plan["result"], plan["model"], plan["camera"]
-    frames = res["frames"]
-    r_lvlh = np.array([f["r_lvlh"] for f in frames], dtype=np.float64)
-    R_cam_from_body = np.array([f["R_cam_from_body"] for f in frames], dtype=np.float64).reshape(-1, 3, 3)
-    R_lvlh_from_cam = np.swapaxes(look_at(r_lvlh), -1, -2)  # as plan_sequence points the camera
-    R_lvlh_from_body0 = R_lvlh_from_cam[0] @ R_cam_from_body[0]
-    verts, faces, ids, base = [], [], [], 0
-    for k, comp in enumerate(model.components):
-        v = np.asarray(comp.mesh.vertices, dtype=np.float64)
-        f = np.asarray(comp.mesh.faces, dtype=np.int64)
-        verts.append(v @ R_lvlh_from_body0.T)
-        faces.append(f + base)
-        ids.append(np.full(len(f), k + 1, dtype=np.int64))
-        base += len(v)
-    l0 = plan["lights"][0]
-    sun = R_lvlh_from_body0 @ np.asarray(l0["sun_dir_body"])
-    earth = R_lvlh_from_body0 @ np.asarray(l0["earth_dir_body"])
-    return PreviewTrack(title=f"{res['target']} {res['pattern']}", r_lvlh_m=r_lvlh, t_s=np.asarray(res["t_s"]),
-                        visible=np.array([f["visible"] for f in frames], dtype=bool),
-                        R_lvlh_from_cam=R_lvlh_from_cam, K=cam.K, width=cam.width, height=cam.height,
-                        vertices_lvlh_m=np.vstack(verts), faces=np.vstack(faces), face_ids=np.concatenate(ids),
-                        sun_dir_lvlh=sun / np.linalg.norm(sun), earth_dir_lvlh=earth / np.linalg.norm(earth))
+    from raytrace.preview import model_track
+    res = plan["result"]
+    r_lvlh = np.array([f["r_lvlh"] for f in res["frames"]], dtype=np.float64)
+    R_cam_from_body = np.array([f["R_cam_from_body"] for f in res["frames"]], dtype=np.float64).reshape(-1, 3, 3)
+    return model_track(f"{res['target']} {res['pattern']}", plan["model"], plan["camera"], r_lvlh, res["t_s"],
+                       [f["visible"] for f in res["frames"]], np.swapaxes(look_at(r_lvlh), -1, -2), R_cam_from_body,
+                       plan["lights"][0])
 
 
 def preview_main(argv: list) -> int:
@@ -1122,40 +743,28 @@ def preview_main(argv: list) -> int:
                 "trajectory coloured by time (start and end marked), camera frusta, the Sun and Earth directions "
                 "at the start frame, frames failing visibility in red; below, the in-plane x-y projection. "
                 "Off-screen (no display needed); seconds, not minutes.")
-    _add_options(p, {})
+    opt.add_options(p, OPTIONS, {})
     g = p.add_argument_group("preview (not part of the scenario)")
-    g.add_argument("--config", type=_path, default=None, metavar="FILE.toml",
+    g.add_argument("--config", type=opt.path, default=None, metavar="FILE.toml",
                    help="options as TOML tables (a sequence's config.toml previews that sequence); flags override")
-    g.add_argument("--out", type=_out_path, default=None, metavar="FILE.png",
+    g.add_argument("--out", type=opt.out_path, default=None, metavar="FILE.png",
                    help="PNG to write (default: output/TARGET_PATTERN_preview.png, "
                         "output/TARGET_all-patterns_preview.png)")
     g.add_argument("--all-patterns", action="store_true", help="the four patterns side by side for one target")
     g.add_argument("--size", type=_size, default=None, metavar="WxH",
                    help=f"PNG size [px] (default: {PREVIEW_SIZE[0]}x{PREVIEW_SIZE[1]}, "
                         f"{PREVIEW_SIZE_ALL[0]}x{PREVIEW_SIZE_ALL[1]} with --all-patterns)")
-    g.add_argument("--frusta-every", type=_int_in(1, 1_000_000), default=None, metavar="K",
+    g.add_argument("--frusta-every", type=opt.int_in(1, 1_000_000), default=None, metavar="K",
                    help="a camera frustum every K frames (default: about 12 per sequence)")
     g.add_argument("--interactive", action="store_true", help="also open a window (needs a display)")
-    g.add_argument("--html", type=_out_path, default=None, metavar="FILE.html",
+    g.add_argument("--html", type=opt.out_path, default=None, metavar="FILE.html",
                    help="also export an interactive scene (needs pyvista's exporter: "
                         "pip install trame-pyvista nest_asyncio2)")
     args = p.parse_args(argv)
     from raytrace import preview
     t0 = time.perf_counter()
     try:
-        for option, path, ext in (("--out", args.out, ".png"), ("--html", args.html, ".html")):
-            # a folder or a name without the extension had the file written elsewhere (name + ext)
-            if path is not None and os.path.isdir(path):
-                raise CLIError(f"{option}: {path} is a folder; give the file's name (e.g. "
-                               f"{os.path.join(path, 'preview' + ext)})")
-            if path is not None and not str(path).endswith(ext):
-                raise CLIError(f"{option} must be a {ext} file name, got {path!r}")
-        if args.interactive and not preview.has_display():
-            raise CLIError("argument --interactive: no display (DISPLAY and WAYLAND_DISPLAY are unset); "
-                           "drop --interactive to write the PNG off-screen")
-        if args.html is not None and not preview.html_export_available():
-            raise CLIError("argument --html: pyvista's HTML exporter is not installed "
-                           f"(pip install {' '.join(preview.HTML_EXPORT_PACKAGES)})")
+        preview.check_outputs(args.out, args.html, args.interactive)
         cfg, given = resolve_config(args)
         if args.all_patterns:
             if cfg["pattern"]["amplitude_m"] is not None or cfg["pattern"]["kappa"] is not None:
@@ -1172,18 +781,7 @@ def preview_main(argv: list) -> int:
         tracks = [preview_track(plan) for plan in plans]
         size = args.size or (PREVIEW_SIZE_ALL if args.all_patterns else PREVIEW_SIZE)
         out = args.out or os.path.join("output", f"{name}_preview.png")
-        for path in (out, args.html):
-            if path is not None and os.path.dirname(os.path.abspath(path)):
-                try:
-                    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-                except OSError as exc:
-                    raise CLIError(f"--out: cannot create the folder of {path} ({exc.strerror or exc})") from None
-        try:
-            preview.write_preview(tracks, out, size=size, frusta_every=args.frusta_every, html_path=args.html)
-        except OSError as exc:
-            raise CLIError(f"--out: cannot write {out} ({exc.strerror or exc})") from None
-        except RuntimeError as exc:
-            raise CLIError(f"argument --html: {exc}; the PNG {out} is written") from None
+        preview.write_preview_files(tracks, out, size=size, frusta_every=args.frusta_every, html_path=args.html)
     except (CLIError, ValueError) as exc:
         return _fail(exc)
     elapsed = time.perf_counter() - t0
@@ -1266,7 +864,7 @@ def degrade_snapshot(name: str, images: dict) -> dict:
         strips = []
         for j, task in enumerate(tasks):
             cols = slice(j * width, (j + 1) * width)
-            _render_seed, degrade_seq = frame_seeds(c["sequence"]["seed"], task["frame"])
+            _render_seed, degrade_seq = folder.frame_seeds(c["sequence"]["seed"], task["frame"])
             strips.append(degrade_frame(c, task, images["rgb"][:, cols], images["radiance"][:, cols], degrade_seq))
         out[f"rgb_{preset}"] = np.concatenate(strips, axis=1)
     return out
@@ -1280,15 +878,15 @@ def snapshots_main(argv: list) -> int:
                 "in tests/snapshots/: masks exactly, depth and normals within tight tolerances, RGB by PSNR >= 45 dB. "
                 "Exit status 1 when something moved (a diff image per failure). --update rewrites the references.")
     p.add_argument("--update", action="store_true", help="rewrite the references instead of comparing (deliberate)")
-    p.add_argument("--targets", type=_subset(TARGETS), default=None,
-                   metavar=_choices_metavar(_subset(TARGETS), True),
+    p.add_argument("--targets", type=opt.subset(TARGETS), default=None,
+                   metavar=opt.choices_metavar(opt.subset(TARGETS), True),
                    help="only these targets, comma-separated (default: all)")
-    p.add_argument("--patterns", type=_subset(PATTERNS), default=None,
-                   metavar=_choices_metavar(_subset(PATTERNS), True),
+    p.add_argument("--patterns", type=opt.subset(PATTERNS), default=None,
+                   metavar=opt.choices_metavar(opt.subset(PATTERNS), True),
                    help="only these patterns, comma-separated (default: all)")
-    p.add_argument("--dir", type=_out_path, default=SNAPSHOT_DIR, metavar="DIR",
+    p.add_argument("--dir", type=opt.out_path, default=SNAPSHOT_DIR, metavar="DIR",
                    help="reference folder (default: tests/snapshots)")
-    p.add_argument("--diff-dir", type=_out_path, default=None, metavar="DIR",
+    p.add_argument("--diff-dir", type=opt.out_path, default=None, metavar="DIR",
                    help="where diff images go (default: a new temporary folder)")
     args = p.parse_args(argv)
     names = snapshot_cases(args.targets, args.patterns)
@@ -1312,44 +910,15 @@ def snapshots_main(argv: list) -> int:
 
 
 def _snapshots_run(args, names: list, diff_dir: str) -> int:
-    """:func:`snapshots_main` after parsing: compare (or with --update write) the snapshots
-    ``names``, diff images into ``diff_dir``."""
-    t0 = time.perf_counter()
-    failures, nbytes = [], 0
+    """:func:`snapshots_main` after parsing: :func:`raytrace.dataset.snapshots.run_snapshots`
+    with the main job's render and degradation."""
     try:
-        stale = None if args.update else snapshots.snapshot_settings_message(args.dir)
-        if stale:
-            sys.stdout.write(f"FAIL {stale}\n")
-            return 1
-        for name in names:
-            new = render_snapshot(name)
-            if args.update:
-                nbytes += sum(os.path.getsize(q) for q in snapshots.write_snapshot(args.dir, name, new))
-                sys.stdout.write(f"{name}: reference written\n")
-                continue
-            ref = snapshots.read_snapshot(args.dir, name)
-            msgs = (snapshots.compare_snapshot(name, ref, new, diff_dir=diff_dir)
-                    + snapshots.check_snapshot_degradation(name, ref, degrade_snapshot(name, ref), diff_dir=diff_dir))
-            failures += msgs
-            sys.stdout.write("".join(f"FAIL {m}\n" for m in msgs) or f"{name}: ok\n")
-        if args.update:
-            from raytrace.files import atomic_write_text
-            atomic_write_text(os.path.join(args.dir, "settings.json"), snapshots._snapshot_settings_json())
+        return snapshots.run_snapshots(names, args.dir, diff_dir, update=args.update, render=render_snapshot,
+                                       degrade=degrade_snapshot, out=sys.stdout)
     except (CLIError, ValueError, FileNotFoundError) as exc:
         return _fail(exc)
     except OSError as exc:
         return _fail(CLIError(f"--dir: {exc}"))
-    elapsed = time.perf_counter() - t0
-    if args.update:
-        sys.stdout.write(f"{len(names)} snapshots written to {args.dir} ({nbytes / 1e6:.2f} MB) in {elapsed:.1f} s; "
-                         "review them (git diff) before committing\n")
-        return 0
-    if failures:
-        sys.stdout.write(f"{len(failures)} failure(s) in {len(names)} snapshots ({elapsed:.1f} s); diff images in "
-                         f"{diff_dir}; if the change is intended: python cli.py snapshots --update\n")
-        return 1
-    sys.stdout.write(f"{len(names)} snapshots match the references in {elapsed:.1f} s\n")
-    return 0
 
 
 COMMANDS = {"render-scene": render_scene_main, "dataset": dataset_main, "ablation": ablation_main,

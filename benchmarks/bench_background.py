@@ -30,7 +30,7 @@ import cli  # noqa: E402
 from raytrace import _shading as K  # noqa: E402
 from raytrace import shade  # noqa: E402
 from raytrace.camera import Camera  # noqa: E402
-from raytrace.dataset.scenes import load_model  # noqa: E402
+from raytrace.dataset.scenes import lighting_of, load_model  # noqa: E402
 from raytrace.scene import Scene  # noqa: E402
 
 
@@ -51,7 +51,7 @@ def main() -> None:
     times = {1: [], shade._BACKGROUND_STEP: []}
     worst = 0.0
     for i, label in enumerate(plan["result"]["frames"]):
-        light = cli._lighting(plan["lights"][i], cfg["render"])
+        light = lighting_of(plan["lights"][i], cfg["render"])
         R = np.asarray(label["R_cam_from_body"], dtype=np.float64).reshape(3, 3)
         t = np.asarray(label["t_cam_m"], dtype=np.float64)
         if light.earth is None or not shade._earth_may_be_in_view(cam, R, light):

@@ -13,6 +13,7 @@ R_E and the Sun a uniform disc of radius R_S (no oblateness, refraction or limb 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -23,7 +24,7 @@ from .constants import R_EARTH_M, R_SUN_M
 __all__ = [
     "SUNLIT", "PENUMBRA", "UMBRA", "SHADOW_NAMES", "DEFAULT_SUN_MARGIN_RAD",
     "line_of_sight", "earth_in_background", "sun_angle", "sun_clear",
-    "shadow_cylindrical", "shadow_conical", "illuminated_fraction",
+    "shadow_cylindrical", "shadow_conical", "illuminated_fraction", "illuminated_fraction_seen",
     "Visibility", "visibility",
 ]
 
@@ -468,6 +469,21 @@ def illuminated_fraction(r_target_eci, r_sun_eci):
     r_target, r_sun = _positions(r_target_eci=r_target_eci, r_sun_eci=r_sun_eci)
     _require_sun_far(r_sun, 0.0, "the Earth's centre", R_SUN_M + R_EARTH_M)
     return _scalar_or_array(_illuminated_fraction(r_target, r_sun))
+
+
+def illuminated_fraction_seen(earth_dir, earth_distance_m: float, sun_dir, *, earth_radius_m: float = R_EARTH_M,
+                             sun_angular_diameter_rad: float):
+    """:func:`illuminated_fraction` of a target that sees the Earth's centre along the unit
+    vector ``earth_dir`` at ``earth_distance_m`` (an Earth of radius ``earth_radius_m``) and the
+    Sun along ``sun_dir`` with the angular diameter ``sun_angular_diameter_rad``, in any one
+    frame of axes: only the angles count. Returns ν in [0, 1]."""
+    # the same angles in a frame scaled to this module's Earth radius: the target at −ê·d, the
+    # Sun at the distance where its disc has the given angular diameter
+    k = R_EARTH_M / finite_scalar("earth_radius_m", earth_radius_m, positive=True)
+    r_target = -k * finite_scalar("earth_distance_m", earth_distance_m, positive=True) * np.asarray(earth_dir, float)
+    half = max(0.5 * finite_scalar("sun_angular_diameter_rad", sun_angular_diameter_rad, positive=True), 1e-7)
+    r_sun = r_target + R_SUN_M / math.sin(half) * np.asarray(sun_dir, float)
+    return illuminated_fraction(r_target, r_sun)
 
 
 _VISIBILITY_DTYPES = {"line_of_sight": np.bool_, "earth_in_background": np.bool_,

@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .dataset.modalities import PICTURES
 from .files import process_folder, remove_stale_process_folders, write_image
 
 __all__ = ["BOP_DEPTH_MAX_CODE", "export_bop", "export_speedplus"]
@@ -52,7 +53,7 @@ BOP_DEPTH_MAX_CODE = 60_000
 """Largest 16-bit depth code the chosen BOP ``depth_scale`` lets the farthest possible target
 point reach (8 % below 65 535)."""
 
-_IMAGE_MODALITIES = ("rgb", "rgb_degraded")
+_IMAGE_MODALITIES = PICTURES
 _ROTATION_TOL = 1e-6
 
 

@@ -461,3 +461,68 @@ def write_preview(tracks, path: str, *, size=(1600, 1000), frusta_every: int | N
     finally:
         pl.close()
     return path
+
+
+def model_track(title: str, model, camera, r_lvlh_m, t_s, visible, R_lvlh_from_cam, R_cam_from_body,
+                light0: dict) -> PreviewTrack:
+    """The :class:`PreviewTrack` of a sequence of ``model`` seen by ``camera``: the observer
+    positions ``r_lvlh_m`` (n, 3) [m] at times ``t_s`` with their ``visible`` flags, the camera
+    axes ``R_lvlh_from_cam`` (n, 3, 3) and the renderer's poses ``R_cam_from_body`` (n, 3, 3);
+    the target is drawn at the start frame's attitude ``R_lvlh_from_body = R_lvlh_from_cam @
+    R_cam_from_body``, with the Sun and Earth directions of the start frame's ``light0``
+    (``sun_dir_body``, ``earth_dir_body``)."""
+    R_lvlh_from_cam = np.asarray(R_lvlh_from_cam, dtype=np.float64)
+    R_lvlh_from_body0 = R_lvlh_from_cam[0] @ np.asarray(R_cam_from_body, dtype=np.float64)[0]
+    verts, faces, ids, base = [], [], [], 0
+    for k, comp in enumerate(model.components):
+        v = np.asarray(comp.mesh.vertices, dtype=np.float64)
+        f = np.asarray(comp.mesh.faces, dtype=np.int64)
+        verts.append(v @ R_lvlh_from_body0.T)
+        faces.append(f + base)
+        ids.append(np.full(len(f), k + 1, dtype=np.int64))
+        base += len(v)
+    sun = R_lvlh_from_body0 @ np.asarray(light0["sun_dir_body"])
+    earth = R_lvlh_from_body0 @ np.asarray(light0["earth_dir_body"])
+    return PreviewTrack(title=title, r_lvlh_m=np.asarray(r_lvlh_m, dtype=np.float64), t_s=np.asarray(t_s),
+                        visible=np.asarray(visible, dtype=bool), R_lvlh_from_cam=R_lvlh_from_cam, K=camera.K,
+                        width=camera.width, height=camera.height, vertices_lvlh_m=np.vstack(verts),
+                        faces=np.vstack(faces), face_ids=np.concatenate(ids),
+                        sun_dir_lvlh=sun / np.linalg.norm(sun), earth_dir_lvlh=earth / np.linalg.norm(earth))
+
+
+def check_outputs(out: str | None, html: str | None, interactive: bool) -> None:
+    """Refuse, before any work, a preview's outputs that cannot be written as asked: ``out``
+    (``--out``, a .png) or ``html`` (``--html``, a .html) naming a folder or another extension
+    (the file would be written elsewhere, name + extension), ``interactive`` without a display,
+    ``html`` without pyvista's exporter. Raises :class:`raytrace.dataset.UsageError`."""
+    from .dataset import UsageError
+    for option, path, ext in (("--out", out, ".png"), ("--html", html, ".html")):
+        if path is not None and os.path.isdir(path):
+            raise UsageError(f"{option}: {path} is a folder; give the file's name (e.g. "
+                             f"{os.path.join(path, 'preview' + ext)})")
+        if path is not None and not str(path).endswith(ext):
+            raise UsageError(f"{option} must be a {ext} file name, got {path!r}")
+    if interactive and not has_display():
+        raise UsageError("argument --interactive: no display (DISPLAY and WAYLAND_DISPLAY are unset); "
+                         "drop --interactive to write the PNG off-screen")
+    if html is not None and not html_export_available():
+        raise UsageError("argument --html: pyvista's HTML exporter is not installed "
+                         f"(pip install {' '.join(HTML_EXPORT_PACKAGES)})")
+
+
+def write_preview_files(tracks, out: str, *, size, frusta_every=None, html_path: str | None = None) -> None:
+    """:func:`write_preview` into ``out`` (and ``html_path``), their folders created; failures as
+    one-line :class:`raytrace.dataset.UsageError` naming the option."""
+    from .dataset import UsageError
+    for path in (out, html_path):
+        if path is not None and os.path.dirname(os.path.abspath(path)):
+            try:
+                os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+            except OSError as exc:
+                raise UsageError(f"--out: cannot create the folder of {path} ({exc.strerror or exc})") from None
+    try:
+        write_preview(tracks, out, size=size, frusta_every=frusta_every, html_path=html_path)
+    except OSError as exc:
+        raise UsageError(f"--out: cannot write {out} ({exc.strerror or exc})") from None
+    except RuntimeError as exc:
+        raise UsageError(f"argument --html: {exc}; the PNG {out} is written") from None

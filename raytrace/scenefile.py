@@ -81,6 +81,25 @@ class SceneSpec:
         """``camera.t_cam_m`` as the file gives it (the pose of the file's body frame)."""
         return self.t_cam_m - self.R_cam_from_body @ self.body_offset_m
 
+    def frame_record(self, frame, *, scene_path: str, samples, seed, render_s: float, exposure_scale: float,
+                     geometric_shadow_fraction) -> dict:
+        """The ``frame.json`` of ``render-scene``: the scene file, the preset, samples and seed
+        used, the time the render took [s], the exposure scale of ``rgb``, the camera and pose as
+        the file gives them, the components, the frame's ``pixel_counts``, ``bbox_xywh`` and
+        ``visible_fraction``, and the shadow fraction used beside the one the scene's Earth
+        makes geometrically."""
+        geo = frame.geometry
+        return {"scene": scene_path, "quality": frame.quality.name, "samples": samples,
+                "seed": seed, "render_s": render_s, "timings_s": frame.timings_s, "exposure_scale": exposure_scale,
+                "width": self.camera.width, "height": self.camera.height, "K": self.camera.K.tolist(),
+                "R_cam_from_body": self.R_cam_from_body.ravel().tolist(),
+                "t_cam_m": self.file_t_cam_m().tolist(), "body_offset_m": self.body_offset_m.tolist(),
+                "components": list(self.model.component_names),
+                "pixel_counts": geo.pixel_counts.tolist(), "bbox_xywh": geo.bbox_xywh,
+                "visible_fraction": None if math.isnan(geo.visible_fraction) else geo.visible_fraction,
+                "shadow_fraction": self.lighting.shadow_fraction,
+                "geometric_shadow_fraction": geometric_shadow_fraction}
+
 
 RECENTRE_SIZES = 10.0
 """Meshes whose bounding-box centre lies farther than this many times their size (bounding-box

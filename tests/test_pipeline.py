@@ -21,7 +21,7 @@ import pytest
 
 import cli
 from raytrace import files as F
-from raytrace.dataset import pool, scenes
+from raytrace.dataset import folder, pool, scenes
 from tests.cli_helpers import run_main
 from tests.raytrace.oracles import png_chunks
 
@@ -824,7 +824,7 @@ def test_stale_process_folders_are_removed_and_others_kept(tmp_path):
 def test_frame_seeds_are_the_spawned_children():
     children = np.random.SeedSequence(7).spawn(5)
     for i, child in enumerate(children):
-        render_seed, degrade_seq = cli.frame_seeds(7, i)
+        render_seed, degrade_seq = folder.frame_seeds(7, i)
         assert render_seed == int(child.generate_state(1)[0] % 2**31)
         assert np.array_equal(degrade_seq.generate_state(4), child.spawn(1)[0].generate_state(4))
 

@@ -18,6 +18,8 @@ from __future__ import annotations
 import json
 import os
 
+import numpy as np
+
 from .. import files as F
 from . import UsageError, warn
 from .modalities import MODALITIES, relpath
@@ -446,3 +448,11 @@ def write_frame(task: dict, images: dict, info: dict) -> dict:
     label["files"] = rel
     F.write_frame_record(seq_dir, task["frame"], {"frame": task["frame"], "label": label, "files": digests})
     return label
+
+
+def frame_seeds(seed: int, frame: int) -> tuple:
+    """(render seed, degradation SeedSequence) of a frame: child ``frame`` of
+    ``SeedSequence(seed).spawn(...)``; the render seed is its first word mod 2³¹, the
+    degradation stream its first child."""
+    child = np.random.SeedSequence(seed, spawn_key=(frame,))
+    return int(child.generate_state(1)[0] % 2**31), np.random.SeedSequence(seed, spawn_key=(frame, 0))

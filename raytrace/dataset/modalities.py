@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Modality", "MODALITIES", "NAMES", "needs_radiance", "produce", "relpath"]
+__all__ = ["Modality", "MODALITIES", "NAMES", "DEFAULT", "PICTURES", "needs_radiance", "produce", "relpath"]
 
 
 @dataclass(frozen=True)
@@ -35,6 +35,11 @@ class Modality:
     noisy : bool
         Mostly noise (a degraded camera frame): written with the fast PNG settings
         (:func:`raytrace.files.write_image`).
+    picture : bool
+        An 8-bit sRGB colour image: what the exports (:mod:`raytrace.export`) take as a frame's
+        picture.
+    default : bool
+        Written when the user names no modalities (``--modalities`` unset).
     produce : callable or None
         ``produce(geometry, radiance) -> pixels`` from a :class:`raytrace.scene.GeometryFrame`
         and the linear radiance (None when not shaded); None: made by the pipeline.
@@ -45,26 +50,32 @@ class Modality:
     holds: str
     shaded: bool = False
     noisy: bool = False
+    picture: bool = False
+    default: bool = True
     produce: object = None
 
 
 MODALITIES = {m.name: m for m in (
-    Modality("rgb", ".png", "clean sRGB, 8 bit (exposure fixed or auto)", shaded=True),
+    Modality("rgb", ".png", "clean sRGB, 8 bit (exposure fixed or auto)", shaded=True, picture=True),
     Modality("rgb_degraded", ".png", "the camera's copy: the degradation preset applied, sRGB 8 bit", shaded=True,
-             noisy=True),
+             noisy=True, picture=True),
     Modality("mask", ".png", "instance ids, 16 bit (component index + 1; 0 background)",
              produce=lambda geo, radiance: geo.instance.astype(np.uint16)),
     Modality("depth", ".exr", "z-depth along the optical axis, float32 m (inf on background)",
              produce=lambda geo, radiance: geo.depth_m.astype(np.float32)),
     Modality("normal", ".exr", "unit surface normal in the camera frame, float32 (0 on background)",
              produce=lambda geo, radiance: geo.normal_cam.astype(np.float32)),
-    Modality("hdr", ".exr", "linear radiance, float32 W/(m²·sr)", shaded=True,
+    Modality("hdr", ".exr", "linear radiance, float32 W/(m²·sr)", shaded=True, default=False,
              produce=lambda geo, radiance: radiance.astype(np.float32)),
 )}
 """Every modality by name, in the order they are listed and written."""
 
 NAMES = tuple(MODALITIES)
 """The modality names, in order."""
+DEFAULT = tuple(m.name for m in MODALITIES.values() if m.default)
+"""The modalities written when none are named."""
+PICTURES = tuple(m.name for m in MODALITIES.values() if m.picture)
+"""The 8-bit sRGB colour modalities."""
 
 
 def needs_radiance(names) -> bool:

@@ -91,3 +91,34 @@ def progress_bar(total: int, initial: int, desc: str, quiet: bool):
     from tqdm import tqdm
     return tqdm(total=total, initial=initial, desc=desc, unit="frame", disable=quiet, file=sys.stderr,
                 dynamic_ncols=True, smoothing=0.1, mininterval=0.5)
+
+
+def summary_line(s: dict, elapsed: float) -> str:
+    """The one-line summary of a sequence's stats (:func:`run_plans`) after ``elapsed`` s."""
+    rate = f", {s['rendered'] / elapsed:.2f} frames/s" if s["rendered"] and elapsed > 0 else ""
+    if s["complete"]:
+        state = "labels.json and manifest.json written"
+    elif s.get("corrupt"):
+        frame, rel = s["corrupt"][0]
+        more = f" and {len(s['corrupt']) - 1} more" if len(s["corrupt"]) > 1 else ""
+        state = (f"{s['present']} of {s['wanted']} frames complete; frame {frame}{more} does not match its manifest "
+                 f"record ({rel}): rerun without --shard, or its shard, to render it again")
+    else:
+        state = (f"{s['present']} of {s['wanted']} frames present; labels.json is written when all are "
+                 "(run the other shards, or rerun without --shard)")
+    return (f"{s['name']}: {s['frames']} frames, {s['visible']} visible; rendered {s['rendered']}, "
+            f"skipped {s['skipped']} complete, in {elapsed:.1f} s{rate} -> {s['dir']}/ ({state})\n")
+
+
+def stats_table(stats: list, modalities: list, elapsed: float, root: str) -> str:
+    """The table of counts of a dataset's sequences (their :func:`run_plans` stats) and a total
+    line, as ``python cli.py dataset`` prints it."""
+    lines = [f"{'sequence':<26} {'frames':>6} {'visible':>7} {'rendered':>8} {'skipped':>7} {'complete':>8}"]
+    for s in stats:
+        lines.append(f"{s['name']:<26} {s['frames']:6d} {s['visible']:7d} {s['rendered']:8d} {s['skipped']:7d} "
+                     f"{'yes' if s['complete'] else 'no':>8}")
+    tot = {k: sum(s[k] for s in stats) for k in ("frames", "visible", "rendered", "skipped")}
+    lines.append(f"{'total':<26} {tot['frames']:6d} {tot['visible']:7d} {tot['rendered']:8d} {tot['skipped']:7d}")
+    lines.append(f"{len(stats)} sequences x {len(modalities)} modalities ({','.join(modalities)}) in {elapsed:.1f} s "
+                 f"-> {root}/")
+    return "\n".join(lines) + "\n"

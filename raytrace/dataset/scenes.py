@@ -129,3 +129,38 @@ def star_field(cfg: dict):
         else:  # one sky per seed: the same stars in every frame
             _STARS[key] = StarField.procedural(key[1], key[2])
     return _STARS[key]
+
+
+MESH_RADIUS_PLAUSIBLE_M = (0.02, 200.0)
+"""Bounding radii of real spacecraft [m]: from a 1U CubeSat's 0.087 m to the ISS's ~55 m, with room
+on both sides. A user mesh outside the range was probably read in the wrong unit."""
+
+def mesh_unit_warning(radius_m: float, path: str) -> str | None:
+    """A one-line warning when a mesh loaded with the default ``--mesh-unit-m 1`` has a size
+    (``radius_m``: half its bounding-box diagonal) no spacecraft has (a 1 m cube drawn in
+    millimetres reads as 866 m), naming the flag."""
+    lo, hi = MESH_RADIUS_PLAUSIBLE_M
+    if radius_m > hi:
+        guess = "millimetres: --mesh-unit-m 0.001" if radius_m > 1000 * lo else "centimetres: --mesh-unit-m 0.01"
+        return (f"--mesh {path}: it is {2 * radius_m:.4g} m across (a radius of {radius_m:.4g} m), larger than any "
+                f"spacecraft, read as metres (--mesh-unit-m 1); if the file is in {guess}")
+    if radius_m < lo:
+        return (f"--mesh {path}: it is {2 * radius_m:.3g} m across, smaller than any spacecraft, read as metres "
+                "(--mesh-unit-m 1); if the file is in kilometres: --mesh-unit-m 1000")
+    return None
+
+
+def lighting_of(light: dict, r: dict, stars=None):
+    """The :class:`raytrace.lighting.Lighting` of a frame: its ``light`` (Sun, Earth and ν in the
+    body frame, from the plan) with the ``render`` table ``r`` (Earth texture and albedo, sky) and
+    the sequence's ``stars``."""
+    from ..constants import SOLAR_CONSTANT_W_M2
+    from ..lighting import Earth, Lighting
+    earth = None
+    if r["earth_texture"] != "none":
+        earth = Earth(light["earth_dir_body"], light["earth_distance_m"], albedo=r["earth_albedo"],
+                      texture=r["earth_texture"], R_body_from_earth=light["R_body_from_earth"])
+    return Lighting(sun_dir_body=light["sun_dir_body"], sun_irradiance_W_m2=SOLAR_CONSTANT_W_M2,
+                    shadow_fraction=light["shadow_fraction"], earth=earth,
+                    ambient_radiance_W_m2_sr=r["ambient_W_m2_sr"], stars=stars,
+                    R_body_from_eci=None if stars is None else light["R_body_from_eci"])

@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import time
 
 import numpy as np
 
@@ -339,3 +340,47 @@ def snapshot_settings_message(folder: str) -> str | None:
         return (f"snapshots: {path} records other snapshot settings or tolerances than raytrace.dataset.snapshots.SNAPSHOT_SETTINGS; "
                 "the references are stale: python cli.py snapshots --update")
     return None
+
+
+def run_snapshots(names: list, folder: str, diff_dir: str, *, update: bool, render, degrade, out) -> int:
+    """Compare the snapshots ``names`` with their references in ``folder`` (or with ``update``
+    write them), a line per snapshot and a summary to the text stream ``out``, diff images into
+    ``diff_dir``; returns the exit status (1: something moved). ``render(name)`` renders a
+    snapshot (:func:`read_snapshot`'s dict); ``degrade(name, images)`` degrades a snapshot's
+    clean RGB and radiance as the main job does (:func:`check_snapshot_degradation`).
+
+    Raises
+    ------
+    ValueError, FileNotFoundError, OSError
+        A bad name, a missing reference, a folder that cannot be written.
+    """
+    t0 = time.perf_counter()
+    failures, nbytes = [], 0
+    stale = None if update else snapshot_settings_message(folder)
+    if stale:
+        out.write(f"FAIL {stale}\n")
+        return 1
+    for name in names:
+        new = render(name)
+        if update:
+            nbytes += sum(os.path.getsize(q) for q in write_snapshot(folder, name, new))
+            out.write(f"{name}: reference written\n")
+            continue
+        ref = read_snapshot(folder, name)
+        msgs = (compare_snapshot(name, ref, new, diff_dir=diff_dir)
+                + check_snapshot_degradation(name, ref, degrade(name, ref), diff_dir=diff_dir))
+        failures += msgs
+        out.write("".join(f"FAIL {m}\n" for m in msgs) or f"{name}: ok\n")
+    if update:
+        F.atomic_write_text(os.path.join(folder, "settings.json"), _snapshot_settings_json())
+    elapsed = time.perf_counter() - t0
+    if update:
+        out.write(f"{len(names)} snapshots written to {folder} ({nbytes / 1e6:.2f} MB) in {elapsed:.1f} s; "
+                  "review them (git diff) before committing\n")
+        return 0
+    if failures:
+        out.write(f"{len(failures)} failure(s) in {len(names)} snapshots ({elapsed:.1f} s); diff images in "
+                  f"{diff_dir}; if the change is intended: python cli.py snapshots --update\n")
+        return 1
+    out.write(f"{len(names)} snapshots match the references in {elapsed:.1f} s\n")
+    return 0
