@@ -156,8 +156,8 @@ def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False) -> None:
 def _signals_deferred():
     """The Python handlers of SIGINT, SIGTERM and SIGHUP held back until the block ends. An
     OpenImageIO writer interrupted between ``open`` and ``write_image`` (a pool worker's
-    SIGTERM raises there, ``cli._worker_stop``) is closed by its destructor with no pixels
-    written, and libpng then prints "No IDATs written into file" on stderr: a second line
+    SIGTERM raises there, ``raytrace.dataset.pool._worker_stop``) is closed by its destructor
+    with no pixels written, and libpng then prints "No IDATs written into file" on stderr: a second line
     beside the CLI's one-line message. Held back, a signal that arrives meanwhile is raised
     again as the block ends, after ``close`` (the caller then removes the complete temporary
     file as it would a partial one). Python runs handlers in the main thread only, so
