@@ -31,8 +31,6 @@ SMALL = ["--target", "icesat", "--pattern", "spiral", "--frames", "8", "--width"
 MODS = ["--modalities", "rgb,rgb_degraded,mask,depth,normal,hdr"]
 
 
-
-
 def tree(folder: Path) -> dict:
     """Relative path → bytes of every file (hidden manifest records included)."""
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}

@@ -65,6 +65,8 @@ MODALITIES = {m.name: m for m in (
              produce=lambda geo, radiance: geo.depth_m.astype(np.float32)),
     Modality("normal", ".exr", "unit surface normal in the camera frame, float32 (0 on background)",
              produce=lambda geo, radiance: geo.normal_cam.astype(np.float32)),
+    Modality("semantic", ".png", "part class, 8 bit (raytrace.model.SEMANTIC_CLASSES index + 1; 0 background)",
+             default=False, produce=lambda geo, radiance: geo.semantic),
     Modality("hdr", ".exr", "linear radiance, float32 W/(m²·sr)", shaded=True, default=False,
              produce=lambda geo, radiance: radiance.astype(np.float32)),
 )}
