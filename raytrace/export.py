@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._checks import finite_numbers
 from .dataset.modalities import PICTURES
 from .files import process_folder, remove_stale_process_folders, write_image
 
@@ -92,17 +93,6 @@ def _load_json(path: Path, what: str):
         raise ValueError(f"{what}: {path} is not readable JSON ({exc})") from None
 
 
-def _numbers(name: str, value, n: int) -> np.ndarray:
-    """``value`` (flat or nested list) as n finite float64 numbers, else ValueError."""
-    try:
-        arr = np.asarray(value, dtype=np.float64).ravel()
-    except (TypeError, ValueError):
-        arr = None
-    if arr is None or arr.size != n or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be {n} finite numbers, got {value!r}")
-    return arr
-
-
 def _count(name: str, value) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise ValueError(f"{name} must be a positive integer, got {value!r}")
@@ -140,14 +130,14 @@ def _parse_frame(i: int, rec) -> _Frame:
     if isinstance(frame, bool) or not isinstance(frame, int) or frame < 0:
         raise ValueError(f"{where}: frame must be an integer >= 0, got {frame!r}")
     where = f"labels.json frame {frame}"
-    R = _numbers(f"{where}: R_cam_from_body", rec["R_cam_from_body"], 9).reshape(3, 3)
+    R = finite_numbers(f"{where}: R_cam_from_body", rec["R_cam_from_body"], 9).reshape(3, 3)
     if not np.allclose(R @ R.T, np.eye(3), atol=_ROTATION_TOL) or np.linalg.det(R) < 0:
         raise ValueError(f"{where}: R_cam_from_body must be a rotation matrix (orthonormal, det +1)")
-    t = _numbers(f"{where}: t_cam_m", rec["t_cam_m"], 3)
+    t = finite_numbers(f"{where}: t_cam_m", rec["t_cam_m"], 3)
     if rec.get("q_cam_from_body") is None:
         q = _quat_from_matrix(R)
     else:
-        q = _numbers(f"{where}: q_cam_from_body", rec["q_cam_from_body"], 4)
+        q = finite_numbers(f"{where}: q_cam_from_body", rec["q_cam_from_body"], 4)
         q = q / np.linalg.norm(q)
         if not np.allclose(_matrix_from_quat(q), R, atol=1e-6):
             raise ValueError(f"{where}: q_cam_from_body does not describe R_cam_from_body "
@@ -170,7 +160,7 @@ def _read_sequence(sequence_dir) -> _Sequence:
     K_src = cam.get("K", cam.get("cameraMatrix"))
     if K_src is None:
         raise ValueError("camera.json lacks K (3×3 intrinsic matrix, or cameraMatrix)")
-    K = _numbers("camera.json: K", K_src, 9).reshape(3, 3)
+    K = finite_numbers("camera.json: K", K_src, 9).reshape(3, 3)
     if K[0, 0] <= 0 or K[1, 1] <= 0 or np.any(K[[0, 1, 2, 2], [1, 0, 0, 1]] != 0) or K[2, 2] != 1:
         raise ValueError(f"camera.json: K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, "
                          f"got {K.tolist()}")
@@ -566,12 +556,12 @@ def _pixel_pitch(cam: dict, K: np.ndarray) -> tuple[float, float]:
     elif "pixel_pitch_um" in cam:
         pp, unit = [cam["pixel_pitch_um"]] * 2, 1e-6
     elif "focal_length_m" in cam:
-        f = _numbers("camera.json: focal_length_m", cam["focal_length_m"], 1)[0]
+        f = finite_numbers("camera.json: focal_length_m", cam["focal_length_m"], 1)[0]
         pp, unit = [f / K[0, 0], f / K[1, 1]], 1.0
     else:
         raise ValueError("camera.json lacks the pixel pitch SPEED+ needs: one of ppx/ppy, pixel_pitch_m, "
                          "pixel_pitch_um or focal_length_m")
-    out = _numbers("camera.json: pixel pitch", pp, 2) * unit
+    out = finite_numbers("camera.json: pixel pitch", pp, 2) * unit
     if np.any(out <= 0):
         raise ValueError(f"camera.json: pixel pitch must be > 0 [m], got {pp!r}")
     return float(out[0]), float(out[1])
@@ -643,7 +633,7 @@ def export_speedplus(sequence_dir, out_dir, *, split: str = "train", domain: str
     elif not isinstance(dist, list) or not 4 <= len(dist) <= 14:
         raise ValueError(f"camera.json: distCoeffs must be a list of 4 to 14 numbers (OpenCV), got {dist!r}")
     else:
-        dist = _numbers("camera.json: distCoeffs", dist, len(dist)).tolist()
+        dist = finite_numbers("camera.json: distCoeffs", dist, len(dist)).tolist()
     camera = {"Nu": seq.width, "Nv": seq.height, "ppx": ppx, "ppy": ppy,
               "fx": float(K[0, 0]) * ppx, "fy": float(K[1, 1]) * ppy,
               "ccx": float(K[0, 2]), "ccy": float(K[1, 2]),

@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import functools
 import math
-import numbers
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import environment as env
+from ._checks import finite_number, rotation, unit3
 from .constants import EARTH_RADIUS_M, EARTH_TEXTURES, SOLAR_CONSTANT_W_M2, SUN_ANGULAR_DIAMETER_RAD
 from .stars import StarField
 
@@ -24,50 +24,6 @@ MAX_IRRADIANCE_W_M2 = 1e6
 """Largest accepted solar irradiance [W/m²] and ambient radiance [W/(m²·sr)]: above the Sun's
 ~650 kW/m² at Parker Solar Probe's closest approach (1361 W/m² / 0.046² au⁻²), far below
 where float32 radiance would overflow."""
-
-
-def only_numbers(value) -> bool:
-    """Whether ``value`` (a number, a nested list or tuple, or an array) holds numbers only:
-    no text or truth values, which ``np.asarray(..., float)`` would also take ("1361", True)."""
-    if isinstance(value, np.ndarray):
-        return value.dtype.kind in "iuf"
-    if isinstance(value, (list, tuple)):
-        return all(only_numbers(x) for x in value)
-    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
-
-
-def _unit3(name: str, value) -> tuple:
-    if not only_numbers(value):
-        raise ValueError(f"{name} must be a unit 3-vector of numbers, got {value!r}")
-    try:
-        v = np.asarray(value, dtype=np.float64).ravel()
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a unit 3-vector, got {value!r}") from None
-    if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
-    n = float(np.linalg.norm(v))
-    if not 0.999 <= n <= 1.001:
-        raise ValueError(f"{name} must be a unit vector (norm within 1e-3 of 1), got norm {n:.6g}")
-    return tuple((v / n).tolist())
-
-
-def _finite(name: str, value, lo: float, hi: float = math.inf, lo_open: bool = False) -> float:
-    # a number, not text or a truth value that float() would also take ("1361", True)
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{name} must be a number, got {value!r}")
-    x = float(value)
-    if not math.isfinite(x) or x < lo or x > hi or (lo_open and x == lo):
-        lo_txt = f"({lo:g}" if lo_open else f"[{lo:g}"
-        raise ValueError(f"{name} must be a finite number in {lo_txt}, {hi:g}], got {value!r}")
-    return x
-
-
-def _rotation(name: str, value, when: str = "") -> np.ndarray:
-    R = None if value is None else np.asarray(value, dtype=np.float64)
-    if R is None or R.shape != (3, 3) or not np.all(np.isfinite(R)) \
-            or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
-        raise ValueError(f"{name} must be a 3x3 rotation matrix (orthonormal, det +1){when}")
-    return R
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -100,12 +56,12 @@ class Earth:
     R_body_from_earth: object = None
 
     def __post_init__(self):
-        object.__setattr__(self, "earth_dir_body", _unit3("earth_dir_body", self.earth_dir_body))
-        r = _finite("earth radius_m", self.radius_m, 0.0, lo_open=True)
+        object.__setattr__(self, "earth_dir_body", unit3("earth_dir_body", self.earth_dir_body))
+        r = finite_number("earth radius_m", self.radius_m, 0.0, lo_open=True)
         object.__setattr__(self, "radius_m", r)
-        object.__setattr__(self, "distance_m", _finite("earth distance_m", self.distance_m, r, lo_open=True))
-        object.__setattr__(self, "albedo", _finite("earth albedo", self.albedo, 0.0, 1.0))
-        R = np.eye(3) if self.R_body_from_earth is None else _rotation("R_body_from_earth", self.R_body_from_earth)
+        object.__setattr__(self, "distance_m", finite_number("earth distance_m", self.distance_m, r, lo_open=True))
+        object.__setattr__(self, "albedo", finite_number("earth albedo", self.albedo, 0.0, 1.0))
+        R = np.eye(3) if self.R_body_from_earth is None else rotation("R_body_from_earth", self.R_body_from_earth)
         object.__setattr__(self, "R_body_from_earth", R)
         tex = self.texture
         if isinstance(tex, str):
@@ -161,21 +117,21 @@ class Lighting:
     R_body_from_eci: object = None
 
     def __post_init__(self):
-        object.__setattr__(self, "sun_dir_body", _unit3("sun_dir_body", self.sun_dir_body))
+        object.__setattr__(self, "sun_dir_body", unit3("sun_dir_body", self.sun_dir_body))
         object.__setattr__(self, "sun_irradiance_W_m2",
-                           _finite("sun_irradiance_W_m2", self.sun_irradiance_W_m2, 0.0, MAX_IRRADIANCE_W_M2))
-        object.__setattr__(self, "shadow_fraction", _finite("shadow_fraction", self.shadow_fraction, 0.0, 1.0))
+                           finite_number("sun_irradiance_W_m2", self.sun_irradiance_W_m2, 0.0, MAX_IRRADIANCE_W_M2))
+        object.__setattr__(self, "shadow_fraction", finite_number("shadow_fraction", self.shadow_fraction, 0.0, 1.0))
         object.__setattr__(self, "sun_angular_diameter_rad",
-                           _finite("sun_angular_diameter_rad", self.sun_angular_diameter_rad, 0.0, 0.1))
+                           finite_number("sun_angular_diameter_rad", self.sun_angular_diameter_rad, 0.0, 0.1))
         object.__setattr__(self, "ambient_radiance_W_m2_sr",
-                           _finite("ambient_radiance_W_m2_sr", self.ambient_radiance_W_m2_sr, 0.0, MAX_IRRADIANCE_W_M2))
+                           finite_number("ambient_radiance_W_m2_sr", self.ambient_radiance_W_m2_sr, 0.0, MAX_IRRADIANCE_W_M2))
         if self.earth is not None and not isinstance(self.earth, Earth):
             raise ValueError(f"earth must be a raytrace.lighting.Earth or None, got {type(self.earth).__name__}")
         if self.stars is not None:
             if not isinstance(self.stars, StarField):
                 raise ValueError(f"stars must be a raytrace.stars.StarField or None, got {type(self.stars).__name__}")
             object.__setattr__(self, "R_body_from_eci",
-                               _rotation("R_body_from_eci", self.R_body_from_eci, " when stars are given"))
+                               rotation("R_body_from_eci", self.R_body_from_eci, " when stars are given"))
 
     @property
     def sun_irradiance_at_target_W_m2(self) -> float:

@@ -44,7 +44,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .camera import Camera
-from .lighting import EARTH_RADIUS_M, EARTH_TEXTURES, SOLAR_CONSTANT_W_M2, Earth, Lighting, only_numbers
+from ._checks import finite_numbers, only_numbers
+from .lighting import EARTH_RADIUS_M, EARTH_TEXTURES, SOLAR_CONSTANT_W_M2, Earth, Lighting
 from .model import MATERIALS, TargetModel
 
 __all__ = ["SceneSpec", "load_scene_file", "scene_to_dict"]
@@ -138,15 +139,10 @@ def _err(msg: str) -> ValueError:
 
 
 def _numbers(name: str, value, n: int) -> np.ndarray:
-    if not only_numbers(value):
-        raise _err(f"{name} must be {n} numbers (JSON numbers, not strings or booleans), got {value!r}")
     try:
-        a = np.asarray(value, dtype=np.float64).ravel()
-    except (TypeError, ValueError):
-        raise _err(f"{name} must be {n} numbers, got {value!r}") from None
-    if a.shape != (n,) or not np.all(np.isfinite(a)):
-        raise _err(f"{name} must be {n} finite numbers, got {value!r}")
-    return a
+        return finite_numbers(name, value, n, strict=True)
+    except ValueError as exc:
+        raise _err(str(exc)) from None
 
 
 # how far from orthonormal a rotation in the file may be: what 4 printed decimals leave
