@@ -20,6 +20,7 @@ import pytest
 
 import cli
 from raytrace import files as F
+from raytrace.dataset import options as opt
 from raytrace.dataset import pool
 from tests.cli_helpers import run_main
 
@@ -243,7 +244,7 @@ def test_config_that_is_a_device_a_fifo_or_too_large_is_one_line(tmp_path):
     fifo = tmp_path / "fifo.toml"
     os.mkfifo(fifo)
     big = tmp_path / "big.toml"
-    big.write_text("# " + "x" * (cli.CONFIG_LIMIT_BYTES + 10) + "\n")
+    big.write_text("# " + "x" * (opt.CONFIG_LIMIT_BYTES + 10) + "\n")
     for path, words in (("/dev/zero", ["regular file", "character device"]), (fifo, ["regular file", "FIFO"]),
                         (big, ["at most 1 MiB"])):
         if str(path).startswith("/dev") and not os.path.exists(path):
