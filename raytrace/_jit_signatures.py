@@ -40,11 +40,20 @@ SIGNATURES = {
     'raytrace._paths.sun_visibility': (1.49, [
         "(int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, float64, Array(float64, 1, 'C', False, aligned=True))",
     ]),
+    'raytrace._sampling._hash01': (0.14, [
+        '(int64, int64)',
+    ]),
+    'raytrace._sampling._hash32': (0.17, [
+        '(int64, int64)',
+    ]),
+    'raytrace._sampling._strata': (0.05, [
+        '(int64,)',
+    ]),
+    'raytrace._sampling.permute': (0.09, [
+        '(int64, int64, int64)',
+    ]),
     'raytrace._shading._earth_albedo_along': (0.77, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64, float64, float64, float64)",
-    ]),
-    'raytrace._shading._strata': (0.05, [
-        '(int64,)',
     ]),
     'raytrace._shading.add_diffuse': (0.3, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
@@ -78,9 +87,6 @@ SIGNATURES = {
     ]),
     'raytrace._shading.mirror_rays': (0.76, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
-    ]),
-    'raytrace._shading.permute': (0.09, [
-        '(int64, int64, int64)',
     ]),
     'raytrace._shading.put_rows': (0.33, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
@@ -165,12 +171,6 @@ SIGNATURES = {
     ]),
     'raytrace.cache._glossy_bounce': (1.34, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
-    ]),
-    'raytrace.cache._hash01': (0.14, [
-        '(int64, int64)',
-    ]),
-    'raytrace.cache._hash32': (0.17, [
-        '(int64, int64)',
     ]),
     'raytrace.cache._interp_rows': (0.32, [
         "(Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
@@ -260,26 +260,26 @@ EXTRA_SIGNATURES = {
         'raytrace._paths.lobe_traced': (21.15, [
             "(int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, float64, float64, float64, bool, int64, float32, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
+        'raytrace._sampling._laine_karras32': (0.05, [
+            '(int64, int64)',
+        ]),
+        'raytrace._sampling._owen_scramble32': (0.06, [
+            '(int64, int64)',
+        ]),
+        'raytrace._sampling._owen_sobol2_keyed': (0.07, [
+            '(int64, int64, int64, int64)',
+        ]),
+        'raytrace._sampling._reverse_bits32': (0.05, [
+            '(int64,)',
+        ]),
+        'raytrace._sampling._sobol2_y': (0.06, [
+            '(int64,)',
+        ]),
         'raytrace._shading._allotted': (0.12, [
             "(float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64)",
         ]),
         'raytrace._shading._edge_top': (0.06, [
             '(float64, float64, float64, float64, float64, float64)',
-        ]),
-        'raytrace._shading._laine_karras32': (0.05, [
-            '(int64, int64)',
-        ]),
-        'raytrace._shading._owen_scramble32': (0.06, [
-            '(int64, int64)',
-        ]),
-        'raytrace._shading._owen_sobol2_keyed': (0.07, [
-            '(int64, int64, int64, int64)',
-        ]),
-        'raytrace._shading._reverse_bits32': (0.05, [
-            '(int64,)',
-        ]),
-        'raytrace._shading._sobol2_y': (0.06, [
-            '(int64,)',
         ]),
         'raytrace._shading.allocate_rays': (0.23, [
             "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64, float64, Array(int64, 1, 'C', False, aligned=True))",

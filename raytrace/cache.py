@@ -84,6 +84,7 @@ from scipy.spatial import cKDTree
 
 from . import environment as env
 from ._jit import inline, jit, jit_exact, pjit, pjit_exact
+from ._sampling import _hash01
 from ._threads import submit
 from .brdf import bounce_albedo, brdf_cos, cosine_direction, sample_brdf
 
@@ -224,24 +225,6 @@ def _lattice_points(V, F, corner_normal, face_s, lat_start, pos, nrm):
                 nrm[k, 0] = nx / nn
                 nrm[k, 1] = ny / nn
                 nrm[k, 2] = nz / nn
-
-
-@jit
-def _hash32(i, k):
-    """A 32-bit hash of the integers (i, k)."""
-    h = (i * 0x9E3779B1 + k * 0x85EBCA77 + 0x27D4EB2F) & 0xFFFFFFFF
-    h ^= h >> 15
-    h = (h * 0x2C1B3C6D) & 0xFFFFFFFF
-    h ^= h >> 12
-    h = (h * 0x297A2D39) & 0xFFFFFFFF
-    h ^= h >> 15
-    return h
-
-
-@jit
-def _hash01(i, k):
-    """A number in [0, 1) from a hash of the integers (i, k) (24 bits)."""
-    return (_hash32(i, k) & 0xFFFFFF) / 16777216.0
 
 
 @pjit

@@ -70,6 +70,8 @@ import numpy as np
 
 from . import _paths, _shading as K
 from ._kernels import centre_rays, ray_origins32
+from ._sampling import (AA_SECOND_STREAM, BOX_STREAM, COVERAGE_STREAM, LOBE_PATH_STREAM, SECOND_PASS_STREAM,
+                        SUB_GATHER_STREAM)
 from ._threads import parallel_chunksize, submit as _submit
 from .brdf import split_sum_table
 from .camera import Camera
@@ -115,9 +117,6 @@ GATHER_ALPHA = 1.0
 # 1.23 s; error at 640×480 (8 / 16 / 64 rays) Crew Dragon 1.93 / 1.57 / 0.96 → 2.01 / 1.66 / 1.05 %,
 # the other three within 0.1 %
 LOBE_MIN_SPECULAR = 0.2
-# XORed into the seed of the paths traced from lobe-ray hits, so that they do not repeat the
-# final gather's paths from the same pixel (both are keyed by pixel and ray number)
-_LOBE_STREAM = 0x2545F491
 # rays per chunk of the final gather and the lobe sampling: their float64 ray, hit and bounce
 # arrays stay a few MB and are reused by the allocator instead of being mapped fresh (a whole
 # 1280×960 gather at 16 rays is 2.6 M rays, ~60 MB per array, and the page faults of writing
@@ -132,17 +131,6 @@ _CHUNK_RAYS = 1 << 18
 # in the second pass; 0, numba's static split, measured 0.95–1.03× on four scenes)
 _FUSED_GATHER = True
 _FUSED_CHUNK = 1
-
-
-# XORed into the frame's seed for the second sub-sample pattern of the noisiest anti-aliased
-# pixels (Quality.aa_extra)
-_AA_SECOND_STREAM = 0x1B873593
-# the directions of the sub-samples' own final gathers: a sequence per pixel apart from its
-# centre's (_shade_subsamples)
-_SUB_GATHER_STREAM = 0x2545F491
-# XORed into the frame's seed for the sub-pixel rays of the pixels that are not anti-aliased
-# (Quality.box_grid)
-_BOX_STREAM = 0x68E31DA4
 
 
 # the local-linear residual filter (_filter_residual): coordinates in units of 8 pixels, and a
@@ -410,7 +398,7 @@ class _Context(_Sunlight):
             sx, sy, sz = (float(x) for x in light.sun_dir_body)
             with parallel_chunksize(_FUSED_CHUNK):
                 _paths.lobe_traced(direct.handle, idx, s["P"], s["NS"], s["NG"], s["WO"], s["comp"], n_rays, seed,
-                                   seed ^ _LOBE_STREAM, np.asarray(pix, dtype=np.int64), self.eps, sx, sy, sz,
+                                   seed ^ LOBE_PATH_STREAM, np.asarray(pix, dtype=np.int64), self.eps, sx, sy, sz,
                                    light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
                                    np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(), lbar, val, v)
             out[idx] = val
@@ -433,7 +421,7 @@ class _Context(_Sunlight):
             # (their own stream of samples: another seed term of the same keys)
             vis = self._bounce_sun(o, d, h)
             keys = np.repeat(pix[part].astype(np.int64), n_rays) * n_rays + np.tile(np.arange(n_rays), len(part))
-            e_ind = self._bounces(o, d, h, hu, hv, keys, seed ^ _LOBE_STREAM, _GATHER_BOUNCES)
+            e_ind = self._bounces(o, d, h, hu, hv, keys, seed ^ LOBE_PATH_STREAM, _GATHER_BOUNCES)
             v = np.empty(len(part))
             K.lobe_sum(n_rays, o, d, w, h["geomID"], h["primID"], hu, hv, *self._lookup(), part, lbar, vis, e_ind, val,
                        v)
@@ -645,8 +633,8 @@ class _Context(_Sunlight):
 
 
 # the two-pass final gather (Quality.pilot_rays): the paths traced from the second pass's hits
-# take the frame's seed XOR _SECOND_PASS_STREAM (its directions continue the pilot's
-# sequences); a pixel gets at most _MAX_RAYS_FACTOR × gather_rays rays; the pilot's per-ray
+# take the frame's seed XOR SECOND_PASS_STREAM (raytrace._sampling; its directions continue the
+# pilot's sequences); a pixel gets at most _MAX_RAYS_FACTOR × gather_rays rays; the pilot's per-ray
 # variance is averaged over the other pixels of the same part within _NOISE_RADIUS; a ray that
 # hits a part costs 1 + _HIT_COST rays that escape (its shadow ray, its cache look-up, its
 # traced bounces); and every pixel keeps a share _EVEN_SHARE × the mean σ of the allocation
@@ -654,7 +642,6 @@ class _Context(_Sunlight):
 # ``balanced``-16: _HIT_COST 0 took the frame 1.12–1.40× the one pass's time, since the rays
 # moved to crevices where they hit and bounce; 3: 1.05–1.09×, 6: 1.00–1.08× for 2.04 / 2.09 %;
 # _EVEN_SHARE 0.5 took ICESat ``backlit`` 2.49 → 2.33 %, the others within ±0.1 %)
-_SECOND_PASS_STREAM = 0x5BD1E995
 _MAX_RAYS_FACTOR = 8
 _NOISE_RADIUS = 2
 _HIT_COST = 3.0
@@ -727,7 +714,7 @@ def _gather_two_pass(ctx: _Context, s, n_rays: int, n_pilot: int, pix: np.ndarra
         # the same sequences of directions, continued (their pilot rays left strata for these
         # to fill), and paths of their own from the hits
         E2 = ctx.gather_E(s, 0, pix[more], seed, var2, counts=extra, first=n_pilot,
-                          path_seed=seed ^ _SECOND_PASS_STREAM, rows=more)
+                          path_seed=seed ^ SECOND_PASS_STREAM, rows=more)
         w = n_pilot / total[more]
         E[more] = w[:, None] * E[more] + (1.0 - w)[:, None] * E2
         var[more] = w * w * var[more] + (1.0 - w) ** 2 * var2
@@ -1010,7 +997,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
             # the highest contrast first, ties in pixel order; then back in pixel order
             sel = np.sort(np.argsort(-contrast, kind="stable")[:n_extra])
             sub2 = _supersample(ctx, scene, camera, R, t, o_body, geo, epix[sel], q.aa_grid,
-                                int(seed) ^ _AA_SECOND_STREAM, centre_light, q.aa_gather_rays, centre, q.cov_grid,
+                                int(seed) ^ AA_SECOND_STREAM, centre_light, q.aa_gather_rays, centre, q.cov_grid,
                                 q.borrow, q.own_at_boundary)
             sub[sel] = 0.5 * (sub[sel] + sub2)
         _check_finite("anti-aliasing", sub)
@@ -1021,7 +1008,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         # of its own; one on another surface than its centre's, rare here, does)
         rest = np.setdiff1d(pix, epix, assume_unique=True)
         if len(rest):
-            box = _supersample(ctx, scene, camera, R, t, o_body, geo, rest, q.box_grid, int(seed) ^ _BOX_STREAM,
+            box = _supersample(ctx, scene, camera, R, t, o_body, geo, rest, q.box_grid, int(seed) ^ BOX_STREAM,
                                centre_light, q.aa_gather_rays, centre, borrow=q.borrow)
             _check_finite("area means", box)
             K.put_rows_nonnegative(rest, box, rad)
@@ -1274,7 +1261,7 @@ def _trace_chunk(sunl: _Sunlight, scene: Scene, camera: Camera, R, t, o_body, ge
     mpix = epix[mixed]
     C = cov_grid * cov_grid
     Dc = np.empty((len(mpix) * C, 3))
-    K.subpixel_rays(mpix.astype(np.int64), W, cov_grid, (seed + 0x3C6EF372) & 0x7FFFFFFF, R_bc, camera.fx,
+    K.subpixel_rays(mpix.astype(np.int64), W, cov_grid, (seed + COVERAGE_STREAM) & 0x7FFFFFFF, R_bc, camera.fx,
                     camera.fy, camera.cx, camera.cy, Dc)
     hc = _intersect_from(scene, o_body, z0, Dc)
     g_c = groups(hc).reshape(len(mpix), C)
@@ -1404,7 +1391,7 @@ def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, se
                     Ls[j] += ctx.lobe(sj, gather_rays, keys, seed, lbar[j])
                 # the gathers of a pixel's sub-samples: one stratified set of its own sequence
                 # (a stream apart from its centre's gather), their paths keyed per sub-sample
-                E[j] = ctx.gather_E(s, gather_rays, keys, seed ^ _SUB_GATHER_STREAM, path_seed=seed, share=S, rows=j)
+                E[j] = ctx.gather_E(s, gather_rays, keys, seed ^ SUB_GATHER_STREAM, path_seed=seed, share=S, rows=j)
         ctx.add_diffuse(s, E, Ls)
         K.put_rows(idx, Ls, L)
     if tr["miss"] is not None:

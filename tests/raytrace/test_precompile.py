@@ -67,15 +67,15 @@ def test_precompile_reports_its_progress_as_each_entry_finishes(tmp_path, monkey
     helpers, one calling the other, and a stale entry; the costs made up) compiled by two
     spawned processes into a temporary numba cache."""
     table = {
-        "raytrace.cache._hash32": (1.0, SIGNATURES["raytrace.cache._hash32"][1]),
-        "raytrace.cache._hash01": (2.0, SIGNATURES["raytrace.cache._hash01"][1]),  # calls _hash32
-        "raytrace._shading.permute": (0.5, ["(int64,)"]),  # wrong arity: a signature from older code
+        "raytrace._sampling._hash32": (1.0, SIGNATURES["raytrace._sampling._hash32"][1]),
+        "raytrace._sampling._hash01": (2.0, SIGNATURES["raytrace._sampling._hash01"][1]),  # calls _hash32
+        "raytrace._sampling.permute": (0.5, ["(int64,)"]),  # wrong arity: a signature from older code
     }
     monkeypatch.setattr(P, "entries_to_compile", lambda groups=("fast",): dict(table))
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))  # the workers' cache
     calls = []
     failed = P.precompile(2, ["fast"], progress=lambda done, total: calls.append((done, total)))
-    assert len(failed) == 1 and failed[0].startswith("raytrace._shading.permute(int64,)")
+    assert len(failed) == 1 and failed[0].startswith("raytrace._sampling.permute(int64,)")
     assert len(calls) == len(table)
     assert all(total == 3.5 for _, total in calls)
     done = [d for d, _ in calls]
@@ -84,15 +84,15 @@ def test_precompile_reports_its_progress_as_each_entry_finishes(tmp_path, monkey
     # task of _hash32 that waited for it adds nothing
     assert sorted(b - a for a, b in zip([0.0] + done, done)) == [0.0, 0.5, 3.0]
     index = {p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")}
-    assert {"cache._hash32", "cache._hash01"} <= index
+    assert {"_sampling._hash32", "_sampling._hash01"} <= index
 
 
 def test_precompile_without_a_callback_compiles_and_returns_the_failures(tmp_path, monkeypatch):
-    table = {"raytrace.cache._hash32": (1.0, SIGNATURES["raytrace.cache._hash32"][1])}
+    table = {"raytrace._sampling._hash32": (1.0, SIGNATURES["raytrace._sampling._hash32"][1])}
     monkeypatch.setattr(P, "entries_to_compile", lambda groups=("fast",): dict(table))
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
     assert P.precompile(2) == []
-    assert [p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")] == ["cache._hash32"]
+    assert [p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")] == ["_sampling._hash32"]
 
 
 def _recorder_module():

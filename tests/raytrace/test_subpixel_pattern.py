@@ -5,7 +5,7 @@ column of the domain, uniform over it across seeds."""
 import numpy as np
 import pytest
 
-from raytrace import _shading as K
+from raytrace import _sampling, _shading as K
 
 FX, FY, CX, CY, W = 800.0, 700.0, 40.0, 30.0, 80
 
@@ -80,11 +80,11 @@ def test_final_gather_directions_are_multi_jittered_in_radius_squared_and_azimut
 
 @pytest.mark.parametrize("n", [1, 2, 5, 16, 36, 100, 257])
 def test_hash_permutation_is_a_permutation_and_depends_on_its_key(n):
-    """raytrace._shading.permute (Kensler 2013, §3): for every key, i ↦ permute(i, n, key)
+    """raytrace._sampling.permute (Kensler 2013, §3): for every key, i ↦ permute(i, n, key)
     maps 0 … n − 1 onto itself one to one; different keys give different orders."""
     orders = set()
     for key in (0, 1, 7, 0x9E3779B9, 0xFFFFFFFF, 123456789):
-        perm = [K.permute(i, n, key) for i in range(n)]
+        perm = [_sampling.permute(i, n, key) for i in range(n)]
         assert sorted(perm) == list(range(n))
         orders.add(tuple(perm))
     if n >= 5:
@@ -99,7 +99,7 @@ def _disc_strata(pixels, n, seed):
     number = np.tile(np.arange(n, dtype=np.int64), len(pixels))
     d = np.empty((len(pixel), 3))
     K.sun_disc_dirs(pixel, number, n, seed, 0.0, 0.0, 1.0, np.cos(half), d)
-    gx = K._strata(n)
+    gx = _sampling._strata(n)
     gy = n // gx
     u1 = (1.0 - d[:, 2]) / (1.0 - np.cos(half))
     u2 = (np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi)) % 1.0

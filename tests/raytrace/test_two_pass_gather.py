@@ -21,7 +21,7 @@ import pytest
 import trimesh
 from scipy import integrate, optimize
 
-from raytrace import _shading as K
+from raytrace import _sampling, _shading as K
 from raytrace import shade
 from raytrace.lighting import Lighting
 from raytrace.model import Component, TargetModel
@@ -116,7 +116,7 @@ def test_unscrambled_sequence_is_scipys_sobol():
     from scipy.stats import qmc
     ref = qmc.Sobol(d=2, scramble=False, bits=32).random_base2(12)
     idx = [k ^ (k >> 1) for k in range(4096)] + [2**32 - 1, 0x9E3779B9, 0x80000001]
-    ours = np.array([[K._reverse_bits32(i), K._sobol2_y(i)] for i in idx], dtype=np.float64) / 2.0**32
+    ours = np.array([[_sampling._reverse_bits32(i), _sampling._sobol2_y(i)] for i in idx], dtype=np.float64) / 2.0**32
     np.testing.assert_array_equal(ours[:4096], ref)
     # a full 32-bit index (as the shuffled index is) against the direction-number recursion
     for i, (x, y) in zip(idx[4096:], ours[4096:] * 2.0**32):
