@@ -20,13 +20,13 @@ import math
 import numba
 import numpy as np
 
+from ._cache_kernels import glossy_draw, hit_normals
 from ._embree import intersect1, occluded1, ray_buffer
 from ._jit import inline, pjit
 from ._sampling import _cmj_perms, _cmj_point, _hash01, _hash32, _owen_sobol2_keyed, _strata
 from ._shading import (add_lobe_term, disc_direction, gather_estimate, gather_start, incoming, incoming_env,
                        mean_estimate)
 from .brdf import cosine_direction, onb, sample_brdf
-from .cache import glossy_draw, hit_normals
 
 # points per block of the parallel loop (scheduled dynamically: the rays per point vary)
 _BLOCK = 16

@@ -17,7 +17,7 @@ from ._jit import FASTMATH, inline, jit, jit_exact, pjit, pjit_exact
 from ._kernels import moller_trumbore, normals_facing
 from .brdf import brdf_cos, cosine_direction, onb, sample_brdf, specular_albedo
 from ._sampling import (_cmj_perms, _cmj_point, _hash01, _hash32, _owen_sobol2_keyed, _strata, permute)
-from .cache import glossy_draw, hit_normals, interpolate_rows, lattice_rows
+from ._cache_kernels import glossy_draw, hit_normals, interpolate_rows, lattice_rows
 
 
 @pjit_exact

@@ -18,7 +18,7 @@ import scipy.sparse as sp
 import trimesh
 from scipy.sparse.linalg import spsolve
 
-from raytrace import environment as env
+from raytrace import _cache_kernels, environment as env
 from raytrace.lighting import Lighting
 from raytrace.model import Component, TargetModel
 from raytrace.scene import Scene
@@ -128,8 +128,8 @@ def test_the_over_relaxed_solve_converges_to_the_direct_solve_or_falls_back(monk
         E = E0.copy()
         Y, Yb = cache._c_rho_ss * E, cache._c_rho_bounce * E
         for _ in range(tight.iterations):
-            cache_module._gauss_seidel_sweep(c["W_ss"].indptr, c["W_ss"].indices, c["W_ss"].data, *c["W_g"],
-                                             cache._c_rho_ss, cache._c_rho_bounce, E0, E, Y, Yb, omega)
+            _cache_kernels._gauss_seidel_sweep(c["W_ss"].indptr, c["W_ss"].indices, c["W_ss"].data, *c["W_g"],
+                                               cache._c_rho_ss, cache._c_rho_bounce, E0, E, Y, Yb, omega)
         E[~cache._c_solved] = 0.0
         assert np.abs(E - E_lu).max() > 1e-2 * scale
 
@@ -192,11 +192,11 @@ def test_cache_rays_in_chunks_on_two_threads_build_the_same_cache(monkeypatch):
 
 
 def test_csr_assembly_against_scipy():
-    """raytrace.cache._csr_sum (the transfer matrices' assembly) against scipy's COO to CSR
+    """raytrace._cache_kernels._csr_sum (the transfer matrices' assembly) against scipy's COO to CSR
     with duplicates summed: the same pattern (columns ascending per row) and values to the
     last bits' order of summation, on rows in input order and shuffled, with dropped entries,
     one and three channels, a column range not a multiple of 64 and an empty matrix."""
-    from raytrace.cache import _csr_sum
+    from raytrace._cache_kernels import _csr_sum
     rng = np.random.default_rng(4)
     for trial in range(12):
         m, n_rows = int(rng.integers(0, 4000)), int(rng.integers(1, 400))
