@@ -51,7 +51,7 @@ def _dispatchers() -> dict:
 # the frames each group is recorded from (after the main job's, group "fast"): full-size
 # frames, so that every stage of the preset runs (edge pixels, coverage, Earth behind). The
 # main job's from two frames: the first has no penumbra to sample (no solar-disc shadow rays,
-# raytrace._shading.sun_disc_dirs), the second has, as most frames of the job do
+# raytrace._surface.sun_disc_dirs), the second has, as most frames of the job do
 _RECORD_ARGS = {
     "fast": ["--frames", "2"],
     "balanced": ["--frames", "1", "--quality", "balanced", "--samples", "16"],

@@ -40,7 +40,7 @@ Per frame
     f_s(sun → row)·cosθ_sun·E_sun·V, is added exactly per frame. A gold plate's reflection onto a
     wall was 0.45× or 4.4× the quadrature with the diffuse stand-in, depending on where the glint
     points; it is now within 3 % / 12 % (tests/raytrace/test_glossy_cache.py). Seen along
-    a given ray (:func:`raytrace._shading.incoming`), a glossy surface instead returns its
+    a given ray (:func:`raytrace._surface.incoming`), a glossy surface instead returns its
     diffuse part, its exact specular reflection of the Sun towards that ray, and its
     specular albedo times the rest of its irradiance (as if that arrived uniformly).
 

@@ -34,7 +34,7 @@ class Quality:
     filter_sigma_l : float
         Edge stopping on the gathered light itself: a neighbour's weight falls as exp(−z/σ_l), z the
         z-score of the two pixels' difference from their gathers' own variances
-        (:func:`raytrace._shading.atrous`); 0: geometry only [-].
+        (:func:`raytrace._filter.atrous`); 0: geometry only [-].
     aa_grid : int
         Edge pixels get aa_grid² stratified sub-pixel rays [-].
     spp : int
@@ -82,7 +82,7 @@ class Quality:
         (:func:`raytrace.shade._thin_shadow_pixels`; needs ``sun_corners``).
     own_at_boundary : bool
         An edge sub-sample on its pixel centre's surface takes the centres' filtered light
-        interpolated (:func:`raytrace._shading.interpolate_rows_into`) only where all four
+        interpolated (:func:`raytrace._edges.interpolate_rows_into`) only where all four
         centres around it lie on that surface; nearer than a pixel to where the surface meets
         another part, folds (a crease) or ends, it casts its own final gather
         (:attr:`aa_gather_rays` rays), since the light there is extrapolated from centres
@@ -104,7 +104,7 @@ class Quality:
         Fraction of the anti-aliased pixels that get a second, independent aa_grid² pattern
         of shaded sub-samples (and coverage rays), their radiance the mean of both: those
         whose first pattern saw the largest contrast (the range of its sub-samples' R + G + B,
-        :func:`raytrace._shading.subsample_contrast`) — a truss, a silhouette against a bright
+        :func:`raytrace._rows.subsample_contrast`) — a truss, a silhouette against a bright
         part, a penumbra, where the sub-samples' noise sits (:func:`_balanced_aa_extra`) [-].
     box_grid : int
         ≥ 2: every target pixel that is not anti-aliased gets box_grid² stratified sub-pixel
@@ -197,7 +197,7 @@ def _balanced_aa_gather(samples: int) -> int:
     1.8× the sub-samples of 6×6 and most sub-samples near a part's boundary gather their own
     (:func:`_own_at_boundary`): the measurements are :func:`_balanced_aa`'s. The gathers of a
     pixel's sub-samples are consecutive blocks of one Owen-scrambled Sobol sequence of the
-    pixel (:func:`raytrace._shading.gather_start`), so together they are one stratified set
+    pixel (:func:`raytrace._gather.gather_start`), so together they are one stratified set
     (a net of 64 × 8 rays at N = 64) rather than 64 independent ones (the 12 scenes at
     1280×960, the same rays: N = 32 1.23 → 1.19 %, N = 64 1.02 → 1.00 %; there, 8×8 sub-samples
     with N / 16 rays gave 1.06 % and 10×10 with N / 16 0.97 % for 1.04× the time, better on the
@@ -227,7 +227,7 @@ def _balanced_aa_extra(samples: int) -> float:
     pixels, at every N. Most of ``balanced``'s edge noise sits in few of them (a truss, a
     penumbra, a crevice): in 16-ray frames of Cassini ``sunlit``, Tiangong ``earth`` and ICESat
     ``earth`` the noisiest 10 % hold 51–55 % of the frame's noise². The pixels are picked by
-    the contrast their first pattern saw (:func:`raytrace._shading.subsample_contrast`): the
+    the contrast their first pattern saw (:func:`raytrace._rows.subsample_contrast`): the
     top 10 % by contrast hold 36–41 % of the noise², the top 10 % by the half-split estimate
     (the two checkerboard halves' means apart, an unbiased but one-degree-of-freedom estimate
     of the pixel mean's variance) 23–30 % (20 %: 53–61 % against 32–50 %).

@@ -13,7 +13,7 @@ per pixel centre) and a linear float32 radiance image [W/(m²·sr)] at three qua
     reflection of the environment prefiltered by the part's GGX lobe (the split-sum
     approximation, :func:`raytrace.environment.glossy_table`), corrected by what the parts add
     or hide, and of the other parts along the mirror direction (one ray), weighted by the
-    lobe's directional albedo (:func:`raytrace._shading.add_mirror`); anti-aliasing with 3×3
+    lobe's directional albedo (:func:`raytrace._surface.add_mirror`); anti-aliasing with 3×3
     correlated multi-jittered sub-pixel rays (an unbiased box filter; Kensler 2013) only where
     neighbouring pixels disagree (silhouette, part, shadow and crease edges) or that a wire
     thinner than a pixel crosses (:attr:`Quality.slivers`); where those sub-samples see more than one
@@ -68,7 +68,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from . import _paths, _shading as K
+from . import _background, _edges, _filter, _gather, _paths, _rows, _surface, environment as env
 from ._kernels import centre_rays, ray_origins32
 from ._sampling import (AA_SECOND_STREAM, BOX_STREAM, COVERAGE_STREAM, LOBE_PATH_STREAM, SECOND_PASS_STREAM,
                         SUB_GATHER_STREAM)
@@ -108,7 +108,7 @@ _NEAR_SPACINGS = 2.0
 # lower or equal (interior bias² up, noise² down more: -16 summed 23.7 → 29.1 and
 # 46.5 → 36.4 ×10⁻⁴), with fewer rays (BENCHMARKS.md, "The first bounce only near")
 _FIRST_NEAR_SPACINGS = 1.0
-# weight of the environment control variate in the final gather (raytrace._shading.gather_sum)
+# weight of the environment control variate in the final gather (raytrace._gather.gather_sum)
 GATHER_ALPHA = 1.0
 # the lobe of a part is sampled (``balanced``) only where its specular albedo is at least this
 # fraction of its diffuse one (luminance): white paint's reflection (f0 = 0.04, α = 0.5, 4.5 % of
@@ -170,15 +170,15 @@ class RenderFrame:
 def _surfaces(scene: Scene, O, D, face) -> dict:
     """The surface points where rays O + t D hit triangles ``face`` of ``scene``: point,
     shading and geometric normals, direction to the viewer, barycentrics, side, part
-    (:func:`raytrace._shading.surfaces`; ``O`` a row per ray, or one row for all)."""
+    (:func:`raytrace._surface.surfaces`; ``O`` a row per ray, or one row for all)."""
     n = len(D)
     out = {k: np.empty((n, 3)) for k in ("P", "NS", "NG", "WO")}
     out["B"] = np.empty((n, 2))
     out["SIDE"] = np.empty(n, dtype=np.int64)
     out["face"] = face
     out["comp"] = scene.component_of_face[face]
-    K.surfaces(O, D, face, scene.vertices, scene.faces, scene.face_normal, scene.corner_normal, out["P"], out["NS"],
-               out["NG"], out["WO"], out["B"], out["SIDE"])
+    _surface.surfaces(O, D, face, scene.vertices, scene.faces, scene.face_normal, scene.corner_normal, out["P"],
+                      out["NS"], out["NG"], out["WO"], out["B"], out["SIDE"])
     return out
 
 
@@ -197,8 +197,8 @@ class _Sunlight:
         self.alpha = np.array([m.roughness for m in mats], dtype=np.float64)
         self.specular = self.f0.max(axis=1) > 0.0
         # parts whose mirror ray ``balanced``'s mirror term weights by more than 0 (the same
-        # expression as raytrace._shading.add_mirror's blend, so t = 1 exactly where False)
-        t = np.minimum(np.maximum((self.alpha - K.MIRROR_BLEND_A0) / K.MIRROR_BLEND_WIDTH, 0.0), 1.0)
+        # expression as raytrace._surface.add_mirror's blend, so t = 1 exactly where False)
+        t = np.minimum(np.maximum((self.alpha - _surface.MIRROR_BLEND_A0) / _surface.MIRROR_BLEND_WIDTH, 0.0), 1.0)
         self.mirror_weighted = t < 1.0
         # ``fast`` (no final gather): glossy parts reflect the environment prefiltered by their
         # lobe, and every specular point casts its mirror ray
@@ -210,7 +210,7 @@ class _Sunlight:
         """Sunlight (shadowed) at the points ``s``: radiance (n, 3) and the Sun's visibility
         (n,) in {0, 1}. The shadow ray goes towards the Sun's centre, or, with ``disc`` =
         (pixel, number, n_strata, seed) per point, towards one solar-disc sample per point
-        (:func:`raytrace._shading.sun_disc_dirs`), drawn only for the points facing the Sun;
+        (:func:`raytrace._surface.sun_disc_dirs`), drawn only for the points facing the Sun;
         ``occluder_t``, when given, receives the distance to the occluder of every blocked
         point. ``robust``: through Embree's robust scene (the pixel centres' exact Sun: no ray
         slips through an edge there), else the faster one (:attr:`Scene.direct_fast`). The
@@ -224,7 +224,7 @@ class _Sunlight:
         if e_sun > 0.0 and n:
             want = np.empty(n, dtype=bool)
             o = np.empty((n, 3), np.float32)  # Embree's precision: rounded once, as before
-            K.sun_rays(s["P"], s["NS"], s["NG"], sx, sy, sz, self.eps, want, o)
+            _surface.sun_rays(s["P"], s["NS"], s["NG"], sx, sy, sz, self.eps, want, o)
             idx = np.flatnonzero(want)
             direct = None
             if _FUSED_GATHER and occluder_t is None:
@@ -242,8 +242,8 @@ class _Sunlight:
                     # (float32: they only steer shadow rays)
                     d = np.empty((len(idx), 3), np.float32)
                     pixel, number, n_strata, seed = disc
-                    K.sun_disc_dirs(pixel[idx], number[idx], n_strata, seed, sx, sy, sz,
-                                    math.cos(0.5 * light.sun_angular_diameter_rad), d)
+                    _surface.sun_disc_dirs(pixel[idx], number[idx], n_strata, seed, sx, sy, sz,
+                                           math.cos(0.5 * light.sun_angular_diameter_rad), d)
                 if occluder_t is None:
                     blocked = self.scene.occluded(o[idx], d, robust=robust)
                 else:
@@ -251,7 +251,7 @@ class _Sunlight:
                     blocked = h["geomID"] >= 0
                     occluder_t[idx[blocked]] = h["tfar"][blocked]
                 vis[idx[~blocked]] = 1.0
-            K.shade_sun(s["NS"], s["WO"], s["comp"], self.diff, self.f0, self.alpha, sx, sy, sz, e_sun, vis, L)
+            _surface.shade_sun(s["NS"], s["WO"], s["comp"], self.diff, self.f0, self.alpha, sx, sy, sz, e_sun, vis, L)
         return L, vis
 
     def mirror_hits(self, s):
@@ -264,7 +264,7 @@ class _Sunlight:
         n = len(s["P"])
         o = np.empty((n, 3))
         d = np.empty((n, 3))
-        K.mirror_rays(s["NS"], s["NG"], s["WO"], s["P"], self.eps, spec, o, d)
+        _surface.mirror_rays(s["NS"], s["NG"], s["WO"], s["P"], self.eps, spec, o, d)
         idx = np.flatnonzero(spec)
         if self.prefiltered_glossy:
             h = self.scene.intersect(o[idx], d[idx])
@@ -313,13 +313,13 @@ class _Sunlight:
         if not len(cand):
             return None
         d = np.empty((len(cand) * n_rays, 3), np.float32)  # as Embree takes them
-        K.sun_disc_dirs(np.repeat(pix[cand].astype(np.int64), n_rays), np.tile(np.arange(n_rays), len(cand)), n_rays,
-                        seed, sx, sy, sz, math.cos(half), d)
+        _surface.sun_disc_dirs(np.repeat(pix[cand].astype(np.int64), n_rays), np.tile(np.arange(n_rays), len(cand)),
+                               n_rays, seed, sx, sy, sz, math.cos(half), d)
         o = np.repeat(s["P"][cand] + self.eps * s["NG"][cand], n_rays, axis=0)
         v = 1.0 - self.scene.occluded(o, d).reshape(len(cand), n_rays).mean(axis=1)
         full = np.zeros((len(cand), 3))
-        K.shade_sun(s["NS"][cand], s["WO"][cand], s["comp"][cand], self.diff, self.f0, self.alpha, sx, sy, sz,
-                    e_sun, np.ones(len(cand)), full)
+        _surface.shade_sun(s["NS"][cand], s["WO"][cand], s["comp"][cand], self.diff, self.f0, self.alpha, sx, sy, sz,
+                           e_sun, np.ones(len(cand)), full)
         dL = (v - vis[cand])[:, None] * full
         vis[cand] = v
         return cand, dL
@@ -345,19 +345,19 @@ class _Context(_Sunlight):
         self.lobe_sampled = self.specular & (spec_albedo @ lum >= LOBE_MIN_SPECULAR * (self.diff @ lum))
         # the environment's unoccluded irradiance: the cache's sky term and the final gather's
         # control variate are both its complement over blocked directions
-        cells = K.env.environment_cells(self.p, self.tex)
-        self.env_irradiance = K.env.irradiance_table(self.p, self.tex, cells=cells)
+        cells = env.environment_cells(self.p, self.tex)
+        self.env_irradiance = env.irradiance_table(self.p, self.tex, cells=cells)
         # ``fast``: the environment prefiltered by each glossy part's lobe for the mirror term's
-        # wide lobes, one table per distinct roughness (raytrace._shading.add_mirror)
-        levels = np.unique(self.alpha[self.specular & (self.alpha > K.GLOSSY_A0)]) if prefiltered_glossy else []
+        # wide lobes, one table per distinct roughness (raytrace._surface.add_mirror)
+        levels = np.unique(self.alpha[self.specular & (self.alpha > _surface.GLOSSY_A0)]) if prefiltered_glossy else []
         self.glossy_level = np.searchsorted(levels, self.alpha).clip(0, max(len(levels) - 1, 0))
-        self.glossy_env = K.env.glossy_table(self.p, levels, cells) if len(levels) else np.zeros((1, 2, 2, 3))
+        self.glossy_env = env.glossy_table(self.p, levels, cells) if len(levels) else np.zeros((1, 2, 2, 3))
         self.cf = self.cache.solve(lighting, env_irradiance=self.env_irradiance)
         self.sun = np.array([*lighting.sun_dir_body, lighting.sun_irradiance_at_target_W_m2])
 
     def add_mirror(self, s, E_point, L, hits, lbar_out=None):
         """Adds the cheap specular term of everything but the Sun
-        (:func:`raytrace._shading.add_mirror`) to ``L`` (n, 3): the mirror rays ``hits`` of
+        (:func:`raytrace._surface.add_mirror`) to ``L`` (n, 3): the mirror rays ``hits`` of
         :meth:`mirror_hits` (None: no specular point) reflecting the cache's light (``E_point``
         the points' cache irradiance); ``lbar_out`` (n, 3), if given, receives the radiance L̄
         the specular term reflects (the control variate of :meth:`lobe`)."""
@@ -367,10 +367,10 @@ class _Context(_Sunlight):
         idx, o, d, h = hits
         M = np.zeros((n, 3))
         lbar = np.zeros((n, 3)) if lbar_out is None else lbar_out
-        K.add_mirror(idx, o, d, h["geomID"], h["primID"], h["u"].astype(np.float64),
-                     h["v"].astype(np.float64), s["NS"], s["WO"], s["comp"], E_point, *self._lookup(),
-                     self.prefiltered_glossy, self.env_irradiance, self.glossy_env, self.glossy_level, M,
-                     lbar)
+        _surface.add_mirror(idx, o, d, h["geomID"], h["primID"], h["u"].astype(np.float64),
+                            h["v"].astype(np.float64), s["NS"], s["WO"], s["comp"], E_point, *self._lookup(),
+                            self.prefiltered_glossy, self.env_irradiance, self.glossy_env, self.glossy_level, M,
+                            lbar)
         L += M
 
     def lobe(self, s, n_rays: int, pix: np.ndarray, seed: int, lbar: np.ndarray, var: np.ndarray | None = None):
@@ -381,7 +381,7 @@ class _Context(_Sunlight):
         hits a part sees it as a final-gather ray does: the Sun exact there (a shadow ray) and
         the hit's indirect light traced (:meth:`_bounces`), not the cache's, whose lattice blurs
         the shadows and edges a sharp lobe reflects. ``var`` (n,), if given, receives each
-        estimate's luminance variance (:func:`raytrace._shading.lobe_sum`). Where Embree can
+        estimate's luminance variance (:func:`raytrace._gather.lobe_sum`). Where Embree can
         be called from numba, all in one kernel (:func:`raytrace._paths.lobe_traced`)."""
         n = len(s["P"])
         out = np.zeros((n, 3))
@@ -412,8 +412,8 @@ class _Context(_Sunlight):
             o = np.empty((m, 3))
             d = np.empty((m, 3))
             w = np.empty((m, 3))
-            K.lobe_rays(part, s["P"], s["NS"], s["NG"], s["WO"], s["comp"], self.f0, self.alpha, n_rays, seed, pix,
-                        self.eps, o, d, w)
+            _gather.lobe_rays(part, s["P"], s["NS"], s["NG"], s["WO"], s["comp"], self.f0, self.alpha, n_rays, seed,
+                              pix, self.eps, o, d, w)
             h = self.scene.intersect(o, d)
             val = np.empty((len(part), 3))
             hu, hv = h["u"].astype(np.float64), h["v"].astype(np.float64)
@@ -423,8 +423,8 @@ class _Context(_Sunlight):
             keys = np.repeat(pix[part].astype(np.int64), n_rays) * n_rays + np.tile(np.arange(n_rays), len(part))
             e_ind = self._bounces(o, d, h, hu, hv, keys, seed ^ LOBE_PATH_STREAM, _GATHER_BOUNCES)
             v = np.empty(len(part))
-            K.lobe_sum(n_rays, o, d, w, h["geomID"], h["primID"], hu, hv, *self._lookup(), part, lbar, vis, e_ind, val,
-                       v)
+            _gather.lobe_sum(n_rays, o, d, w, h["geomID"], h["primID"], hu, hv, *self._lookup(), part, lbar, vis, e_ind,
+                             val, v)
             out[part] = val
             if var is not None:
                 var[part] = v
@@ -433,8 +433,8 @@ class _Context(_Sunlight):
     def cache_E(self, s):
         E = np.empty((len(s["P"]), 3))
         c = self.cache
-        K.cache_irradiance(self.cf.indirect_W_m2, c.valid, c.face_s, c.lat_start, c.lat_ids, s["face"], s["B"],
-                           s["SIDE"], E)
+        _surface.cache_irradiance(self.cf.indirect_W_m2, c.valid, c.face_s, c.lat_start, c.lat_ids, s["face"], s["B"],
+                                  s["SIDE"], E)
         return E
 
     def gather_E(self, s, n_rays: int, pix: np.ndarray, seed: int, var: np.ndarray | None = None,
@@ -445,12 +445,12 @@ class _Context(_Sunlight):
         (:meth:`_gather_fused`) where Embree can be called from numba, else in chunks of about
         _CHUNK_RAYS rays (every sample is keyed by its pixel, so the result does not depend on
         the chunking); the rays are samples ``first``, ``first`` + 1, … of each pixel's
-        sequence of directions (:func:`raytrace._shading.gather_rays`, keyed by ``seed``; with
+        sequence of directions (:func:`raytrace._gather.gather_rays`, keyed by ``seed``; with
         ``share`` > 0 ``pix`` holds pixel · share + i for the sub-sample i of a pixel, and the
-        sub-samples of a pixel share its sequence: :func:`raytrace._shading.gather_start`), the
+        sub-samples of a pixel share its sequence: :func:`raytrace._gather.gather_start`), the
         paths traced from their hits keyed by ``path_seed`` (default ``seed``). ``var`` (n,),
         if given, receives each estimate's luminance variance
-        (:func:`raytrace._shading.gather_sum`), ``hits`` (n,) how many of its rays hit a part.
+        (:func:`raytrace._gather.gather_sum`), ``hits`` (n,) how many of its rays hit a part.
         ``rows`` (n,), if given, are the rows of ``s`` the n points are (the rest is per point)."""
         n = len(s["P"]) if rows is None else len(rows)
         if var is None:
@@ -515,7 +515,7 @@ class _Context(_Sunlight):
         o = np.empty((m, 3))
         d = np.empty((m, 3))
         seed, path_seed = seeds
-        K.gather_rays(s["P"], s["NS"], s["NG"], start, first, seed, pix, share, kmul, self.eps, o, d)
+        _gather.gather_rays(s["P"], s["NS"], s["NG"], start, first, seed, pix, share, kmul, self.eps, o, d)
         h = self.scene.intersect(o, d)
         if hits is not None and n:
             hits[:] = np.add.reduceat((h["geomID"] >= 0).astype(np.int64), start[:-1])
@@ -525,8 +525,8 @@ class _Context(_Sunlight):
         keys = np.repeat(pix.astype(np.int64) * kmul - start[:-1], counts) + np.arange(m, dtype=np.int64)
         e_ind = self._traced_indirect(o, d, h, hu, hv, keys, path_seed)
         E = np.empty((n, 3))
-        K.gather_sum(start, o, d, s["NG"], h["geomID"], h["primID"], hu, hv, *self._lookup(), vis, e_ind, s["NS"],
-                     self.env_irradiance, GATHER_ALPHA, E, var)
+        _gather.gather_sum(start, o, d, s["NG"], h["geomID"], h["primID"], hu, hv, *self._lookup(), vis, e_ind, s["NS"],
+                           self.env_irradiance, GATHER_ALPHA, E, var)
         return E
 
     def _traced_indirect(self, o, d, h, hu, hv, keys, seed):
@@ -540,7 +540,7 @@ class _Context(_Sunlight):
         not interpolated: the cache's error there reaches the pixel multiplied once more by
         the gap's albedo-weighted view factor at every traced bounce. At a glossy hit the path
         follows the part's lobe instead and estimates its specular reflection
-        (:func:`raytrace._shading.bounce2_rays`): a gold foil facing a lit wall reflects the wall,
+        (:func:`raytrace._gather.bounce2_rays`): a gold foil facing a lit wall reflects the wall,
         not the average of its surroundings."""
         return self._bounces(o, d, h, hu, hv, keys, seed, _GATHER_BOUNCES,
                              first_near_m=_FIRST_NEAR_SPACINGS * self.cache.spacing_m)
@@ -563,7 +563,7 @@ class _Context(_Sunlight):
         (the others take the cache's indirect light)."""
         m = len(d)
         e_ind = np.empty((m, 3))
-        K.hit_or_miss_rows(h["geomID"], e_ind)  # directions below the surface carry nothing
+        _rows.hit_or_miss_rows(h["geomID"], e_ind)  # directions below the surface carry nothing
         if levels <= 0 or not (h["geomID"] >= 0).any():
             e_ind.fill(-1.0)
             return e_ind
@@ -572,9 +572,9 @@ class _Context(_Sunlight):
         d2 = np.empty((m, 3))
         w2 = np.empty((m, 3))
         sc = self.scene
-        K.bounce2_rays(o, d, h["tfar"].astype(np.float64), h["geomID"], h["primID"], hu, hv, sc.face_offset,
-                       sc.face_normal, sc.corner_normal, sc.component_of_face, self.glossy, self.f0, self.alpha,
-                       keys, seed, self.eps, want, o2, d2, w2)
+        _gather.bounce2_rays(o, d, h["tfar"].astype(np.float64), h["geomID"], h["primID"], hu, hv, sc.face_offset,
+                             sc.face_normal, sc.corner_normal, sc.component_of_face, self.glossy, self.f0, self.alpha,
+                             keys, seed, self.eps, want, o2, d2, w2)
         if first_near_m is not None:
             go = self._continued(h, first_near_m)
             want &= go
@@ -582,8 +582,8 @@ class _Context(_Sunlight):
         idx = np.flatnonzero(want)
         if len(idx):
             o2c, d2c = np.empty((len(idx), 3)), np.empty((len(idx), 3))
-            K.take_rows(o2, idx, o2c)
-            K.take_rows(d2, idx, d2c)
+            _rows.take_rows(o2, idx, o2c)
+            _rows.take_rows(d2, idx, d2c)
             o2, d2 = o2c, d2c
             h2 = sc.intersect(o2, d2)
             hu2, hv2 = h2["u"].astype(np.float64), h2["v"].astype(np.float64)
@@ -598,8 +598,8 @@ class _Context(_Sunlight):
                     e2[near] = self._bounces(o2[near], d2[near], {k: v[near] for k, v in h2.items()}, hu2[near],
                                              hv2[near], keys[idx][near] * 4 + 1, seed, levels - 1)
             L2 = np.empty((len(idx), 3))
-            K.incoming_rays(o2, d2, h2["geomID"], h2["primID"], hu2, hv2, *self._lookup(), vis2, e2, L2)
-            K.put_weighted_rows(idx, L2, w2, e_ind)
+            _gather.incoming_rays(o2, d2, h2["geomID"], h2["primID"], hu2, hv2, *self._lookup(), vis2, e2, L2)
+            _rows.put_weighted_rows(idx, L2, w2, e_ind)
         return e_ind
 
     def _bounce_sun(self, o, d, h):
@@ -609,12 +609,12 @@ class _Context(_Sunlight):
         if light.sun_irradiance_at_target_W_m2 <= 0.0 or not len(d):
             return np.full(len(d), -1.0)
         vis = np.empty(len(d))
-        K.hit_or_miss(h["geomID"], vis)
+        _rows.hit_or_miss(h["geomID"], vis)
         sx, sy, sz = light.sun_dir_body
         want = np.empty(len(d), dtype=bool)
         so = np.empty((len(d), 3))
-        K.bounce_sun_rays(o, d, h["tfar"].astype(np.float64), h["geomID"], h["primID"], self.scene.face_offset,
-                          self.scene.face_normal, sx, sy, sz, self.eps, want, so)
+        _gather.bounce_sun_rays(o, d, h["tfar"].astype(np.float64), h["geomID"], h["primID"], self.scene.face_offset,
+                                self.scene.face_normal, sx, sy, sz, self.eps, want, so)
         idx = np.flatnonzero(want)
         if len(idx):
             blocked = self.scene.occluded(so[idx], np.broadcast_to(np.float32([sx, sy, sz]), (len(idx), 3)))
@@ -622,14 +622,14 @@ class _Context(_Sunlight):
         return vis
 
     def _lookup(self):
-        """Arguments of :func:`raytrace._shading.incoming` after the ray."""
+        """Arguments of :func:`raytrace._surface.incoming` after the ray."""
         sc, c = self.scene, self.cache
         return (sc.face_offset, sc.face_normal, sc.corner_normal, sc.component_of_face, self.diff, self.f0,
                 self.alpha, self.glossy, self.table, self.sun, self.cf.irradiance_W_m2, self.cf.sun_irradiance_W_m2, c.valid,
                 c.face_s, c.lat_start, c.lat_ids, self.p, self.tex)
 
     def add_diffuse(self, s, E, L):
-        K.add_diffuse(E, s["comp"], self.diff, L)
+        _surface.add_diffuse(E, s["comp"], self.diff, L)
 
 
 # the two-pass final gather (Quality.pilot_rays): the paths traced from the second pass's hits
@@ -655,7 +655,7 @@ def _gather_two_pass(ctx: _Context, s, n_rays: int, n_pilot: int, pix: np.ndarra
     every pixel, then as many more as the pilot's measured noise calls for, at the cost of
     n_rays rays at every pixel in all. For a fixed cost Σ c_k n_k the summed variance
     Σ σ_k²/n_k of the pixels' estimates is least at n_k ∝ σ_k/√c_k (Neyman allocation with
-    costs; :func:`raytrace._shading.allocate_rays`), and the gather's noise is very uneven: in
+    costs; :func:`raytrace._gather.allocate_rays`), and the gather's noise is very uneven: in
     the 12 scenes of the benchmark the noisiest 20 % of target pixels hold 69–100 % of it (in
     crevices, beside bright parts, where Earth is partly blocked), while the rays from an open,
     evenly lit face return the control variate exactly.
@@ -674,7 +674,7 @@ def _gather_two_pass(ctx: _Context, s, n_rays: int, n_pilot: int, pix: np.ndarra
     on a module, a panel's edge) over few: so the allocation minimises Σ Q_k σ_k²/n_k, the
     filtered variances, with n_k ∝ √Q_k σ_k/√c_k, where Q_k is the variance the filter's passes
     leave of unit noise at pixel k counting neighbours on its own part only
-    (:func:`raytrace._shading.filter_variance`; 0 passes: Q = 1, the plain Neyman allocation).
+    (:func:`raytrace._filter.filter_variance`; 0 passes: Q = 1, the plain Neyman allocation).
     Q depends on the ids alone, not on any ray, so the estimate stays unbiased. Measured on the
     12 scenes of ``benchmarks/bench_time_error.py`` at 1280×960 (``benchmarks/bench_bias_noise.py``,
     the same seeds both ways): at 8 rays the median error stays 2.85 % and the noisiest scenes
@@ -684,7 +684,7 @@ def _gather_two_pass(ctx: _Context, s, n_rays: int, n_pilot: int, pix: np.ndarra
     (Cassini ``backlit`` 5.79 → 5.46 %); at 64 rays (one pass) 1.33 → 1.32 %, no scene moved by
     more than 0.05 %. The frame's rays in all are the same budget. The second pass
     continues each pixel's sequence of directions from sample n_pilot, so both passes
-    together are as evenly stratified as one (:func:`raytrace._shading.gather_rays`).
+    together are as evenly stratified as one (:func:`raytrace._gather.gather_rays`).
     ``var`` (n,) receives each estimate's luminance variance, ``rays_out`` (n,), if given, its
     number of rays."""
     hits = np.empty(len(pix), dtype=np.int64)
@@ -692,19 +692,19 @@ def _gather_two_pass(ctx: _Context, s, n_rays: int, n_pilot: int, pix: np.ndarra
     img = np.zeros(inst.shape)
     img[at] = var * n_pilot  # per ray
     sig2 = np.zeros(inst.shape)
-    K.same_part_mean(img, inst, _NOISE_RADIUS, sig2)
+    _filter.same_part_mean(img, inst, _NOISE_RADIUS, sig2)
     img[at] = hits / n_pilot
     hit_frac = np.zeros(inst.shape)
-    K.same_part_mean(img, inst, _NOISE_RADIUS, hit_frac)
+    _filter.same_part_mean(img, inst, _NOISE_RADIUS, hit_frac)
     cost = 1.0 + _HIT_COST * hit_frac[at]
     total = np.empty(len(pix), dtype=np.int64)
     sg = np.sqrt(sig2[at])
     sg += _EVEN_SHARE * sg.mean()
     if filter_passes > 0:
         q = np.empty(inst.shape)
-        K.filter_variance(inst, filter_passes, q)
+        _filter.filter_variance(inst, filter_passes, q)
         sg *= np.sqrt(q[at])
-    K.allocate_rays(sg, cost, n_pilot, _MAX_RAYS_FACTOR * n_rays, n_rays * cost.sum(), total)
+    _gather.allocate_rays(sg, cost, n_pilot, _MAX_RAYS_FACTOR * n_rays, n_rays * cost.sum(), total)
     if rays_out is not None:
         rays_out[:] = total
     more = np.flatnonzero(total > n_pilot)
@@ -724,7 +724,7 @@ def _gather_two_pass(ctx: _Context, s, n_rays: int, n_pilot: int, pix: np.ndarra
 def _filter_residual(rows, var, inst, at, guide, passes: int, sigma_l: float, linear: float = 0.0) -> np.ndarray:
     """The per-pixel rows (n, 3) of a gathered estimate (``balanced``'s gathered irradiance,
     or its lobe's difference from the mirror term), with their luminance variances
-    ``var`` (n,), filtered by ``passes`` à-trous passes (:func:`raytrace._shading.atrous`) on
+    ``var`` (n,), filtered by ``passes`` à-trous passes (:func:`raytrace._filter.atrous`) on
     the image of ids ``inst`` (pixel k at (at[0][k], at[1][k]); pixels whose id is 0 neither
     take nor give), ``guide`` = (normals, depths, fx, fy, cx, cy) of that image: rows (n, 3).
 
@@ -745,15 +745,15 @@ def _filter_residual(rows, var, inst, at, guide, passes: int, sigma_l: float, li
     av, au = at[0].astype(np.int64), at[1].astype(np.int64)
     img = np.zeros((*inst.shape, 14 if linear_fit else 3))
     var_img = np.zeros(inst.shape)
-    K.residual_image(rows, var, av, au, _LL_UNIT, img, var_img)
+    _filter.residual_image(rows, var, av, au, _LL_UNIT, img, var_img)
     img, _ = _atrous_passes(img, var_img, inst, guide, passes, sigma_l, overwrite=True)
     out = np.empty((len(av), 3))
-    K.residual_rows(img, av, au, _LL_UNIT, _LL_RIDGE_PX2 / (_LL_UNIT * _LL_UNIT), linear, out)
+    _filter.residual_rows(img, av, au, _LL_UNIT, _LL_RIDGE_PX2 / (_LL_UNIT * _LL_UNIT), linear, out)
     return out
 
 
 def _atrous_passes(img, var, inst, guide, passes: int, sigma_l: float, overwrite: bool = False):
-    """``passes`` à-trous passes (:func:`raytrace._shading.atrous`, pass k with holes of 2^k
+    """``passes`` à-trous passes (:func:`raytrace._filter.atrous`, pass k with holes of 2^k
     pixels) over the image ``img`` (H, W, C) with per-pixel variances ``var`` (H, W), ids
     ``inst`` and ``guide`` = (normals, depths, fx, fy, cx, cy): the filtered image and its
     variances (σ_l = 0: geometry only). They are new arrays, or, with ``overwrite``, may be
@@ -765,8 +765,8 @@ def _atrous_passes(img, var, inst, guide, passes: int, sigma_l: float, overwrite
     normal, depth, fx, fy, cx, cy = guide
     for k in range(passes):
         if sigma_l > 0.0:
-            K.guide_images(img, var, inst, lum, var_blur)
-        K.atrous(img, var, var_blur, lum, inst, normal, depth, fx, fy, cx, cy, 1 << k, sigma_l, tmp, var_tmp)
+            _filter.guide_images(img, var, inst, lum, var_blur)
+        _filter.atrous(img, var, var_blur, lum, inst, normal, depth, fx, fy, cx, cy, 1 << k, sigma_l, tmp, var_tmp)
         img, tmp = tmp, img
         var, var_tmp = var_tmp, var
     return img, var
@@ -796,7 +796,7 @@ _CONTEXT_ON_SIDE_THREAD = True
 # median per-scene time ratio 0.95 for ``balanced``-16 and -64 (BENCHMARKS.md). ``fast``'s
 # anti-aliasing is one chunk on all of them.
 _AA_CHUNKS_ON_TWO_THREADS = True
-# Earth behind the target (raytrace._shading.earth_background): the procedural texture's
+# Earth behind the target (raytrace._background.earth_background): the procedural texture's
 # albedo on the corners of 4 × 4 pixel cells, interpolated in cells that span less than 1e-3
 # of Earth's radius (6.4 km; the texture's finest octave is ~60 km) and match their centre's
 # albedo to 0.2 %; elsewhere (near the limb) per pixel. 16 frames of the main job (Cassini,
@@ -904,9 +904,9 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     earth_px = np.zeros((H, W), dtype=bool)
     earth_drawn = lighting.earth is not None and _earth_may_be_in_view(camera, R, lighting)
     if earth_drawn:
-        K.earth_background(geo.instance, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy,
-                           sunl.p_background, sunl.tex, _BACKGROUND_STEP, _BACKGROUND_TOL,
-                           _BACKGROUND_CHORD, earth_px, rad.reshape(H, W, 3))
+        _background.earth_background(geo.instance, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy,
+                                     sunl.p_background, sunl.tex, _BACKGROUND_STEP, _BACKGROUND_TOL,
+                                     _BACKGROUND_CHORD, earth_px, rad.reshape(H, W, 3))
         _check_finite("background", rad)
     epix = _aa_pixels(q, scene, camera, R, t, o_body, geo, lighting, sunl, s, vis, pix, lit_img, earth_px,
                       earth_drawn)
@@ -975,7 +975,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     _check_finite("indirect light", L)
     # the specular corrections (lobe − mirror term) and the local-linear filter's planes may
     # overshoot below zero; radiance is never negative
-    K.put_rows_nonnegative(pix, L, rad)
+    _rows.put_rows_nonnegative(pix, L, rad)
     timings["indirect"] = time.perf_counter() - t0
 
     # ---- anti-aliasing where neighbours disagree (Earth behind the target is drawn above)
@@ -1001,7 +1001,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
                                 q.borrow, q.own_at_boundary)
             sub[sel] = 0.5 * (sub[sel] + sub2)
         _check_finite("anti-aliasing", sub)
-        K.put_rows_nonnegative(epix, sub, rad)
+        _rows.put_rows_nonnegative(epix, sub, rad)
     if q.box_grid > 1 and len(pix):
         # every other target pixel: its area mean from box_grid² sub-samples, which take the
         # centres' filtered light interpolated on their surface (none near a boundary casts a gather
@@ -1011,7 +1011,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
             box = _supersample(ctx, scene, camera, R, t, o_body, geo, rest, q.box_grid, int(seed) ^ BOX_STREAM,
                                centre_light, q.aa_gather_rays, centre, borrow=q.borrow)
             _check_finite("area means", box)
-            K.put_rows_nonnegative(rest, box, rad)
+            _rows.put_rows_nonnegative(rest, box, rad)
     timings["antialias"] = time.perf_counter() - t0
     rad = rad.reshape(H, W, 3)
     _stars(rad, scene, camera, R, t, lighting, timings)
@@ -1021,11 +1021,11 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
 def _aa_pixels(q: Quality, scene: Scene, camera: Camera, R, t, o_body, geo, lighting: Lighting, sunl: _Sunlight, s,
                vis, pix, lit_img, earth_px, earth_drawn: bool) -> np.ndarray:
     """The pixels :func:`render` anti-aliases (flat indices, ascending): where 4-neighbours
-    disagree (:func:`raytrace._shading.edge_pixels`: id, Earth, lit/shadowed, crease, depth
+    disagree (:func:`raytrace._edges.edge_pixels`: id, Earth, lit/shadowed, crease, depth
     step), and as the preset asks, where a rod's shadow thinner than a pixel may fall
     (:func:`_thin_shadow_pixels`), where a pixel corner sees another part or Sun than its
     centre (:func:`_corner_edges`) and where a triangle thinner than a pixel lies
-    (:func:`raytrace._shading.sliver_pixels`). Needs no radiance cache."""
+    (:func:`raytrace._edges.sliver_pixels`). Needs no radiance cache."""
     H, W = camera.height, camera.width
     if earth_drawn:
         check = np.array([0, 0, W, H])
@@ -1036,7 +1036,7 @@ def _aa_pixels(q: Quality, scene: Scene, camera: Camera, R, t, o_body, geo, ligh
         return np.zeros(0, dtype=np.int64)
     corners = _corner_rays(scene, camera, R, t, o_body, geo) if q.corner_rays else None
     edges = np.zeros((H, W), dtype=bool)
-    K.edge_pixels(geo.instance, lit_img.reshape(H, W), geo.normal_cam, geo.depth_m, earth_px, check, edges)
+    _edges.edge_pixels(geo.instance, lit_img.reshape(H, W), geo.normal_cam, geo.depth_m, earth_px, check, edges)
     sun_corners = q.sun_corners and lighting.sun_irradiance_at_target_W_m2 > 0.0
     if sun_corners and q.thin_shadows and len(pix):
         thin = _thin_shadow_pixels(scene, s, vis, geo.depth_m.ravel()[pix].astype(np.float64) / camera.fx,
@@ -1046,8 +1046,8 @@ def _aa_pixels(q: Quality, scene: Scene, camera: Camera, R, t, o_body, geo, ligh
         edges |= _corner_edges(scene, geo, corners, lit_img.reshape(H, W) if sun_corners else None,
                                lighting.sun_dir_body, sunl.eps)
     if q.slivers:
-        K.sliver_pixels(scene.vertices, scene.faces, R, t, camera.fx, camera.fy, camera.cx, camera.cy,
-                        1e-6 * scene.scale_m, 1.0, geo.depth_m, edges)
+        _edges.sliver_pixels(scene.vertices, scene.faces, R, t, camera.fx, camera.fy, camera.cx, camera.cy,
+                             1e-6 * scene.scale_m, 1.0, geo.depth_m, edges)
     return np.flatnonzero(edges.ravel())
 
 
@@ -1075,9 +1075,9 @@ def _thin_shadow_pixels(scene: Scene, s, vis, foot, sun_dir) -> np.ndarray:
     """Which of the lit surface points ``s`` (rows of the target pixels; ``foot`` their pixel
     footprints [m]) may hold the shadow of a rod or wire thinner than a pixel, which the centre
     and corner probes can both miss: a conservative shadow map of the triangles that are
-    slivers seen from the Sun (:func:`raytrace._shading.shadow_map_of_slivers`, cells of the
+    slivers seen from the Sun (:func:`raytrace._edges.shadow_map_of_slivers`, cells of the
     median footprint, slivers narrower than 1.5 cells) and a look-up over each footprint
-    (:func:`raytrace._shading.near_shadow_slivers`)."""
+    (:func:`raytrace._edges.near_shadow_slivers`)."""
     lit = vis >= 0.5
     out = np.zeros(len(vis), dtype=bool)
     if not lit.any():
@@ -1098,8 +1098,8 @@ def _thin_shadow_pixels(scene: Scene, s, vis, foot, sun_dir) -> np.ndarray:
     nx = int((pa.max() - a0) / cell) + 2
     ny = int((pb.max() - b0) / cell) + 2
     grid = np.full((ny, nx), -np.inf)
-    K.shadow_map_of_slivers(V, scene.faces, e1, e2, sdir, a0, b0, cell, 1.5 * cell, grid)
-    K.near_shadow_slivers(s["P"], s["NS"], s["WO"], lit, foot, e1, e2, sdir, a0, b0, cell, grid, out)
+    _edges.shadow_map_of_slivers(V, scene.faces, e1, e2, sdir, a0, b0, cell, 1.5 * cell, grid)
+    _edges.near_shadow_slivers(s["P"], s["NS"], s["WO"], lit, foot, e1, e2, sdir, a0, b0, cell, grid, out)
     return out
 
 
@@ -1107,7 +1107,7 @@ def _background_params(lighting: Lighting):
     """The environment's parameter vector and texture as the background draws them: Earth
     without the ambient sky (the sky lights the target but is not drawn)."""
     p, tex = lighting.packed()
-    p[K.env.P_AMBIENT] = 0.0
+    p[env.P_AMBIENT] = 0.0
     return p, tex
 
 
@@ -1154,8 +1154,8 @@ def _corner_edges(scene: Scene, geo, corners, lit=None, sun_dir=None, eps: float
         so = np.empty((n, 3))
         O = np.ascontiguousarray(o32, dtype=np.float64)
         D = np.ascontiguousarray(d32, dtype=np.float64)
-        K.bounce_sun_rays(O, D, hc["tfar"].astype(np.float64), hc["geomID"], hc["primID"], scene.face_offset,
-                          scene.face_normal, sx, sy, sz, eps, want, so)
+        _gather.bounce_sun_rays(O, D, hc["tfar"].astype(np.float64), hc["geomID"], hc["primID"], scene.face_offset,
+                                scene.face_normal, sx, sy, sz, eps, want, so)
         idx = np.flatnonzero(want)
         c_lit = np.zeros(n, dtype=bool)
         if len(idx):
@@ -1171,7 +1171,7 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
                  centre_light=None, gather_rays: int = 0, centre_surface=None, cov_grid: int = 0, borrow: bool = False,
                  own_at_boundary: bool = False, contrast_out=None, traced=None):
     """Box-filtered radiance of the listed pixels from n_grid² correlated multi-jittered
-    sub-pixel rays (:func:`raytrace._shading.subpixel_rays`). Each sub-sample is shaded like a
+    sub-pixel rays (:func:`raytrace._edges.subpixel_rays`). Each sub-sample is shaded like a
     ``fast`` pixel (exact Sun, cache, mirror term); with ``centre_light`` (the centres' filtered
     gathered irradiance and filtered lobe corrections, ``balanced``) a sub-sample on the same surface as its
     pixel centre (same part, normals within 25°, within a pixel footprint of the centre's
@@ -1195,7 +1195,7 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     the noise of cov_grid² + n_grid² samples, not n_grid².
 
     With ``contrast_out`` (one per pixel), it receives the squared contrast each pixel's shaded
-    sub-samples saw (:func:`raytrace._shading.subsample_contrast`).
+    sub-samples saw (:func:`raytrace._rows.subsample_contrast`).
 
     The pixels go through in chunks of about _CHUNK_RAYS sub-samples (every sample is keyed
     by its pixel and number, so the result does not depend on the chunking): the arrays of
@@ -1238,7 +1238,7 @@ def _trace_chunk(sunl: _Sunlight, scene: Scene, camera: Camera, R, t, o_body, ge
     R_bc = np.ascontiguousarray(R.T)
     z0 = 0.0 if geo.camera_inside_hull else scene._near_plane(scene.hull_vertices @ R.T + t)
     D = np.empty((len(epix) * S, 3))
-    K.subpixel_rays(epix.astype(np.int64), W, n_grid, seed, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, D)
+    _edges.subpixel_rays(epix.astype(np.int64), W, n_grid, seed, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, D)
     h = _intersect_from(scene, o_body, z0, D)
     centre = np.repeat(epix, S)
     number = np.tile(np.arange(S), len(epix))
@@ -1249,7 +1249,7 @@ def _trace_chunk(sunl: _Sunlight, scene: Scene, camera: Camera, R, t, o_body, ge
 
     def groups(hh):
         g = np.empty(len(hh["geomID"]), dtype=np.int64)
-        K.ray_groups(hh["geomID"], hh["primID"], scene.face_offset, scene.component_of_face, g)
+        _edges.ray_groups(hh["geomID"], hh["primID"], scene.face_offset, scene.component_of_face, g)
         return g
 
     # coverage rays only where the shaded sub-samples saw more than one part (or space):
@@ -1261,14 +1261,14 @@ def _trace_chunk(sunl: _Sunlight, scene: Scene, camera: Camera, R, t, o_body, ge
     mpix = epix[mixed]
     C = cov_grid * cov_grid
     Dc = np.empty((len(mpix) * C, 3))
-    K.subpixel_rays(mpix.astype(np.int64), W, cov_grid, (seed + COVERAGE_STREAM) & 0x7FFFFFFF, R_bc, camera.fx,
-                    camera.fy, camera.cx, camera.cy, Dc)
+    _edges.subpixel_rays(mpix.astype(np.int64), W, cov_grid, (seed + COVERAGE_STREAM) & 0x7FFFFFFF, R_bc, camera.fx,
+                         camera.fy, camera.cx, camera.cy, Dc)
     hc = _intersect_from(scene, o_body, z0, Dc)
     g_c = groups(hc).reshape(len(mpix), C)
     g_m = np.ascontiguousarray(g_s[mixed])
     # parts seen only by coverage rays: shade the first such ray of each
     first_of = np.zeros((len(mpix), C), dtype=bool)
-    K.coverage_unshaded_first(g_m, g_c, first_of)
+    _edges.coverage_unshaded_first(g_m, g_c, first_of)
     first = np.flatnonzero(first_of.ravel())
     tr.update(mixed=mixed, C=C, g_m=g_m, g_c=g_c, first_of=first_of, first=first)
     if len(first):
@@ -1286,9 +1286,9 @@ def _shade_chunk(ctx: _Context, camera: Camera, geo, tr: dict, seed: int, centre
     L = _shade_subsamples(ctx, geo, camera, R_cam, tr["sub"], S, seed, centre_light, gather_rays, centre_surface,
                           borrow, own_at_boundary)
     out = np.empty((len(epix), 3))
-    K.group_means(L, S, out)
+    _rows.group_means(L, S, out)
     if contrast_out is not None:
-        K.subsample_contrast(L, S, contrast_out)
+        _rows.subsample_contrast(L, S, contrast_out)
     mixed = tr["mixed"]
     if mixed is None:
         return out
@@ -1298,8 +1298,8 @@ def _shade_chunk(ctx: _Context, camera: Camera, geo, tr: dict, seed: int, centre
         L_c[first] = _shade_subsamples(ctx, geo, camera, R_cam, tr["cov"], S + C, seed, centre_light, gather_rays,
                                        centre_surface, borrow, own_at_boundary)
     res = np.empty((len(mixed), 3))
-    K.coverage_combine(tr["g_m"], np.ascontiguousarray(L.reshape(len(epix), S, 3)[mixed]), tr["g_c"], tr["first_of"],
-                       L_c.reshape(len(mixed), C, 3), res)
+    _edges.coverage_combine(tr["g_m"], np.ascontiguousarray(L.reshape(len(epix), S, 3)[mixed]), tr["g_c"],
+                            tr["first_of"], L_c.reshape(len(mixed), C, 3), res)
     out[mixed] = res
     return out
 
@@ -1330,8 +1330,8 @@ def _trace_subsamples(sunl: _Sunlight, scene: Scene, o_body, D, h, centre, numbe
         Dh = np.empty((len(idx), 3))
         c_idx = np.empty(len(idx), np.int64)  # each hit's pixel
         n_idx = np.empty(len(idx), np.int64)  # and its number there
-        K.subsample_hits(idx, h["geomID"], h["primID"], scene.face_offset, D, np.asarray(centre, np.int64),
-                         np.asarray(number, np.int64), face, Dh, c_idx, n_idx)
+        _rows.subsample_hits(idx, h["geomID"], h["primID"], scene.face_offset, D, np.asarray(centre, np.int64),
+                             np.asarray(number, np.int64), face, Dh, c_idx, n_idx)
         s = _surfaces(scene, np.asarray(o_body, np.float64).reshape(1, 3), Dh, face)  # one origin for all
         disc = None
         if sunl.lighting.sun_angular_diameter_rad > 0.0 and S > 1:
@@ -1344,7 +1344,7 @@ def _trace_subsamples(sunl: _Sunlight, scene: Scene, o_body, D, h, centre, numbe
     if len(miss) and sunl.lighting.earth is not None:
         Dm = D[miss] / np.linalg.norm(D[miss], axis=1, keepdims=True)
         out = np.empty((len(miss), 3))
-        K.env_along(o_body, np.ascontiguousarray(Dm), sunl.p_background, sunl.tex, out)
+        _background.env_along(o_body, np.ascontiguousarray(Dm), sunl.p_background, sunl.tex, out)
         tr["miss"] = (miss, out)
     return tr
 
@@ -1366,8 +1366,8 @@ def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, se
             row_of_pixel, P_c, N_c, foot = centre_surface
             k = np.empty(len(idx), dtype=np.int64)
             H, W = geo.instance.shape
-            K.donor_rows(c_idx, W, H, s["comp"], s["P"], s["NS"], row_of_pixel,
-                         geo.instance.ravel(), P_c, N_c, foot, borrow, k)
+            _edges.donor_rows(c_idx, W, H, s["comp"], s["P"], s["NS"], row_of_pixel,
+                              geo.instance.ravel(), P_c, N_c, foot, borrow, k)
             # on its own pixel centre's surface: the filtered irradiance (centre_light[0], in place
             # of the cache's, which is kept only where no centre's applies) and lobe corrections
             # of the (up to) four centres around it on that surface, interpolated bilinearly,
@@ -1375,13 +1375,13 @@ def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, se
             # within the pixel)
             own = np.flatnonzero((k >= 0) & (k == row_of_pixel[c_idx]))
             added = np.empty(len(own), dtype=np.bool_)
-            K.interpolate_rows_into(own, Dh, R_cam, camera.fx, camera.fy, camera.cx, camera.cy, W, H, s["comp"],
-                                    s["P"], s["NS"], row_of_pixel, geo.instance.ravel(), P_c, N_c, foot,
-                                    centre_light[0], centre_light[1], 4 if own_at_boundary else 1, E, Ls, added)
+            _edges.interpolate_rows_into(own, Dh, R_cam, camera.fx, camera.fy, camera.cx, camera.cy, W, H, s["comp"],
+                                         s["P"], s["NS"], row_of_pixel, geo.instance.ravel(), P_c, N_c, foot,
+                                         centre_light[0], centre_light[1], 4 if own_at_boundary else 1, E, Ls, added)
             k[own] = -2  # done; −1: none
             if own_at_boundary:
                 k[own[~added]] = -1  # near its surface's boundary: its own gather below
-            K.take_add_rows(k, centre_light[0], centre_light[1], E, Ls)  # where k ≥ 0: a neighbouring centre's
+            _rows.take_add_rows(k, centre_light[0], centre_light[1], E, Ls)  # where k ≥ 0: a neighbouring centre's
             # below _MIN_SUB_GATHER rays an unfiltered gather is noisier than the cache is wrong
             j = np.flatnonzero(k == -1)
             if len(j) and gather_rays >= _MIN_SUB_GATHER:
@@ -1393,7 +1393,7 @@ def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, se
                 # (a stream apart from its centre's gather), their paths keyed per sub-sample
                 E[j] = ctx.gather_E(s, gather_rays, keys, seed ^ SUB_GATHER_STREAM, path_seed=seed, share=S, rows=j)
         ctx.add_diffuse(s, E, Ls)
-        K.put_rows(idx, Ls, L)
+        _rows.put_rows(idx, Ls, L)
     if tr["miss"] is not None:
         miss, out = tr["miss"]
         L[miss] = out

@@ -536,7 +536,7 @@ def test_second_sub_sample_pattern_halves_the_silhouette_noise(sphere, monkeypat
 def test_second_sub_sample_pattern_goes_to_the_highest_contrast_pixels(sphere, monkeypatch):
     """``Quality.aa_extra`` = 0.2 on a sphere lit from the side: the second pattern is drawn
     at exactly the 20 % of the anti-aliased pixels whose sub-samples saw the largest contrast
-    (:func:`raytrace._shading.subsample_contrast`), and those lie on the lit limb, none on
+    (:func:`raytrace._rows.subsample_contrast`), and those lie on the lit limb, none on
     the dark limb (black against black)."""
     import dataclasses
 
@@ -570,16 +570,16 @@ def test_second_sub_sample_pattern_goes_to_the_highest_contrast_pixels(sphere, m
 
 
 def test_subsample_contrast_is_the_squared_range_of_each_pixels_sub_samples():
-    """raytrace._shading.subsample_contrast against NumPy (the peak-to-peak of R + G + B over
+    """raytrace._rows.subsample_contrast against NumPy (the peak-to-peak of R + G + B over
     each pixel's rows); a uniform pixel has none, and a step of height c gives c² whatever
     fraction of the pixel each side covers."""
-    from raytrace import _shading as K
+    from raytrace import _rows
 
     rng = np.random.default_rng(0)
     for S in (9, 16, 36):
         L = rng.gamma(2.0, 1.5, (5000 * S, 3))
         got = np.empty(5000)
-        K.subsample_contrast(L, S, got)
+        _rows.subsample_contrast(L, S, got)
         want = np.ptp(L.sum(1).reshape(5000, S), axis=1) ** 2
         np.testing.assert_allclose(got, want, rtol=1e-12)
     S = 36
@@ -587,7 +587,7 @@ def test_subsample_contrast_is_the_squared_range_of_each_pixels_sub_samples():
     for p, k in enumerate((0, 1, 18, 35)):
         L[p * S:p * S + k] = [1.3, 0.2, 0.1]  # k of the 36 sub-samples on the bright side
     got = np.empty(4)
-    K.subsample_contrast(L, S, got)
+    _rows.subsample_contrast(L, S, got)
     np.testing.assert_allclose(got, [0.0, 1.0, 1.0, 1.0], atol=1e-12)
 
 
@@ -661,7 +661,7 @@ def test_sliver_pixels_marks_exactly_the_pixels_a_thin_triangle_overlaps():
     """A wire 0.03 px wide and 40 px long, slanted across pixel rows: every pixel square it
     overlaps is marked, no other (against a dense point rasterisation); hidden behind the
     pixels' surface it marks nothing; a wide triangle is no sliver."""
-    from raytrace._shading import sliver_pixels
+    from raytrace._edges import sliver_pixels
     W = H = 100
     f, c, z = 100.0, 49.5, 10.0
     px = np.array([30.3, 70.1, 70.1])
@@ -705,7 +705,7 @@ def test_sliver_pixels_row_spans_mark_what_the_whole_box_test_marks(angle_deg):
     """Wires 0.05 px wide and 10–80 px long at every slant, horizontal and vertical ones
     included (edges less than 10⁻³ px high bound nothing): the pixels marked are those the
     separating-axis test marks over the triangle's whole bounding box."""
-    from raytrace._shading import sliver_pixels
+    from raytrace._edges import sliver_pixels
     W, H = 120, 90
     f, c, z = 100.0, 49.5, 10.0
     rng = np.random.default_rng(int(angle_deg * 1000))
@@ -732,7 +732,7 @@ def test_donor_rows_takes_the_centre_else_the_nearest_neighbour_on_the_same_surf
     """Edge sub-samples take their pixel centre's correction when they lie on its surface;
     otherwise (with borrowing) the nearest neighbouring centre on their own surface, never one
     of another part, a normal more than 25° away or off their plane by more than a footprint."""
-    from raytrace._shading import donor_rows
+    from raytrace._edges import donor_rows
     W = H = 3
     inst = np.full(W * H, 1, dtype=np.uint16)  # part 0 everywhere ...
     inst[2] = 2  # ... but pixel (0, 2): part 1
@@ -805,7 +805,7 @@ def test_put_rows_nonnegative_is_numpys_clamped_assignment():
     """The kernel that writes the shaded rows into the float32 image is NumPy's
     ``out[idx] = np.maximum(src, 0.0)``, bit for bit: negatives and −0 to +0, rounding to
     float32 the same, other rows untouched."""
-    from raytrace import _shading as K
+    from raytrace import _rows
     rng = np.random.default_rng(3)
     src = rng.standard_normal((500, 3)) * 10.0 ** rng.integers(-40, 40, (500, 1))
     src[:7] = [[-0.0, 0.0, -1e-300], [1e-46, -1e-46, 3.4e38], [0.1, 0.2, 0.3], [-5, 5, -0.0],
@@ -815,6 +815,6 @@ def test_put_rows_nonnegative_is_numpys_clamped_assignment():
     b = a.copy()
     with np.errstate(over="ignore"):
         a[idx] = np.maximum(src, 0.0)
-    K.put_rows_nonnegative(idx, src, b)
+    _rows.put_rows_nonnegative(idx, src, b)
     assert a.tobytes() == b.tobytes()
     assert not np.signbit(b[idx]).any() and (b[idx] >= 0).all()
