@@ -96,13 +96,13 @@ def _record_here(out_dir: str) -> dict:
     [signature reprs new in the group])}}."""
     from numba.core import event
     import cli
-    from raytrace import scene, shade
+    from raytrace import presets
     cli._kernels_not_compiled = lambda *a, **k: []  # compile here, where the recorder sees it
     seen: dict = {}
     result = {}
     for group in GROUPS:
-        shade._FUSED_GATHER = group != "batched"
-        scene._CAST_IN_ONE_KERNEL = group != "batched"  # the geometry pass's fallback too
+        presets.FUSED_GATHER = group != "batched"
+        presets.CAST_IN_ONE_KERNEL = group != "batched"  # the geometry pass's fallback too
         times = _compile_time_recorder()
         with event.install_listener("numba:compile", times):
             status = cli.main(["--target", "cassini", "--pattern", "spiral", "--workers", "1",
@@ -116,7 +116,8 @@ def _record_here(out_dir: str) -> dict:
                 out[qualname] = (round(times.spent.get(qualname, 0.0), 2), new)
                 seen.setdefault(qualname, set()).update(new)
         result[group] = out
-    shade._FUSED_GATHER = True
+    presets.FUSED_GATHER = True
+    presets.CAST_IN_ONE_KERNEL = True
     return result
 
 

@@ -413,7 +413,7 @@ def _gauss_seidel_sweep(indptr, indices, data, g_ptr, g_idx, g_data, rho, rho_b,
     """One Gauss–Seidel sweep of X = X0 + W_ss (ρ ⊙ X) + W_g (ρ_bounce ⊙ X), in place: the rows
     in order, each from the newest values of the rows before it, over-relaxed by ``omega``
     (X_i ← X_i + ω (s_i − X_i), s_i the row's sum; ω = 1: plain Gauss–Seidel, see
-    :data:`raytrace.cache._SOR_OMEGA`). Y = ρ ⊙ X and Yb = ρ_bounce ⊙ X (empty without glossy
+    :data:`raytrace.presets.SOR_OMEGA`). Y = ρ ⊙ X and Yb = ρ_bounce ⊙ X (empty without glossy
     parts) are kept up to date row by row. Returns max |s_i − X_i| (the row's residual, before relaxation).
 
     One thread, in row order, so the result does not depend on the thread count. It replaces

@@ -81,7 +81,7 @@ import scipy.sparse as sp
 import trimesh
 from scipy.spatial import cKDTree
 
-from . import environment as env
+from . import environment as env, presets
 from ._cache_kernels import (_bin_hits, _cache_rays, _csr_sum, _gauss_seidel_sweep, _glints, _glossy_bounce,
                              _interp_rows, _jacobi_step, _lattice_points, _lookup_rows, _oct_cells, _ray_cells,
                              _rows_irradiance, _sun_rays, _zero_rows)
@@ -130,24 +130,6 @@ def _barycentrics(tri, p):
 def _EMPTY_CSR3(n_rows):
     """An empty (indptr, indices, data (0, 3)) matrix of ``n_rows`` rows."""
     return np.zeros(n_rows + 1, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
-
-
-# the cache rays go in chunks of about _CAST_CHUNK_RAYS rays (RadianceCache._cast), two at a time
-# on a side pool (raytrace._threads.submit); False: one after the other. The same cache bit for
-# bit (tests/raytrace/test_cache_solve.py); the four built-in targets' caches built in 0.71–0.85×
-# the time (BENCHMARKS.md, "Building the radiance cache").
-_CAST_CHUNK_RAYS = 1 << 18
-_CAST_CHUNKS_ON_TWO_THREADS = True
-# the contact rows' W_ss and W_sb summed by each chunk of rays as it is cast (their columns'
-# aliases are the coarse rows', known by then), not from lists of every hit: the same matrices
-# bit for bit; the cache of a CAD mesh with many contacts built in ~1/3 of the time
-# (BENCHMARKS.md, "Building the radiance cache of a user's mesh"). False: from the lists.
-_ASSEMBLE_CONTACT_PER_CHUNK = True
-# over-relaxation of the solve's Gauss–Seidel sweeps (RadianceCache.solve; 1: none). ω = 1.2 took
-# the 1/90 caches of the built-in targets 12–15 → 9–11 sweeps (Spacedragon 5–7 → 6) to the same
-# tolerance, nearer the exact solution; ω = 1.3–1.4 failed on Cassini, so a sweep whose residual
-# grows drops back to ω = 1 (BENCHMARKS.md, "Over-relaxed sweeps for the radiance cache")
-_SOR_OMEGA = 1.2
 
 
 def _row_ids(key):
@@ -344,8 +326,13 @@ class RadianceCache:
         pos_all, nrm_all = np.concatenate([pos, pos_f]), np.concatenate([nrm, nrm_f])
         self.contact_rows = 2 * n_c + np.flatnonzero(valid_f & active)
         ray_pos_f = self._ray_origins(pos_f, face_f)
+        # their W_ss and W_sb summed by each chunk of rays as it is cast (their columns' aliases are
+        # the coarse rows', known by then; presets.ASSEMBLE_CONTACT_PER_CHUNK), not from lists of
+        # every hit: the same matrices bit for bit; the cache of a CAD mesh with many contacts built
+        # in ~1/3 of the time (BENCHMARKS.md, "Building the radiance cache of a user's mesh").
+        # False: from the lists.
         raw_f = self._cast(np.concatenate([self._c_ray_pos, ray_pos_f]), nrm_all, self.contact_rows, 2 * n_c,
-                           assemble=(valid_f, 2 * n_c) if _ASSEMBLE_CONTACT_PER_CHUNK else None)
+                           assemble=(valid_f, 2 * n_c) if presets.ASSEMBLE_CONTACT_PER_CHUNK else None)
         ok_f = self._unburied(valid_f, raw_f, row0=2 * n_c)
         comp_rows = np.concatenate([comp_rows_c, np.repeat(scene.component_of_face[face_f], 2)])
         ok_all = np.concatenate([ok, ok_f])
@@ -501,7 +488,7 @@ class RadianceCache:
         lists' copies (~3 entries per cache ray: 36 M for Hubble's 12 M contact rays)."""
         scene = self.scene
         G = self.G
-        chunk = max(1, _CAST_CHUNK_RAYS // G)
+        chunk = max(1, presets.CAST_CHUNK_RAYS // G)
         raw = {k: [] for k in ("hit_rows", "hit_cols", "hit_w", "blk_rows", "blk_cells", "g_rows", "g_cols", "g_w",
                                "gb_rows", "gb_cells", "gb_w", "ss", "sb")}
         rec = {k: [] for k in ("row", "face", "u", "v", "side", "n", "wo")}
@@ -549,7 +536,11 @@ class RadianceCache:
             return part, part_rec
 
         starts = range(0, len(rows_all), chunk)
-        if _CAST_CHUNKS_ON_TWO_THREADS and numba.get_num_threads() > 1 and len(starts) > 1:
+        # the chunks (of about presets.CAST_CHUNK_RAYS rays) two at a time on a side pool
+        # (raytrace._threads.submit; presets.CAST_CHUNKS_ON_TWO_THREADS); False: one after the
+        # other. The same cache bit for bit (tests/raytrace/test_cache_solve.py); the four built-in
+        # targets' caches built in 0.71–0.85× the time (BENCHMARKS.md, "Building the radiance cache")
+        if presets.CAST_CHUNKS_ON_TWO_THREADS and numba.get_num_threads() > 1 and len(starts) > 1:
             # a chunk's NumPy steps run on one core, which the other chunk's Embree and kernels
             # then use; every ray is keyed by its row, so the pieces are the same bits in any
             # order, and they are put back in chunk order
@@ -720,7 +711,11 @@ class RadianceCache:
         glossy = c["W_g"] is not None
         W_g = c["W_g"] if glossy else _EMPTY_CSR3(self.n_coarse_rows)
         Yb = self._c_rho_bounce * E if glossy else np.empty((0, 3))
-        omega = _SOR_OMEGA
+        # over-relaxed sweeps (presets.SOR_OMEGA; 1: none). ω = 1.2 took the 1/90 caches of the
+        # built-in targets 12–15 → 9–11 sweeps (Spacedragon 5–7 → 6) to the same tolerance, nearer
+        # the exact solution; ω = 1.3–1.4 failed on Cassini, so a sweep whose residual grows drops
+        # back to ω = 1 (BENCHMARKS.md, "Over-relaxed sweeps for the radiance cache")
+        omega = presets.SOR_OMEGA
         last = math.inf
         for it in range(1, max_iterations + 1):
             delta = _gauss_seidel_sweep(W.indptr, W.indices, W.data, *W_g, self._c_rho_ss, self._c_rho_bounce,

@@ -5,6 +5,10 @@ measurements on the scenes of ``benchmarks/bench_time_error.py`` that chose its 
 count: its gather rays per pixel, from which the anti-aliasing grid, the residual filter and
 the ray allocation follow) or ``reference`` (samples per pixel of the path tracer). The
 renderer that reads them, and what each stage does, is :mod:`raytrace.shade`.
+
+The section *switches* at the end holds the module-level switches of the renderer, the scene's
+ray casting and the radiance cache (one path or another, chunk sizes, two weights), read at call
+time, so that the tests can toggle them here.
 """
 
 from __future__ import annotations
@@ -445,3 +449,35 @@ def quality_preset(name: str, samples: int | None = None) -> Quality:
         return Quality(name, spp=samples)
     aa = max(1, min(samples, 16))
     return replace(q, aa_grid=aa, cov_grid=COV_FAST if aa <= COV_FAST else 0)
+
+
+# ---- switches
+# Module-level switches of the renderer and the radiance cache, in one place: most choose between
+# two code paths that give the same bytes (the tests toggle them here, monkeypatch.setattr on this
+# module, and compare the paths), some are sizes or weights the tests vary. The code reads them at
+# call time as ``presets.NAME``; the measurements that chose them are beside the code they switch.
+
+# shade.render: the frame's lighting context built on a side thread while the geometry pass runs
+CONTEXT_ON_SIDE_THREAD = True
+# shade._supersample: the anti-aliasing's chunks run two at a time on a side pool
+AA_CHUNKS_ON_TWO_THREADS = True
+# rays per chunk of the final gather and the lobe sampling, and sub-samples per anti-aliasing chunk
+CHUNK_RAYS = 1 << 18
+# the final gather, lobe and sub-samples' shadow rays in fused kernels calling Embree from numba
+FUSED_GATHER = True
+# weight of the environment control variate in the final gather (_gather.gather_sum)
+GATHER_ALPHA = 1.0
+# Scene.intersect / occluded through raytrace._embree's kernels where Embree 4 is loaded
+DIRECT_BATCHES = True
+# the rays that shade a preset's frame through Embree without its robust flag (Scene.direct_fast)
+FAST_TRAVERSAL = True
+# the geometry pass through _kernels.cast_and_refine (one kernel) where Embree 4 is callable
+CAST_IN_ONE_KERNEL = True
+# rays per chunk of the radiance cache's rays (RadianceCache._cast)
+CAST_CHUNK_RAYS = 1 << 18
+# RadianceCache._cast runs its chunks of rays two at a time on a side pool
+CAST_CHUNKS_ON_TWO_THREADS = True
+# the contact rows' W_ss and W_sb summed by each chunk of cache rays as it is cast
+ASSEMBLE_CONTACT_PER_CHUNK = True
+# over-relaxation ω of the cache solve's Gauss–Seidel sweeps (RadianceCache.solve; 1: none)
+SOR_OMEGA = 1.2

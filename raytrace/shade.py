@@ -68,7 +68,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from . import _background, _edges, _filter, _gather, _paths, _rows, _surface, environment as env
+from . import _background, _edges, _filter, _gather, _paths, _rows, _surface, environment as env, presets
 from ._kernels import centre_rays, ray_origins32
 from ._sampling import (AA_SECOND_STREAM, BOX_STREAM, COVERAGE_STREAM, LOBE_PATH_STREAM, SECOND_PASS_STREAM,
                         SUB_GATHER_STREAM)
@@ -108,8 +108,6 @@ _NEAR_SPACINGS = 2.0
 # lower or equal (interior bias² up, noise² down more: -16 summed 23.7 → 29.1 and
 # 46.5 → 36.4 ×10⁻⁴), with fewer rays (BENCHMARKS.md, "The first bounce only near")
 _FIRST_NEAR_SPACINGS = 1.0
-# weight of the environment control variate in the final gather (raytrace._gather.gather_sum)
-GATHER_ALPHA = 1.0
 # the lobe of a part is sampled (``balanced``) only where its specular albedo is at least this
 # fraction of its diffuse one (luminance): white paint's reflection (f0 = 0.04, α = 0.5, 4.5 % of
 # its diffuse albedo) costs as many lobe rays as gold's and is then taken from the mirror term
@@ -117,19 +115,12 @@ GATHER_ALPHA = 1.0
 # 1.23 s; error at 640×480 (8 / 16 / 64 rays) Crew Dragon 1.93 / 1.57 / 0.96 → 2.01 / 1.66 / 1.05 %,
 # the other three within 0.1 %
 LOBE_MIN_SPECULAR = 0.2
-# rays per chunk of the final gather and the lobe sampling: their float64 ray, hit and bounce
-# arrays stay a few MB and are reused by the allocator instead of being mapped fresh (a whole
-# 1280×960 gather at 16 rays is 2.6 M rays, ~60 MB per array, and the page faults of writing
-# fresh arrays from parallel kernels cost more than the kernels: bounce2_rays 66 ms fresh
-# against 9 ms on mapped memory, measured on Crew Dragon ``sunlit``)
-_CHUNK_RAYS = 1 << 18
 # the final gather, the lobe sampling and the edge sub-samples' shadow rays in one kernel each
-# that calls Embree from numba (raytrace._paths, raytrace._embree; the same frames); False:
-# the batched code through embreex, the fallback where the wheel has no Embree 4 (the tests
-# compare the two). The fused kernels hand out blocks of raytrace._paths._BLOCK points
+# that calls Embree from numba (presets.FUSED_GATHER; raytrace._paths, raytrace._embree; the same
+# frames); False: the batched code through embreex, the fallback where the wheel has no Embree 4
+# (the tests compare the two). The fused kernels hand out blocks of raytrace._paths._BLOCK points
 # _FUSED_CHUNK blocks at a time (numba.set_parallel_chunksize: the rays per point vary 8×
 # in the second pass; 0, numba's static split, measured 0.95–1.03× on four scenes)
-_FUSED_GATHER = True
 _FUSED_CHUNK = 1
 
 
@@ -157,7 +148,7 @@ class RenderFrame:
         after the geometry pass and the work that needs no radiance cache (the pixel centres'
         sunlight, the pixels to anti-alias and, when they are one chunk, their sub-samples'
         rays and sunlight): the context is built on a side thread meanwhile
-        (``_CONTEXT_ON_SIDE_THREAD``), so its own time is inside the other stages.
+        (:data:`raytrace.presets.CONTEXT_ON_SIDE_THREAD`), so its own time is inside the other stages.
         ``antialias`` includes the area means of the other pixels (``Quality.box_grid``).
     """
 
@@ -227,7 +218,7 @@ class _Sunlight:
             _surface.sun_rays(s["P"], s["NS"], s["NG"], sx, sy, sz, self.eps, want, o)
             idx = np.flatnonzero(want)
             direct = None
-            if _FUSED_GATHER and occluder_t is None:
+            if presets.FUSED_GATHER and occluder_t is None:
                 direct = self.scene.direct if robust else self.scene.direct_fast
             if len(idx) and direct is not None:
                 # the disc samples drawn and the shadow rays cast in one kernel
@@ -390,7 +381,7 @@ class _Context(_Sunlight):
         idx = np.flatnonzero(self.lobe_sampled[s["comp"]])
         if len(idx) == 0:
             return out
-        direct = self.scene.direct_fast if _FUSED_GATHER else None
+        direct = self.scene.direct_fast if presets.FUSED_GATHER else None
         if direct is not None:
             val = np.empty((len(idx), 3))
             v = np.empty(len(idx))
@@ -405,7 +396,7 @@ class _Context(_Sunlight):
             if var is not None:
                 var[idx] = v
             return out
-        step = max(1, _CHUNK_RAYS // n_rays)
+        step = max(1, presets.CHUNK_RAYS // n_rays)
         for a in range(0, len(idx), step):
             part = idx[a:a + step]
             m = len(part) * n_rays
@@ -443,7 +434,7 @@ class _Context(_Sunlight):
         """Final-gather irradiance (n, 3) of the points ``s`` from n_rays rays each, or from
         counts[k] rays at point k (≥ 1; then ``n_rays`` is ignored): in one kernel
         (:meth:`_gather_fused`) where Embree can be called from numba, else in chunks of about
-        _CHUNK_RAYS rays (every sample is keyed by its pixel, so the result does not depend on
+        presets.CHUNK_RAYS rays (every sample is keyed by its pixel, so the result does not depend on
         the chunking); the rays are samples ``first``, ``first`` + 1, … of each pixel's
         sequence of directions (:func:`raytrace._gather.gather_rays`, keyed by ``seed``; with
         ``share`` > 0 ``pix`` holds pixel · share + i for the sub-sample i of a pixel, and the
@@ -462,16 +453,21 @@ class _Context(_Sunlight):
             counts = np.asarray(counts, dtype=np.int64)
             kmul = int(counts.max()) if n else 1
         seeds = (seed, seed if path_seed is None else path_seed)
-        direct = self.scene.direct_fast if _FUSED_GATHER else None
+        direct = self.scene.direct_fast if presets.FUSED_GATHER else None
         if direct is not None:
             rows = np.arange(n, dtype=np.int64) if rows is None else np.asarray(rows, dtype=np.int64)
             return self._gather_fused(direct, s, rows, counts, kmul, first, pix, seeds, var, hits, share)
         if rows is not None:
             s = {k: s[k][rows] for k in ("P", "NS", "NG")}
         end = np.cumsum(counts)
-        # chunk boundaries: every _CHUNK_RAYS rays (at least one point per chunk)
-        cuts = np.unique(np.searchsorted(end, np.arange(_CHUNK_RAYS, int(end[-1]) if n else 0, _CHUNK_RAYS),
-                                         side="right"))
+        # chunk boundaries: every presets.CHUNK_RAYS rays (at least one point per chunk). In chunks,
+        # the float64 ray, hit and bounce arrays of the final gather and the lobe sampling stay a
+        # few MB and are reused by the allocator instead of being mapped fresh (a whole 1280×960
+        # gather at 16 rays is 2.6 M rays, ~60 MB per array, and the page faults of writing fresh
+        # arrays from parallel kernels cost more than the kernels: bounce2_rays 66 ms fresh against
+        # 9 ms on mapped memory, measured on Crew Dragon ``sunlit``)
+        chunk = presets.CHUNK_RAYS
+        cuts = np.unique(np.searchsorted(end, np.arange(chunk, int(end[-1]) if n else 0, chunk), side="right"))
         bounds = [0, *[int(c) for c in cuts if 0 < c < n], n]
         if len(bounds) == 2:
             return self._gather_chunk(s, counts, kmul, first, pix, seeds, var, hits, share)
@@ -501,7 +497,7 @@ class _Context(_Sunlight):
                                  light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
                                  np.float32(_FIRST_NEAR_SPACINGS * self.cache.spacing_m),
                                  np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(),
-                                 self.env_irradiance, GATHER_ALPHA, E, var, h)
+                                 self.env_irradiance, presets.GATHER_ALPHA, E, var, h)
         if hits is not None:
             hits[:] = h
         return E
@@ -526,7 +522,7 @@ class _Context(_Sunlight):
         e_ind = self._traced_indirect(o, d, h, hu, hv, keys, path_seed)
         E = np.empty((n, 3))
         _gather.gather_sum(start, o, d, s["NG"], h["geomID"], h["primID"], hu, hv, *self._lookup(), vis, e_ind, s["NS"],
-                           self.env_irradiance, GATHER_ALPHA, E, var)
+                           self.env_irradiance, presets.GATHER_ALPHA, E, var)
         return E
 
     def _traced_indirect(self, o, d, h, hu, hv, keys, seed):
@@ -777,25 +773,6 @@ def _check_finite(stage: str, a: np.ndarray) -> None:
         raise FloatingPointError(f"non-finite radiance after {stage}: please report this scene")
 
 
-# The frame's context (:class:`_Context`: the radiance cache's solve, the environment's tables)
-# does not depend on the camera, so it is built on a side thread while the geometry pass runs:
-# the cache's Gauss–Seidel sweeps run on one core, and the geometry pass's chunks fill the
-# other. The same frames bit for bit (tests/raytrace/test_shading.py); 12 benchmark scenes, median
-# per-scene time ratio to building it in line 0.95–0.97 for ``fast``, 0.98 for ``balanced``-16
-# (BENCHMARKS.md, "The context on a side thread"). What needs no cache is done before the frame
-# waits for it (:class:`_Sunlight`: the centres' sunlight and mirror rays, the pixels to
-# anti-alias and their sub-samples' rays, hits and sunlight when they are one chunk): ``fast``
-# then waits ~0 ms instead of 0–33 ms; one frame on both cores 0.91–0.96× the time (median per
-# scene; ``balanced``-8 0.97–1.01×), the two versions' renders interleaved
-# (benchmarks/bench_interleaved.py; BENCHMARKS.md, "`fast` waits for nothing"). False: one after
-# the other.
-_CONTEXT_ON_SIDE_THREAD = True
-# The anti-aliasing's chunks (:func:`_supersample`) two at a time: a chunk's Python and NumPy
-# steps run on one core, which the other chunk's kernels then use. Each chunk's samples are
-# keyed by pixel, so the same bytes (tests/raytrace/test_shading.py); 12 benchmark scenes,
-# median per-scene time ratio 0.95 for ``balanced``-16 and -64 (BENCHMARKS.md). ``fast``'s
-# anti-aliasing is one chunk on all of them.
-_AA_CHUNKS_ON_TWO_THREADS = True
 # Earth behind the target (raytrace._background.earth_background): the procedural texture's
 # albedo on the corners of 4 × 4 pixel cells, interpolated in cells that span less than 1e-3
 # of Earth's radius (6.4 km; the texture's finest octave is ~60 km) and match their centre's
@@ -853,7 +830,20 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     cache_options = preset_cache_options(q, scene.scale_m, cache_options)
     timings = {}
     pending = None
-    if _CONTEXT_ON_SIDE_THREAD and q.name != "reference" and numba.get_num_threads() > 1:
+    # The frame's context (:class:`_Context`: the radiance cache's solve, the environment's
+    # tables) does not depend on the camera, so it is built on a side thread while the geometry
+    # pass runs (presets.CONTEXT_ON_SIDE_THREAD): the cache's Gauss–Seidel sweeps run on one core,
+    # and the geometry pass's chunks fill the other. The same frames bit for bit
+    # (tests/raytrace/test_shading.py); 12 benchmark scenes, median per-scene time ratio to
+    # building it in line 0.95–0.97 for ``fast``, 0.98 for ``balanced``-16 (BENCHMARKS.md, "The
+    # context on a side thread"). What needs no cache is done before the frame waits for it
+    # (:class:`_Sunlight`: the centres' sunlight and mirror rays, the pixels to anti-alias and
+    # their sub-samples' rays, hits and sunlight when they are one chunk): ``fast`` then waits
+    # ~0 ms instead of 0–33 ms; one frame on both cores 0.91–0.96× the time (median per scene;
+    # ``balanced``-8 0.97–1.01×), the two versions' renders interleaved
+    # (benchmarks/bench_interleaved.py; BENCHMARKS.md, "`fast` waits for nothing"). False: one
+    # after the other.
+    if presets.CONTEXT_ON_SIDE_THREAD and q.name != "reference" and numba.get_num_threads() > 1:
         # what both threads use and the scene builds on first use, built here, once
         scene.embree, scene.direct, scene.direct_fast, scene.radiance_cache(**cache_options)
         pending = _submit("context", 1, _Context, scene, lighting, cache_options, q.gather_rays == 0)
@@ -1197,7 +1187,7 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
     With ``contrast_out`` (one per pixel), it receives the squared contrast each pixel's shaded
     sub-samples saw (:func:`raytrace._rows.subsample_contrast`).
 
-    The pixels go through in chunks of about _CHUNK_RAYS sub-samples (every sample is keyed
+    The pixels go through in chunks of about presets.CHUNK_RAYS sub-samples (every sample is keyed
     by its pixel and number, so the result does not depend on the chunking): the arrays of
     all of them at once (~600 k rows on Tiangong at 1280×960) were mapped fresh on every
     frame, and their page faults cost more than the shading. Each chunk is traced
@@ -1216,14 +1206,19 @@ def _supersample(ctx: _Context, scene: Scene, camera: Camera, R, t, o_body, geo,
                             own_at_boundary, None if contrast_out is None else contrast_out[i:i + per])
 
     starts = range(0, len(epix), per)
-    if _AA_CHUNKS_ON_TWO_THREADS and numba.get_num_threads() > 1:
+    # The chunks two at a time (presets.AA_CHUNKS_ON_TWO_THREADS): a chunk's Python and NumPy
+    # steps run on one core, which the other chunk's kernels then use. Each chunk's samples are
+    # keyed by pixel, so the same bytes (tests/raytrace/test_shading.py); 12 benchmark scenes,
+    # median per-scene time ratio 0.95 for ``balanced``-16 and -64 (BENCHMARKS.md). ``fast``'s
+    # anti-aliasing is one chunk on all of them.
+    if presets.AA_CHUNKS_ON_TWO_THREADS and numba.get_num_threads() > 1:
         return np.concatenate([f.result() for f in [_submit("aa", 2, chunk, i) for i in starts]])
     return np.concatenate([chunk(i) for i in starts])
 
 
 def _aa_chunk_pixels(n_grid: int) -> int:
-    """Pixels per chunk of :func:`_supersample` (about _CHUNK_RAYS sub-samples)."""
-    return max(1, _CHUNK_RAYS // (n_grid * n_grid))
+    """Pixels per chunk of :func:`_supersample` (about presets.CHUNK_RAYS sub-samples)."""
+    return max(1, presets.CHUNK_RAYS // (n_grid * n_grid))
 
 
 def _trace_chunk(sunl: _Sunlight, scene: Scene, camera: Camera, R, t, o_body, geo, epix, n_grid, seed: int,

@@ -22,6 +22,7 @@ from scipy import integrate
 from scipy.ndimage import binary_erosion
 
 from orbit.pose import look_at
+from raytrace import presets
 from raytrace.camera import Camera
 from raytrace.lighting import Earth, Lighting
 from raytrace.model import Component, TargetModel
@@ -314,9 +315,9 @@ def test_context_built_on_a_side_thread_gives_the_same_bytes(monkeypatch, qualit
         init(self, *a, **k)
 
     monkeypatch.setattr(shade._Context, "__init__", spy)
-    monkeypatch.setattr(shade, "_CONTEXT_ON_SIDE_THREAD", False)
+    monkeypatch.setattr(presets, "CONTEXT_ON_SIDE_THREAD", False)
     a = render(scene, CAM, R, t, light, quality=quality, samples=samples, seed=5)
-    monkeypatch.setattr(shade, "_CONTEXT_ON_SIDE_THREAD", True)
+    monkeypatch.setattr(presets, "CONTEXT_ON_SIDE_THREAD", True)
     b = render(scene, CAM, R, t, light, quality=quality, samples=samples, seed=5)
     assert built_on[0] == threading.current_thread().name and built_on[1].startswith("raytrace-context")
     assert a.radiance.tobytes() == b.radiance.tobytes()
@@ -334,7 +335,7 @@ def test_anti_aliasing_chunks_on_two_threads_give_the_same_bytes(monkeypatch, sp
     R, t = _pose([1.0, -5.0, 2.0])
     light = Lighting(sun_dir_body=(0.6, -0.48, 0.64), ambient_radiance_W_m2_sr=2.0,
                      earth=Earth((0, 0, -1), 6.778e6))
-    monkeypatch.setattr(shade, "_CHUNK_RAYS", 16 * 90)  # 90 edge pixels per chunk (a 4 × 4 grid at 8 rays)
+    monkeypatch.setattr(presets, "CHUNK_RAYS", 16 * 90)  # 90 edge pixels per chunk (a 4 × 4 grid at 8 rays)
     ran_on = []
     chunk = shade._shade_chunk
 
@@ -343,10 +344,10 @@ def test_anti_aliasing_chunks_on_two_threads_give_the_same_bytes(monkeypatch, sp
         return chunk(*a, **k)
 
     monkeypatch.setattr(shade, "_shade_chunk", spy)
-    monkeypatch.setattr(shade, "_AA_CHUNKS_ON_TWO_THREADS", False)
+    monkeypatch.setattr(presets, "AA_CHUNKS_ON_TWO_THREADS", False)
     a = render(sphere, CAM, R, t, light, quality="balanced", samples=8, seed=2).radiance
     serial = len(ran_on)
-    monkeypatch.setattr(shade, "_AA_CHUNKS_ON_TWO_THREADS", True)
+    monkeypatch.setattr(presets, "AA_CHUNKS_ON_TWO_THREADS", True)
     b = render(sphere, CAM, R, t, light, quality="balanced", samples=8, seed=2).radiance
     assert serial > 4 and len(ran_on) == 2 * serial
     assert all(n == threading.current_thread().name for n in ran_on[:serial])
@@ -793,8 +794,8 @@ def test_one_chunk_traced_before_the_cache_gives_the_chunked_bytes(monkeypatch, 
     one = render(sphere, CAM, R, t, light, quality=quality, samples=samples, seed=4).radiance
     assert events[0] == "trace" and events.count("trace") >= 1
     events.clear()
-    monkeypatch.setattr(shade, "_AA_CHUNKS_ON_TWO_THREADS", False)
-    monkeypatch.setattr(shade, "_CHUNK_RAYS", 16 * 40)  # 40 to 71 edge pixels per chunk
+    monkeypatch.setattr(presets, "AA_CHUNKS_ON_TWO_THREADS", False)
+    monkeypatch.setattr(presets, "CHUNK_RAYS", 16 * 40)  # 40 to 71 edge pixels per chunk
     several = render(sphere, CAM, R, t, light, quality=quality, samples=samples, seed=4).radiance
     assert events[0] == "cache" and events.count("trace") > 3
     assert one.tobytes() == several.tobytes()
