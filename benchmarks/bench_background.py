@@ -27,8 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import cli  # noqa: E402
-from raytrace import _background  # noqa: E402
-from raytrace import shade  # noqa: E402
+from raytrace import _background, _context, shade  # noqa: E402
 from raytrace.camera import Camera  # noqa: E402
 from raytrace.scene import Scene  # noqa: E402
 
@@ -58,7 +57,7 @@ def main() -> None:
         geo = scene.render_geometry(cam, R, t)
         R_bc = np.ascontiguousarray(R.T)
         o_body = -R_bc @ t
-        p, tex = shade._background_params(light)
+        p, tex = _context._background_params(light)
         out = {}
         for r in range(args.repeats):
             for step in ((1, shade._BACKGROUND_STEP) if r % 2 == 0 else (shade._BACKGROUND_STEP, 1)):

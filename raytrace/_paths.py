@@ -1,6 +1,6 @@
 """Fused kernels: rays and the paths traced from their hits in one pass, Embree called per ray.
 
-The batched code (:meth:`raytrace.shade._Context._gather_chunk` and ``_bounces``, kept as the
+The batched code (:meth:`raytrace._context._Context._gather_chunk` and ``_bounces``, kept as the
 fallback) runs the final gather level by level: every ray's direction into an array
 (:func:`raytrace._gather.gather_rays`), the batch through ``embreex``, the shadow rays
 (:func:`raytrace._gather.bounce_sun_rays`), the next bounce's rays
@@ -34,7 +34,7 @@ _BLOCK = 16
 
 @inline
 def _sun_visibility(scene, buf, ox, oy, oz, dx, dy, dz, g, pr, t, face_offset, face_normal, sx, sy, sz, eps, sun_on):
-    """The Sun's visibility at the hit of the ray (o, d) as :meth:`shade._Context._bounce_sun`
+    """The Sun's visibility at the hit of the ray (o, d) as :meth:`_context._Context._bounce_sun`
     gives it: −1 at a miss or when there is no sunlight, 0 where the side the ray arrived from
     faces away from the Sun or a shadow ray (from the hit, offset along that side's normal)
     is blocked, else 1."""
@@ -80,13 +80,13 @@ def _bounce_draw(ox, oy, oz, dx, dy, dz, f, hu, hv, t, face_normal, corner_norma
 def _traced_indirect(scene, buf, path, ox, oy, oz, dx, dy, dz, g, pr, hu, hv, t, key, seed, levels, first_near,
                      near, sx, sy, sz, sun_on, eps, lk):
     """The traced estimate of the indirect irradiance at the hit (g ≥ 0) of the gather ray
-    (o, d), as :meth:`shade._Context._traced_indirect` computes it with ``levels`` bounces:
+    (o, d), as :meth:`_context._Context._traced_indirect` computes it with ``levels`` bounces:
     −1 where the cache stands in (a miss; a hit farther than ``first_near`` on a part that is
     not glossy), 0 where the bounce's draw fails, else the weight of the bounce times the
     radiance its ray brings back, the path continued from hits nearer than ``near`` (float32
     distances, as the batched code compares them) and from every glossy hit. ``path``
     (≥ levels, 14) is scratch for the path's vertices; ``lk`` the tuple of arrays
-    :meth:`raytrace.shade._Context._lookup` returns (a numba-inlined call takes at most 30
+    :meth:`raytrace._context._Context._lookup` returns (a numba-inlined call takes at most 30
     arguments: CPython passes more as one tuple, which numba's inliner does not take)."""
     (face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot,
      E_sun, valid, face_s, lat_start, lat_ids, p, tex) = lk
@@ -148,7 +148,7 @@ def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, sh
                   out, out_var, out_hits):
     """Final-gather irradiance per point k (at row rows[k] of P, NS and NG; every other array is
     per point) from rays start[k] … start[k + 1] − 1, as
-    :meth:`raytrace.shade._Context._gather_chunk` computes it from the kernels
+    :meth:`raytrace._context._Context._gather_chunk` computes it from the kernels
     :func:`raytrace._gather.gather_rays` (samples ``first`` … of the pixel's sequence,
     keyed by ``seed``; with ``share`` > 0 of the sub-samples' pixels,
     :func:`raytrace._gather.gather_start`), the shadow rays of its hits, the paths traced from them
@@ -230,7 +230,7 @@ def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, e
                 face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun,
                 E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, CV, out, out_var):
     """Each listed point's (idx[j]) sampled specular reflection minus its control variate, as
-    :meth:`raytrace.shade._Context.lobe` computes it from :func:`raytrace._gather.lobe_rays`
+    :meth:`raytrace._context._Context.lobe` computes it from :func:`raytrace._gather.lobe_rays`
     (n_rays lobe directions, keyed by pixel and ``seed``), the shadow rays and paths of their
     hits (:func:`_traced_indirect`: the first bounce from every hit, further ones from hits
     nearer than ``near``; keyed by pix·n_rays + r and ``path_seed``) and :func:`raytrace._gather.lobe_sum`; a draw that fails (weight 0) casts
@@ -286,7 +286,7 @@ def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, e
 @pjit
 def sun_visibility(scene, idx, P, NG, sx, sy, sz, eps, pixel, number, n_strata, seed, cos_half, out):
     """out[k] = 1 where the shadow ray of listed point k = idx[j] reaches the Sun, else 0 (the
-    rest untouched), as :meth:`raytrace.shade._Sunlight.sunlight` casts it: from P + ε·NG
+    rest untouched), as :meth:`raytrace._context._Sunlight.sunlight` casts it: from P + ε·NG
     (float32, as Embree takes it) towards the Sun's centre, or with ``n_strata`` > 0 towards
     the solar-disc sample :func:`raytrace._surface.sun_disc_dirs` draws for (pixel[k],
     number[k]) — the same directions, without their array."""

@@ -272,7 +272,7 @@ GLOSSY_A1 = 0.2
 GLOSSY_HIT = 0.7
 # ``balanced``'s mirror term (add_mirror) blends from the mirror ray to E/π by
 # t = (α − MIRROR_BLEND_A0) / MIRROR_BLEND_WIDTH clamped to [0, 1]; where t = 1 it casts no
-# mirror ray (shade._Context.mirror_weighted, the same expression)
+# mirror ray (_context._Context.mirror_weighted, the same expression)
 MIRROR_BLEND_A0 = 0.05
 MIRROR_BLEND_WIDTH = 0.3
 
@@ -297,7 +297,7 @@ def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset
     On an open surface that second term vanishes and the reflection of Earth's disc, its limb
     and terminator follows the lobe. Otherwise (``balanced``, where this term is the control
     variate of the sampled lobe, :func:`raytrace._gather.lobe_sum`, or the answer on parts whose specular albedo
-    is too small to be worth sampling, ``shade.LOBE_MIN_SPECULAR``) L̄_in blends from the mirror ray
+    is too small to be worth sampling, ``_context.LOBE_MIN_SPECULAR``) L̄_in blends from the mirror ray
     (α ≤ 0.05) to E/π (α ≥ 0.35), the environment as if it arrived uniformly: smooth, it kept
     ``balanced``'s filtered residual nearer the truth on the four targets with real materials
     (8 rays, 640×480: 7.55 / 2.12 / 7.31 / 5.41 % against 7.62 / 2.08 / 7.39 / 5.64 % with the

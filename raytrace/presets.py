@@ -75,7 +75,7 @@ class Quality:
     corner_rays : bool
         One more ray through every pixel corner of the cast rectangle (about one per pixel):
         a pixel whose corners see another part than its centre holds sub-pixel geometry and
-        is anti-aliased (:func:`raytrace.shade._corner_edges`). Off in ``fast``, where :attr:`slivers` finds
+        is anti-aliased (:func:`raytrace._antialias._corner_edges`). Off in ``fast``, where :attr:`slivers` finds
         the same pixels but 0–8 per frame (12 scenes at 1280×960: 0–8 pixels of the frames
         differ, the errors are the same to 0.01 %) for 12–37 ms less per frame on one core;
         ``balanced`` needs them for :attr:`sun_corners`.
@@ -83,7 +83,7 @@ class Quality:
         Lit pixels near the shadow of a rod or wire thinner than a pixel, which pixel centres
         and corners can both miss, are anti-aliased too: a conservative shadow map of the
         triangles that are slivers seen from the Sun, looked up over each pixel's footprint
-        (:func:`raytrace.shade._thin_shadow_pixels`; needs ``sun_corners``).
+        (:func:`raytrace._antialias._thin_shadow_pixels`; needs ``sun_corners``).
     own_at_boundary : bool
         An edge sub-sample on its pixel centre's surface takes the centres' filtered light
         interpolated (:func:`raytrace._edges.interpolate_rows_into`) only where all four
@@ -112,7 +112,7 @@ class Quality:
         part, a penumbra, where the sub-samples' noise sits (:func:`_balanced_aa_extra`) [-].
     box_grid : int
         ≥ 2: every target pixel that is not anti-aliased gets box_grid² stratified sub-pixel
-        rays too (:func:`raytrace.shade._supersample`), shaded like the edge sub-samples on
+        rays too (:func:`raytrace._antialias._supersample`), shaded like the edge sub-samples on
         their pixel centre's surface (exact Sun with a solar-disc sample each, the cache, the
         centres' filtered light interpolated; a gather of its own only where a
         sub-sample lands on another surface than its centre's, which the anti-aliasing's tests
@@ -123,7 +123,7 @@ class Quality:
     aa_gather_rays : int
         Rays of the final gather an edge sub-sample casts of its own (off its pixel centre's
         surface, or near that surface's boundary with :attr:`own_at_boundary`;
-        :func:`_balanced_aa_gather`); below ``raytrace.shade._MIN_SUB_GATHER`` none, the cache
+        :func:`_balanced_aa_gather`); below ``raytrace._antialias._MIN_SUB_GATHER`` none, the cache
         alone [-].
     cache_divisions : int
         > 0: the radiance cache's lattice spacing is the target's bounding-box diagonal divided
@@ -459,7 +459,7 @@ def quality_preset(name: str, samples: int | None = None) -> Quality:
 
 # shade.render: the frame's lighting context built on a side thread while the geometry pass runs
 CONTEXT_ON_SIDE_THREAD = True
-# shade._supersample: the anti-aliasing's chunks run two at a time on a side pool
+# _antialias._supersample: the anti-aliasing's chunks run two at a time on a side pool
 AA_CHUNKS_ON_TWO_THREADS = True
 # rays per chunk of the final gather and the lobe sampling, and sub-samples per anti-aliasing chunk
 CHUNK_RAYS = 1 << 18

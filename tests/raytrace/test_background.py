@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import binary_dilation
 
-from raytrace import shade
+from raytrace import _context, shade
 from raytrace._background import earth_background
 from raytrace.camera import Camera
 from raytrace.lighting import EARTH_RADIUS_M, SOLAR_CONSTANT_W_M2, Earth, Lighting
@@ -33,7 +33,7 @@ def _background(texture: str, tilt_rad: float, step: int, inst=None):
                   R_body_from_earth=_rotation_about_x(0.7) @ np.array([[0.0, 1, 0], [0, 0, 1], [1, 0, 0]]))
     sun = np.array([0.3, -0.4, -0.6])  # above the camera, slanting: day side with a Sun gradient
     light = Lighting(sun_dir_body=tuple(sun / np.linalg.norm(sun)), earth=earth)
-    p, tex = shade._background_params(light)
+    p, tex = _context._background_params(light)
     H, W = CAM.height, CAM.width
     inst = np.zeros((H, W), np.uint16) if inst is None else inst
     earth_px = np.zeros((H, W), bool)

@@ -22,7 +22,7 @@ from scipy import integrate
 from scipy.ndimage import binary_erosion
 
 from orbit.pose import look_at
-from raytrace import presets
+from raytrace import _antialias, _context, presets
 from raytrace.camera import Camera
 from raytrace.lighting import Earth, Lighting
 from raytrace.model import Component, TargetModel
@@ -299,7 +299,6 @@ def test_context_built_on_a_side_thread_gives_the_same_bytes(monkeypatch, qualit
     the geometry pass; the frame must be the one built in line, bit for bit."""
     import threading
 
-    from raytrace import shade
     if numba.get_num_threads() < 2:
         pytest.skip("one numba thread: render builds the context in line")
     scene = _plates(0.8, 0.6)  # inter-reflection: the cache's solve matters
@@ -308,13 +307,13 @@ def test_context_built_on_a_side_thread_gives_the_same_bytes(monkeypatch, qualit
     light = Lighting(sun_dir_body=tuple(sun / np.linalg.norm(sun)), ambient_radiance_W_m2_sr=1.0,
                      earth=Earth(tuple(earth / np.linalg.norm(earth)), 6.778e6))
     built_on = []
-    init = shade._Context.__init__
+    init = _context._Context.__init__
 
     def spy(self, *a, **k):
         built_on.append(threading.current_thread().name)
         init(self, *a, **k)
 
-    monkeypatch.setattr(shade._Context, "__init__", spy)
+    monkeypatch.setattr(_context._Context, "__init__", spy)
     monkeypatch.setattr(presets, "CONTEXT_ON_SIDE_THREAD", False)
     a = render(scene, CAM, R, t, light, quality=quality, samples=samples, seed=5)
     monkeypatch.setattr(presets, "CONTEXT_ON_SIDE_THREAD", True)
@@ -329,7 +328,6 @@ def test_anti_aliasing_chunks_on_two_threads_give_the_same_bytes(monkeypatch, sp
     frame has several, the frame must be the one computed chunk after chunk, bit for bit."""
     import threading
 
-    from raytrace import shade
     if numba.get_num_threads() < 2:
         pytest.skip("one numba thread: the chunks run one after the other")
     R, t = _pose([1.0, -5.0, 2.0])
@@ -337,13 +335,13 @@ def test_anti_aliasing_chunks_on_two_threads_give_the_same_bytes(monkeypatch, sp
                      earth=Earth((0, 0, -1), 6.778e6))
     monkeypatch.setattr(presets, "CHUNK_RAYS", 16 * 90)  # 90 edge pixels per chunk (a 4 × 4 grid at 8 rays)
     ran_on = []
-    chunk = shade._shade_chunk
+    chunk = _antialias._shade_chunk
 
     def spy(*a, **k):
         ran_on.append(threading.current_thread().name)
         return chunk(*a, **k)
 
-    monkeypatch.setattr(shade, "_shade_chunk", spy)
+    monkeypatch.setattr(_antialias, "_shade_chunk", spy)
     monkeypatch.setattr(presets, "AA_CHUNKS_ON_TWO_THREADS", False)
     a = render(sphere, CAM, R, t, light, quality="balanced", samples=8, seed=2).radiance
     serial = len(ran_on)
@@ -486,7 +484,7 @@ def test_edge_sub_samples_gather_the_presets_own_ray_count(sphere, monkeypatch):
     assert (q.aa_grid, q.aa_gather_rays) == (8, 4)
     assert shade.quality_preset("balanced", 16).aa_gather_rays == 4  # a quarter below 32 rays
     seen = []
-    gather = shade._Context.gather_E
+    gather = _context._Context.gather_E
 
     def record(self, s, n_rays, pix, *args, **kwargs):
         centres = "counts" in kwargs or "hits" in kwargs
@@ -495,7 +493,7 @@ def test_edge_sub_samples_gather_the_presets_own_ray_count(sphere, monkeypatch):
             assert kwargs["share"] == 64 and pix.min() >= 0 and pix.max() < 64 * CAM.width * CAM.height
         return gather(self, s, n_rays, pix, *args, **kwargs)
 
-    monkeypatch.setattr(shade._Context, "gather_E", record)
+    monkeypatch.setattr(_context._Context, "gather_E", record)
     R, t = _pose([0.0, -5.0, 0.0])
     light = Lighting(sun_dir_body=(1.0, 0.0, 0.0), sun_irradiance_W_m2=1000.0, ambient_radiance_W_m2_sr=5.0)
     preset = shade.quality_preset
@@ -547,7 +545,7 @@ def test_second_sub_sample_pattern_goes_to_the_highest_contrast_pixels(sphere, m
     monkeypatch.setattr(shade, "quality_preset",
                         lambda name, samples=None: dataclasses.replace(preset(name, samples), aa_extra=0.2))
     calls = []
-    first = shade._supersample
+    first = _antialias._supersample
 
     def record(*args, **kwargs):
         out = first(*args, **kwargs)
@@ -555,7 +553,7 @@ def test_second_sub_sample_pattern_goes_to_the_highest_contrast_pixels(sphere, m
         calls.append((args[7].copy(), None if contrast is None else contrast.copy()))
         return out
 
-    monkeypatch.setattr(shade, "_supersample", record)
+    monkeypatch.setattr(_antialias, "_supersample", record)
     R, t = _pose([0.0, -5.0, 0.0])
     light = Lighting(sun_dir_body=(1.0, 0.0, 0.0), sun_irradiance_W_m2=1000.0)  # lights the +x half
     render(sphere, CAM, R, t, light, quality="balanced", samples=8, seed=2)
@@ -774,12 +772,11 @@ def test_one_chunk_traced_before_the_cache_gives_the_chunked_bytes(monkeypatch, 
     the Sun, mirror rays) before it waits for the radiance cache, and shades them after: the
     same bytes as several chunks each traced and shaded in turn, and the trace comes before the
     first look-up in the cache."""
-    from raytrace import shade
     R, t = _pose([1.0, -5.0, 2.0])
     light = Lighting(sun_dir_body=(0.6, -0.48, 0.64), ambient_radiance_W_m2_sr=2.0,
                      earth=Earth((0, 0, -1), 6.778e6))
     events = []
-    trace, cache_E = shade._trace_chunk, shade._Context.cache_E
+    trace, cache_E = _antialias._trace_chunk, _context._Context.cache_E
 
     def spy_trace(*a, **k):
         events.append("trace")
@@ -789,8 +786,8 @@ def test_one_chunk_traced_before_the_cache_gives_the_chunked_bytes(monkeypatch, 
         events.append("cache")
         return cache_E(self, s)
 
-    monkeypatch.setattr(shade, "_trace_chunk", spy_trace)
-    monkeypatch.setattr(shade._Context, "cache_E", spy_cache)
+    monkeypatch.setattr(_antialias, "_trace_chunk", spy_trace)
+    monkeypatch.setattr(_context._Context, "cache_E", spy_cache)
     one = render(sphere, CAM, R, t, light, quality=quality, samples=samples, seed=4).radiance
     assert events[0] == "trace" and events.count("trace") >= 1
     events.clear()

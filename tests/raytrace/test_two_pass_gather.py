@@ -21,8 +21,7 @@ import pytest
 import trimesh
 from scipy import integrate, optimize
 
-from raytrace import _filter, _gather, _sampling
-from raytrace import shade
+from raytrace import _context, _filter, _gather, _sampling, shade
 from raytrace.lighting import Lighting
 from raytrace.model import Component, TargetModel
 from raytrace.scene import Scene
@@ -297,7 +296,7 @@ def plate_points():
     the same grid on its back (facing −x, which sees nothing: no noise at all), as a 6 × 12
     image of two parts."""
     scene = _plates()
-    ctx = shade._Context(scene, Lighting(sun_dir_body=(0, 0, 1), sun_irradiance_W_m2=E_SUN), {})
+    ctx = _context._Context(scene, Lighting(sun_dir_body=(0, 0, 1), sun_irradiance_W_m2=E_SUN), {})
     ys, zs = np.meshgrid(np.linspace(-0.6, 0.6, 6), np.linspace(0.05, 1.5, 6))
     front = np.column_stack([np.ones(ys.size), ys.ravel(), zs.ravel()])
     back = front * [-1.0, 1.0, 1.0]
@@ -306,7 +305,7 @@ def plate_points():
     h = scene.intersect(O, D)
     assert np.all(h["geomID"] == 1)
     face = scene.face_offset[h["geomID"]] + h["primID"].astype(np.int64)
-    s = shade._surfaces(ctx.scene, O, D, face)
+    s = _context._surfaces(ctx.scene, O, D, face)
     inst = np.concatenate([np.full(ys.shape, 2), np.full(ys.shape, 3)], axis=1).astype(np.uint16)
     v, u = np.unravel_index(np.arange(ys.size), ys.shape)
     at = (np.concatenate([v, v]), np.concatenate([u, u + 6]))
