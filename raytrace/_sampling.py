@@ -206,26 +206,29 @@ def owen_sobol2(i, key, stream):
 # ---- random streams
 # A second sample pattern of the same keys (pixel, sub-sample, ray number) is drawn with the
 # frame's seed XORed with one of these constants (the coverage rays: added), so that it does not
-# repeat the first. One constant per stream, named for what it draws:
+# repeat the first. Within the kernels, a pattern's dimensions are streams of the hashes' second
+# argument: 4s + 21 … 23 the solar disc (_surface.disc_direction), 2s + 15 … 17 the gather's
+# directions (_gather.gather_rays), 4s + 31, 4s + 32 a traced bounce (_gather.bounce2_rays),
+# 2s + 11 … 14 the sub-pixel rays (_edges.subpixel_rays), 2s + 23, 2s + 24 the lobe's
+# permutations (_gather.lobe_rays), s the seed a stream is drawn with.
 
-# the paths traced from lobe-ray hits (shade._Context.lobe): not the final gather's paths from
-# the same pixel (both keyed by pixel and ray number)
+# the paths traced from lobe-ray hits, apart from the final gather's (_context._Context.lobe)
 LOBE_PATH_STREAM = 0x2545F491
-# the directions of an edge sub-sample's own final gather (shade._shade_subsamples): a
-# sequence per pixel apart from its centre's gather
+# the directions of an edge sub-sample's own final gather (_antialias._shade_subsamples)
 SUB_GATHER_STREAM = 0x2545F491
-# (The two share a value, so one frame draws both from the same seed s' = seed ^ 0x2545F491, at
-# one sub-sample too (its own lobe and gather, shade._shade_subsamples). They never draw the same
-# numbers: the gather's directions hash the key pixel·1009 + s' with the streams 2s' + 15 … 17
-# (gather_rays, _paths.gather_traced), the lobe's paths the key pixel·N + r (r < N, then
-# 4·key + 1 per bounce) with 4s' + 31, 4s' + 32 (bounce2_rays, _paths._bounce_draw): the streams
-# meet only at s' = 2³¹ − 8 or 2³¹ − 7, and the keys must then agree too. Separate values would
-# not change the outputs' statistics; they are kept for the same bytes.)
+# The two share a value: a frame draws both with s' = seed ^ 0x2545F491, one sub-sample too (its
+# own lobe and gather). They never draw the same stream: the sub-sample's gather directions hash
+# the key pixel·1009 + s' with the streams 2s' + 15 … 17 (gather_rays, _paths.gather_traced), the
+# lobe's paths the keys pixel·N + r (then 4·key + 1 per bounce) with 4s' + 31, 4s' + 32
+# (bounce2_rays, _paths._bounce_draw); the streams meet only at s' = 2³¹ − 8 or 2³¹ − 7, two seeds
+# in 2³¹. Where a hash input of one equals one of the other for the same pixel, it is the hash's
+# linear input (key·A + stream·B) meeting by chance: on 1280×960 frames of 150 seeds, as often
+# with a separate value for either stream. Kept one value: the same bytes.
 # the second sub-pixel pattern of the noisiest anti-aliased pixels (Quality.aa_extra)
 AA_SECOND_STREAM = 0x1B873593
 # the sub-pixel rays of the pixels that are not anti-aliased (Quality.box_grid)
 BOX_STREAM = 0x68E31DA4
 # the paths traced from the second pass's hits of the two-pass final gather (shade._gather_two_pass)
 SECOND_PASS_STREAM = 0x5BD1E995
-# added to the seed (mod 2³¹) for the coverage rays of mixed edge pixels (shade._trace_chunk)
+# added to the seed (mod 2³¹) for the coverage rays of mixed edge pixels (_antialias._trace_chunk)
 COVERAGE_STREAM = 0x3C6EF372
