@@ -5,7 +5,7 @@
 
 The frames are those of the main job (``cli.py --target … --pattern …`` with ``--frames``
 frames, its default camera, 1280×960). For every frame with Earth in view,
-:func:`raytrace._shading.earth_background` runs twice on the frame's geometry: with
+:func:`raytrace._background.earth_background` runs twice on the frame's geometry: with
 ``raytrace.shade._BACKGROUND_STEP`` (the albedo interpolated on step × step cells where that
 is safe) and with step 1 (the texture evaluated at every pixel, the independent answer). Prints
 per frame the share of the image that is Earth and lit Earth behind the target, the kernel's
@@ -27,8 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import cli  # noqa: E402
-from raytrace import _shading as K  # noqa: E402
-from raytrace import shade  # noqa: E402
+from raytrace import _background, _context, shade  # noqa: E402
 from raytrace.camera import Camera  # noqa: E402
 from raytrace.dataset.scenes import lighting_of, load_model  # noqa: E402
 from raytrace.scene import Scene  # noqa: E402
@@ -59,15 +58,15 @@ def main() -> None:
         geo = scene.render_geometry(cam, R, t)
         R_bc = np.ascontiguousarray(R.T)
         o_body = -R_bc @ t
-        p, tex = shade._background_params(light)
+        p, tex = _context._background_params(light)
         out = {}
         for r in range(args.repeats):
             for step in ((1, shade._BACKGROUND_STEP) if r % 2 == 0 else (shade._BACKGROUND_STEP, 1)):
                 earth = np.zeros((cam.height, cam.width), dtype=bool)
                 rad = np.zeros((cam.height, cam.width, 3), dtype=np.float32)
                 t0 = time.perf_counter()
-                K.earth_background(geo.instance, o_body, R_bc, cam.fx, cam.fy, cam.cx, cam.cy, p, tex, step,
-                                   shade._BACKGROUND_TOL, shade._BACKGROUND_CHORD, earth, rad)
+                _background.earth_background(geo.instance, o_body, R_bc, cam.fx, cam.fy, cam.cx, cam.cy, p, tex, step,
+                                             shade._BACKGROUND_TOL, shade._BACKGROUND_CHORD, earth, rad)
                 dt = time.perf_counter() - t0
                 out[step] = (rad, earth, min(dt, out.get(step, (None, None, np.inf))[2]))
         (exact, earth1, t1), (fast, earth2, t2) = out[1], out[shade._BACKGROUND_STEP]

@@ -6,7 +6,7 @@ Per built-in target, the seconds of ``Scene.radiance_cache()`` (a fresh ``Scene`
 Embree's BVH built before the clock starts, numba's cache warm), the median of ``--repeats``:
 
 * *Chunks.* The cache rays' chunks two at a time on a side pool against one after the other
-  (``raytrace.cache._CAST_CHUNKS_ON_TWO_THREADS``), alternated round by round so a slow spell of
+  (``raytrace.presets.CAST_CHUNKS_ON_TWO_THREADS``), alternated round by round so a slow spell of
   a shared machine hits both alike; and whether the two caches are the same bits (every
   array, sparse matrix and glossy record).
 * *Lattice merge.* The merge of lattice points into samples (distinct rows of component, cell
@@ -29,7 +29,7 @@ import scipy.sparse as sp
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from raytrace import cache as cache_module  # noqa: E402
+from raytrace import cache as cache_module, presets  # noqa: E402
 from raytrace.scene import Scene  # noqa: E402
 from raytrace.targets import BUILTIN_TARGETS, load_target  # noqa: E402
 
@@ -51,7 +51,7 @@ def _members(c) -> list[str]:
 
 
 def _build(model, two: bool):
-    cache_module._CAST_CHUNKS_ON_TWO_THREADS = two
+    presets.CAST_CHUNKS_ON_TWO_THREADS = two
     scene = Scene(model)
     scene.embree  # the BVH is not the cache's
     t0 = time.perf_counter()
@@ -80,7 +80,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--targets", nargs="+", default=list(BUILTIN_TARGETS), choices=list(BUILTIN_TARGETS))
     args = ap.parse_args(argv)
-    saved = cache_module._CAST_CHUNKS_ON_TWO_THREADS
+    saved = presets.CAST_CHUNKS_ON_TWO_THREADS
     ratios = []
     print("| target | rows | one after the other, s | two at a time, s | ratio | same bits | merge, np.unique(axis=0) s"
           " | merge, packed s | same ids |")
@@ -111,7 +111,7 @@ def main(argv=None) -> int:
             print(f"| {name} | {last[True].n_rows} | {t1:.2f} | {t2:.2f} | {t2 / t1:.3f} | {same} | {t_np:.3f} | "
                   f"{t_pk:.3f} | {same_ids} |", flush=True)
     finally:
-        cache_module._CAST_CHUNKS_ON_TWO_THREADS = saved
+        presets.CAST_CHUNKS_ON_TWO_THREADS = saved
     print(f"\nmedian ratio two at a time / one after the other: {statistics.median(ratios):.3f} "
           f"({min(ratios):.3f}–{max(ratios):.3f})")
     return 0

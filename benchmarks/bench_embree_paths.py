@@ -3,9 +3,9 @@
     python benchmarks/bench_embree_paths.py --scenes DIR [--width 1280] [--repeats 3]
         [--presets fast balanced:16 balanced:64] [--targets ...] [--views ...]
 
-Two parts, both alternating the two paths (``raytrace.scene._DIRECT_BATCHES`` False / True) so a
+Two parts, both alternating the two paths (``raytrace.presets.DIRECT_BATCHES`` False / True) so a
 slow spell of a shared machine hits both alike, both through Embree's robust mode (the script
-turns off ``raytrace.scene._FAST_TRAVERSAL``):
+turns off ``raytrace.presets.FAST_TRAVERSAL``):
 
 * *Rays.* Per scene, 36 jittered sub-pixel rays through every target pixel (the anti-aliasing
   stage's kind of batch, ~1 M rays): seconds of one ``Scene.intersect`` call each way, and
@@ -33,18 +33,18 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_time_error import add_scene_options, parse_presets, scene_frames  # noqa: E402
 
-from raytrace import scene as scene_module  # noqa: E402
+from raytrace import presets  # noqa: E402
 from raytrace.shade import render  # noqa: E402
 
 
 def _paths(flag: bool) -> None:
-    scene_module._DIRECT_BATCHES = flag
+    presets.DIRECT_BATCHES = flag
 
 
 # both paths through Embree's robust mode, as embreex builds its scenes: the comparison is of
 # the two ways of calling Embree, not of the faster scene the shading rays take by default
-# (raytrace.scene._FAST_TRAVERSAL; BENCHMARKS.md, "Embree's robust flag where it matters only")
-scene_module._FAST_TRAVERSAL = False
+# (raytrace.presets.FAST_TRAVERSAL; BENCHMARKS.md, "Embree's robust flag where it matters only")
+presets.FAST_TRAVERSAL = False
 
 
 def subpixel_batch(scene, camera, R, t, per_pixel: int = 36, seed: int = 0):

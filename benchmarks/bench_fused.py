@@ -5,7 +5,7 @@ code they replaced (``embreex`` batches, a round of Python per bounce level), si
         [--targets ...] [--views ...]
 
 The scenes are those of ``benchmarks/bench_time_error.py`` (written to ``DIR`` if missing). Per
-scene, the two paths alternate (``raytrace.shade._FUSED_GATHER``), each rendered ``--repeats``
+scene, the two paths alternate (``raytrace.presets.FUSED_GATHER``), each rendered ``--repeats``
 times after a warm-up; prints the median time of each, their ratio and the largest difference
 between the two frames relative to the frame's maximum (0: bit-identical), then the median
 over scenes. Run nothing else meanwhile.
@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_time_error import scene_frames, viewpoints  # noqa: E402
 
-from raytrace import shade  # noqa: E402
+from raytrace import presets, shade  # noqa: E402
 from raytrace.targets import BUILTIN_TARGETS  # noqa: E402
 
 
@@ -44,7 +44,7 @@ def main() -> None:
         img = {}
         for r in range(args.repeats + 1):
             for fused in ((False, True) if r % 2 == 0 else (True, False)):
-                shade._FUSED_GATHER = fused
+                presets.FUSED_GATHER = fused
                 t0 = time.perf_counter()
                 f = shade.render(*frame_args, quality="balanced", samples=args.samples, seed=3 + r)
                 dt = time.perf_counter() - t0
@@ -59,7 +59,7 @@ def main() -> None:
         t_fused.append(tf)
         print(f"{target:12s} {view:8s} batched {tb:7.3f} s  fused {tf:7.3f} s  ratio {tf / tb:.3f}  "
               f"max difference {diff:.1e}", flush=True)
-    shade._FUSED_GATHER = True
+    presets.FUSED_GATHER = True
     print(f"median over scenes: batched {statistics.median(t_batched):.3f} s, fused {statistics.median(t_fused):.3f} s, "
           f"median ratio {statistics.median(ratios):.3f} ({min(ratios):.3f}-{max(ratios):.3f})")
 

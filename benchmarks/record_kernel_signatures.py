@@ -51,7 +51,7 @@ def _dispatchers() -> dict:
 # the frames each group is recorded from (after the main job's, group "fast"): full-size
 # frames, so that every stage of the preset runs (edge pixels, coverage, Earth behind). The
 # main job's from two frames: the first has no penumbra to sample (no solar-disc shadow rays,
-# raytrace._shading.sun_disc_dirs), the second has, as most frames of the job do
+# raytrace._surface.sun_disc_dirs), the second has, as most frames of the job do
 _RECORD_ARGS = {
     "fast": ["--frames", "2"],
     "balanced": ["--frames", "1", "--quality", "balanced", "--samples", "16"],
@@ -96,14 +96,14 @@ def _record_here(out_dir: str) -> dict:
     [signature reprs new in the group])}}."""
     from numba.core import event
     import cli
-    from raytrace import scene, shade
+    from raytrace import presets
     from raytrace.dataset import jit
     jit.kernels_not_compiled = lambda *a, **k: []  # compile here, where the recorder sees it
     seen: dict = {}
     result = {}
     for group in GROUPS:
-        shade._FUSED_GATHER = group != "batched"
-        scene._CAST_IN_ONE_KERNEL = group != "batched"  # the geometry pass's fallback too
+        presets.FUSED_GATHER = group != "batched"
+        presets.CAST_IN_ONE_KERNEL = group != "batched"  # the geometry pass's fallback too
         times = _compile_time_recorder()
         with event.install_listener("numba:compile", times):
             status = cli.main(["--target", "cassini", "--pattern", "spiral", "--workers", "1",
@@ -117,7 +117,8 @@ def _record_here(out_dir: str) -> dict:
                 out[qualname] = (round(times.spent.get(qualname, 0.0), 2), new)
                 seen.setdefault(qualname, set()).update(new)
         result[group] = out
-    shade._FUSED_GATHER = True
+    presets.FUSED_GATHER = True
+    presets.CAST_IN_ONE_KERNEL = True
     return result
 
 

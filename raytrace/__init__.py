@@ -10,6 +10,11 @@ inter-reflection (``shade``, with the radiance cache ``cache`` and the path trac
 ``raytrace`` knows nothing of orbits: it receives poses and light directions already
 expressed in the target's body frame.
 
+Their numba kernels live in modules of their own, one topic each (``_sampling``, ``_surface``,
+``_rows``, ``_gather``, ``_filter``, ``_edges``, ``_background``, ``_paths``, ``_cache_kernels``,
+``_kernels``, ``_embree``), which import no module that holds the objects driving them (``shade``
+with ``_context`` and ``_antialias``, ``cache``, ``scene``).
+
 ``_jit``, which every module with kernels imports, sets numba's thread policy and, on Linux,
 malloc's thresholds for the large per-frame arrays (docs/shading.md, "Memory").
 """

@@ -1,16 +1,16 @@
 """Fused kernels: rays and the paths traced from their hits in one pass, Embree called per ray.
 
-The batched code (:meth:`raytrace.shade._Context._gather_chunk` and ``_bounces``, kept as the
+The batched code (:meth:`raytrace._context._Context._gather_chunk` and ``_bounces``, kept as the
 fallback) runs the final gather level by level: every ray's direction into an array
-(:func:`raytrace._shading.gather_rays`), the batch through ``embreex``, the shadow rays
-(:func:`raytrace._shading.bounce_sun_rays`), the next bounce's rays
-(:func:`raytrace._shading.bounce2_rays`), and so on up to four bounces deep, then the sum
-(:func:`raytrace._shading.gather_sum`), with a round of Python, NumPy indexing and arrays of
+(:func:`raytrace._gather.gather_rays`), the batch through ``embreex``, the shadow rays
+(:func:`raytrace._gather.bounce_sun_rays`), the next bounce's rays
+(:func:`raytrace._gather.bounce2_rays`), and so on up to four bounces deep, then the sum
+(:func:`raytrace._gather.gather_sum`), with a round of Python, NumPy indexing and arrays of
 every ray between levels. :func:`gather_traced` computes the same estimate ray by ray inside
 one kernel that calls Embree itself (:mod:`raytrace._embree`): the same directions, the same
 keys of the same hashes, the same float32 rays, so the same result up to the last bits of the
 fast-math shading arithmetic. :func:`lobe_traced` does the same for the GGX-lobe sampling
-(:func:`raytrace._shading.lobe_rays` … :func:`raytrace._shading.lobe_sum`), and
+(:func:`raytrace._gather.lobe_rays` … :func:`raytrace._gather.lobe_sum`), and
 :func:`sun_visibility` for the edge sub-samples' shadow rays towards the solar disc.
 """
 from __future__ import annotations
@@ -20,12 +20,13 @@ import math
 import numba
 import numpy as np
 
+from ._cache_kernels import glossy_draw, hit_normals
 from ._embree import intersect1, occluded1, ray_buffer
+from ._gather import add_lobe_term, gather_estimate, gather_start, mean_estimate
 from ._jit import inline, pjit
-from ._shading import (_cmj_perms, _cmj_point, _owen_sobol2_keyed, _strata, add_lobe_term, disc_direction,
-                       gather_estimate, gather_start, incoming, incoming_env, mean_estimate)
+from ._sampling import _cmj_perms, _cmj_point, _hash01, _hash32, _owen_sobol2_keyed, _strata
+from ._surface import disc_direction, incoming, incoming_env
 from .brdf import cosine_direction, onb, sample_brdf
-from .cache import _hash01, _hash32, glossy_draw, hit_normals
 
 # points per block of the parallel loop (scheduled dynamically: the rays per point vary)
 _BLOCK = 16
@@ -33,7 +34,7 @@ _BLOCK = 16
 
 @inline
 def _sun_visibility(scene, buf, ox, oy, oz, dx, dy, dz, g, pr, t, face_offset, face_normal, sx, sy, sz, eps, sun_on):
-    """The Sun's visibility at the hit of the ray (o, d) as :meth:`shade._Context._bounce_sun`
+    """The Sun's visibility at the hit of the ray (o, d) as :meth:`_context._Context._bounce_sun`
     gives it: −1 at a miss or when there is no sunlight, 0 where the side the ray arrived from
     faces away from the Sun or a shadow ray (from the hit, offset along that side's normal)
     is blocked, else 1."""
@@ -56,7 +57,7 @@ def _sun_visibility(scene, buf, ox, oy, oz, dx, dy, dz, g, pr, t, face_offset, f
 @inline
 def _bounce_draw(ox, oy, oz, dx, dy, dz, f, hu, hv, t, face_normal, corner_normal, comp_of_face, glossy, mat_f0,
                  mat_alpha, key, seed, eps):
-    """:func:`raytrace._shading.bounce2_rays` for one hit: (ok, o2, d2, w2)."""
+    """:func:`raytrace._gather.bounce2_rays` for one hit: (ok, o2, d2, w2)."""
     nx, ny, nz, ngx, ngy, ngz = hit_normals(face_normal, corner_normal, f, hu, hv, dx, dy, dz)
     u1 = _hash01(key, 4 * seed + 31)
     u2 = _hash01(key, 4 * seed + 32)
@@ -79,13 +80,13 @@ def _bounce_draw(ox, oy, oz, dx, dy, dz, f, hu, hv, t, face_normal, corner_norma
 def _traced_indirect(scene, buf, path, ox, oy, oz, dx, dy, dz, g, pr, hu, hv, t, key, seed, levels, first_near,
                      near, sx, sy, sz, sun_on, eps, lk):
     """The traced estimate of the indirect irradiance at the hit (g ≥ 0) of the gather ray
-    (o, d), as :meth:`shade._Context._traced_indirect` computes it with ``levels`` bounces:
+    (o, d), as :meth:`_context._Context._traced_indirect` computes it with ``levels`` bounces:
     −1 where the cache stands in (a miss; a hit farther than ``first_near`` on a part that is
     not glossy), 0 where the bounce's draw fails, else the weight of the bounce times the
     radiance its ray brings back, the path continued from hits nearer than ``near`` (float32
     distances, as the batched code compares them) and from every glossy hit. ``path``
     (≥ levels, 14) is scratch for the path's vertices; ``lk`` the tuple of arrays
-    :meth:`raytrace.shade._Context._lookup` returns (a numba-inlined call takes at most 30
+    :meth:`raytrace._context._Context._lookup` returns (a numba-inlined call takes at most 30
     arguments: CPython passes more as one tuple, which numba's inliner does not take)."""
     (face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot,
      E_sun, valid, face_s, lat_start, lat_ids, p, tex) = lk
@@ -147,12 +148,12 @@ def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, sh
                   out, out_var, out_hits):
     """Final-gather irradiance per point k (at row rows[k] of P, NS and NG; every other array is
     per point) from rays start[k] … start[k + 1] − 1, as
-    :meth:`raytrace.shade._Context._gather_chunk` computes it from the kernels
-    :func:`raytrace._shading.gather_rays` (samples ``first`` … of the pixel's sequence,
+    :meth:`raytrace._context._Context._gather_chunk` computes it from the kernels
+    :func:`raytrace._gather.gather_rays` (samples ``first`` … of the pixel's sequence,
     keyed by ``seed``; with ``share`` > 0 of the sub-samples' pixels,
-    :func:`raytrace._shading.gather_start`), the shadow rays of its hits, the paths traced from them
+    :func:`raytrace._gather.gather_start`), the shadow rays of its hits, the paths traced from them
     (:func:`_traced_indirect`, keyed by pix·kmul + j and ``path_seed``) and
-    :func:`raytrace._shading.gather_sum` (environment control variate with weight ``alpha``;
+    :func:`raytrace._gather.gather_sum` (environment control variate with weight ``alpha``;
     ``out_var`` the estimate's luminance variance). ``out_hits[k]`` counts the rays that hit a
     part. ``scene`` is a :class:`raytrace._embree.DirectScene` handle."""
     stream = 2 * seed + 15
@@ -229,10 +230,10 @@ def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, e
                 face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun,
                 E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, CV, out, out_var):
     """Each listed point's (idx[j]) sampled specular reflection minus its control variate, as
-    :meth:`raytrace.shade._Context.lobe` computes it from :func:`raytrace._shading.lobe_rays`
+    :meth:`raytrace._context._Context.lobe` computes it from :func:`raytrace._gather.lobe_rays`
     (n_rays lobe directions, keyed by pixel and ``seed``), the shadow rays and paths of their
     hits (:func:`_traced_indirect`: the first bounce from every hit, further ones from hits
-    nearer than ``near``; keyed by pix·n_rays + r and ``path_seed``) and :func:`raytrace._shading.lobe_sum`; a draw that fails (weight 0) casts
+    nearer than ``near``; keyed by pix·n_rays + r and ``path_seed``) and :func:`raytrace._gather.lobe_sum`; a draw that fails (weight 0) casts
     no ray."""
     gx = _strata(n_rays)
     gy = n_rays // gx
@@ -285,9 +286,9 @@ def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, e
 @pjit
 def sun_visibility(scene, idx, P, NG, sx, sy, sz, eps, pixel, number, n_strata, seed, cos_half, out):
     """out[k] = 1 where the shadow ray of listed point k = idx[j] reaches the Sun, else 0 (the
-    rest untouched), as :meth:`raytrace.shade._Sunlight.sunlight` casts it: from P + ε·NG
+    rest untouched), as :meth:`raytrace._context._Sunlight.sunlight` casts it: from P + ε·NG
     (float32, as Embree takes it) towards the Sun's centre, or with ``n_strata`` > 0 towards
-    the solar-disc sample :func:`raytrace._shading.sun_disc_dirs` draws for (pixel[k],
+    the solar-disc sample :func:`raytrace._surface.sun_disc_dirs` draws for (pixel[k],
     number[k]) — the same directions, without their array."""
     gx = _strata(max(n_strata, 1))
     gy = max(n_strata, 1) // gx

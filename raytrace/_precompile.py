@@ -30,8 +30,8 @@ signatures compiled twice for one kernel.
 The groups (``raytrace/_jit_signatures.py``): ``fast``, the kernels the frames of the main job
 call (:data:`SIGNATURES`); then, each holding only what the one before did not compile,
 ``balanced`` (a ``--quality balanced`` frame), ``batched`` (the same frame through the
-batched fallback, :data:`raytrace.shade._FUSED_GATHER` and
-:data:`raytrace.scene._CAST_IN_ONE_KERNEL` False: what a machine whose embreex wheel has no
+batched fallback, :data:`raytrace.presets.FUSED_GATHER` and
+:data:`raytrace.presets.CAST_IN_ONE_KERNEL` False: what a machine whose embreex wheel has no
 Embree 4 library runs) and ``reference``. Regenerate them after changing a
 kernel's arguments::
 

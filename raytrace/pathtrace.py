@@ -26,8 +26,9 @@ import numba
 import numpy as np
 
 from . import environment as env
+from ._background import background
 from ._jit import jit, pjit
-from ._shading import background, surfaces
+from ._surface import surfaces
 from .brdf import brdf_cos, onb, sample_brdf
 
 _PHI2 = 1.324717957244746

@@ -5,6 +5,10 @@ measurements on the scenes of ``benchmarks/bench_time_error.py`` that chose its 
 count: its gather rays per pixel, from which the anti-aliasing grid, the residual filter and
 the ray allocation follow) or ``reference`` (samples per pixel of the path tracer). The
 renderer that reads them, and what each stage does, is :mod:`raytrace.shade`.
+
+The section *switches* at the end holds the module-level switches of the renderer, the scene's
+ray casting and the radiance cache (one path or another, chunk sizes, two weights), read at call
+time, so that the tests can toggle them here.
 """
 
 from __future__ import annotations
@@ -34,7 +38,7 @@ class Quality:
     filter_sigma_l : float
         Edge stopping on the gathered light itself: a neighbour's weight falls as exp(−z/σ_l), z the
         z-score of the two pixels' difference from their gathers' own variances
-        (:func:`raytrace._shading.atrous`); 0: geometry only [-].
+        (:func:`raytrace._filter.atrous`); 0: geometry only [-].
     aa_grid : int
         Edge pixels get aa_grid² stratified sub-pixel rays [-].
     spp : int
@@ -71,7 +75,7 @@ class Quality:
     corner_rays : bool
         One more ray through every pixel corner of the cast rectangle (about one per pixel):
         a pixel whose corners see another part than its centre holds sub-pixel geometry and
-        is anti-aliased (:func:`raytrace.shade._corner_edges`). Off in ``fast``, where :attr:`slivers` finds
+        is anti-aliased (:func:`raytrace._antialias._corner_edges`). Off in ``fast``, where :attr:`slivers` finds
         the same pixels but 0–8 per frame (12 scenes at 1280×960: 0–8 pixels of the frames
         differ, the errors are the same to 0.01 %) for 12–37 ms less per frame on one core;
         ``balanced`` needs them for :attr:`sun_corners`.
@@ -79,10 +83,10 @@ class Quality:
         Lit pixels near the shadow of a rod or wire thinner than a pixel, which pixel centres
         and corners can both miss, are anti-aliased too: a conservative shadow map of the
         triangles that are slivers seen from the Sun, looked up over each pixel's footprint
-        (:func:`raytrace.shade._thin_shadow_pixels`; needs ``sun_corners``).
+        (:func:`raytrace._antialias._thin_shadow_pixels`; needs ``sun_corners``).
     own_at_boundary : bool
         An edge sub-sample on its pixel centre's surface takes the centres' filtered light
-        interpolated (:func:`raytrace._shading.interpolate_rows_into`) only where all four
+        interpolated (:func:`raytrace._edges.interpolate_rows_into`) only where all four
         centres around it lie on that surface; nearer than a pixel to where the surface meets
         another part, folds (a crease) or ends, it casts its own final gather
         (:attr:`aa_gather_rays` rays), since the light there is extrapolated from centres
@@ -104,11 +108,11 @@ class Quality:
         Fraction of the anti-aliased pixels that get a second, independent aa_grid² pattern
         of shaded sub-samples (and coverage rays), their radiance the mean of both: those
         whose first pattern saw the largest contrast (the range of its sub-samples' R + G + B,
-        :func:`raytrace._shading.subsample_contrast`) — a truss, a silhouette against a bright
+        :func:`raytrace._rows.subsample_contrast`) — a truss, a silhouette against a bright
         part, a penumbra, where the sub-samples' noise sits (:func:`_balanced_aa_extra`) [-].
     box_grid : int
         ≥ 2: every target pixel that is not anti-aliased gets box_grid² stratified sub-pixel
-        rays too (:func:`raytrace.shade._supersample`), shaded like the edge sub-samples on
+        rays too (:func:`raytrace._antialias._supersample`), shaded like the edge sub-samples on
         their pixel centre's surface (exact Sun with a solar-disc sample each, the cache, the
         centres' filtered light interpolated; a gather of its own only where a
         sub-sample lands on another surface than its centre's, which the anti-aliasing's tests
@@ -119,7 +123,7 @@ class Quality:
     aa_gather_rays : int
         Rays of the final gather an edge sub-sample casts of its own (off its pixel centre's
         surface, or near that surface's boundary with :attr:`own_at_boundary`;
-        :func:`_balanced_aa_gather`); below ``raytrace.shade._MIN_SUB_GATHER`` none, the cache
+        :func:`_balanced_aa_gather`); below ``raytrace._antialias._MIN_SUB_GATHER`` none, the cache
         alone [-].
     cache_divisions : int
         > 0: the radiance cache's lattice spacing is the target's bounding-box diagonal divided
@@ -197,7 +201,7 @@ def _balanced_aa_gather(samples: int) -> int:
     1.8× the sub-samples of 6×6 and most sub-samples near a part's boundary gather their own
     (:func:`_own_at_boundary`): the measurements are :func:`_balanced_aa`'s. The gathers of a
     pixel's sub-samples are consecutive blocks of one Owen-scrambled Sobol sequence of the
-    pixel (:func:`raytrace._shading.gather_start`), so together they are one stratified set
+    pixel (:func:`raytrace._gather.gather_start`), so together they are one stratified set
     (a net of 64 × 8 rays at N = 64) rather than 64 independent ones (the 12 scenes at
     1280×960, the same rays: N = 32 1.23 → 1.19 %, N = 64 1.02 → 1.00 %; there, 8×8 sub-samples
     with N / 16 rays gave 1.06 % and 10×10 with N / 16 0.97 % for 1.04× the time, better on the
@@ -227,7 +231,7 @@ def _balanced_aa_extra(samples: int) -> float:
     pixels, at every N. Most of ``balanced``'s edge noise sits in few of them (a truss, a
     penumbra, a crevice): in 16-ray frames of Cassini ``sunlit``, Tiangong ``earth`` and ICESat
     ``earth`` the noisiest 10 % hold 51–55 % of the frame's noise². The pixels are picked by
-    the contrast their first pattern saw (:func:`raytrace._shading.subsample_contrast`): the
+    the contrast their first pattern saw (:func:`raytrace._rows.subsample_contrast`): the
     top 10 % by contrast hold 36–41 % of the noise², the top 10 % by the half-split estimate
     (the two checkerboard halves' means apart, an unbiased but one-degree-of-freedom estimate
     of the pixel mean's variance) 23–30 % (20 %: 53–61 % against 32–50 %).
@@ -445,3 +449,35 @@ def quality_preset(name: str, samples: int | None = None) -> Quality:
         return Quality(name, spp=samples)
     aa = max(1, min(samples, 16))
     return replace(q, aa_grid=aa, cov_grid=COV_FAST if aa <= COV_FAST else 0)
+
+
+# ---- switches
+# Module-level switches of the renderer and the radiance cache, in one place: most choose between
+# two code paths that give the same bytes (the tests toggle them here, monkeypatch.setattr on this
+# module, and compare the paths), some are sizes or weights the tests vary. The code reads them at
+# call time as ``presets.NAME``; the measurements that chose them are beside the code they switch.
+
+# shade.render: the frame's lighting context built on a side thread while the geometry pass runs
+CONTEXT_ON_SIDE_THREAD = True
+# _antialias._supersample: the anti-aliasing's chunks run two at a time on a side pool
+AA_CHUNKS_ON_TWO_THREADS = True
+# rays per chunk of the final gather and the lobe sampling, and sub-samples per anti-aliasing chunk
+CHUNK_RAYS = 1 << 18
+# the final gather, lobe and sub-samples' shadow rays in fused kernels calling Embree from numba
+FUSED_GATHER = True
+# weight of the environment control variate in the final gather (_gather.gather_sum)
+GATHER_ALPHA = 1.0
+# Scene.intersect / occluded through raytrace._embree's kernels where Embree 4 is loaded
+DIRECT_BATCHES = True
+# the rays that shade a preset's frame through Embree without its robust flag (Scene.direct_fast)
+FAST_TRAVERSAL = True
+# the geometry pass through _kernels.cast_and_refine (one kernel) where Embree 4 is callable
+CAST_IN_ONE_KERNEL = True
+# rays per chunk of the radiance cache's rays (RadianceCache._cast)
+CAST_CHUNK_RAYS = 1 << 18
+# RadianceCache._cast runs its chunks of rays two at a time on a side pool
+CAST_CHUNKS_ON_TWO_THREADS = True
+# the contact rows' W_ss and W_sb summed by each chunk of cache rays as it is cast
+ASSEMBLE_CONTACT_PER_CHUNK = True
+# over-relaxation ω of the cache solve's Gauss–Seidel sweeps (RadianceCache.solve; 1: none)
+SOR_OMEGA = 1.2

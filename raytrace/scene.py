@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _kernels
+from . import _kernels, presets
 from ._threads import parallel_chunksize
 from .camera import Camera
 from .model import TargetModel
@@ -32,29 +32,10 @@ from .model import TargetModel
 __all__ = ["GeometryFrame", "Scene", "default_threads"]
 
 _RAYS_PER_CHUNK = 1 << 14  # rays per Embree call: small enough to balance threads, large enough to amortise
-_CAST_IN_ONE_KERNEL = True  # the geometry pass through _kernels.cast_and_refine where Embree 4 is callable
 _ROWS_PER_TASK = 4  # image rows per task of cast_and_refine's parallel loop
 _CULL_GROUPS = 64  # at most this many bounding polytopes cull the geometry pass's rays (_part_hulls)
 _CULL_PARTS = True  # cast only inside the parts' polytopes' images (False: the whole rectangle)
 _MIN_CHUNK = 2048  # fewest rays per Embree call of a batch on the thread pool
-# Scene.intersect / occluded through raytrace._embree's kernels where Embree 4 is loaded (False:
-# always through embreex; the tests compare the two)
-_DIRECT_BATCHES = True
-# The rays a preset's frame casts to shade it (sub-samples' Sun, soft shadows, final gathers and
-# their paths, glossy lobes and mirror rays, anti-aliasing sub-samples, coverage and corner rays,
-# stars) go through Embree built without its robust flag (Scene.direct_fast). The robust one
-# (Scene.direct) casts the geometry pass (the labels), the pixel centres' exact Sun, camera rays
-# that may start on a face (the camera inside the target's hull), the radiance cache's rays and
-# the reference path tracer's: only the robust mode reports a face a ray starts on (t = 0), which
-# the labels and the cache's contact rows count on. Measured (BENCHMARKS.md, "Embree's robust flag
-# where it matters only"): one frame on both cores 0.924× / 0.891× / 0.911× the time for
-# ``fast`` / ``balanced``-8 / -16 (median of the 12 scenes' ratios, side by side), the same
-# errors; sub-pixel primary rays 0.69–0.84× (Cassini's 11 m boom triangles gain most); of 2 M
-# rays from random surface points of each target, 3 or fewer found no hit where the robust
-# scene found one, ~1 % another triangle at the same distance (coincident faces, shared edges),
-# and the hit distances' error along the normal stayed below 0.005 of the rays' offset
-# ray_eps_m. False: every ray robust.
-_FAST_TRAVERSAL = True
 _POOL: ThreadPoolExecutor | None = None
 
 
@@ -345,9 +326,23 @@ class Scene:
         slips through the edge two triangles share (measured: once in 24 M rays cast at and
         from inside closed meshes) is one Monte Carlo sample in millions; the labels, the
         pixel centres' Sun, the radiance cache and the reference keep the robust scene
-        (``_FAST_TRAVERSAL``).
-        :attr:`direct` itself where ``_FAST_TRAVERSAL`` is off; None where :attr:`direct` is."""
-        if not _FAST_TRAVERSAL or self.direct is None:
+        (:data:`raytrace.presets.FAST_TRAVERSAL`).
+        :attr:`direct` itself where that switch is off; None where :attr:`direct` is."""
+        # The rays a preset's frame casts to shade it (sub-samples' Sun, soft shadows, final gathers and
+        # their paths, glossy lobes and mirror rays, anti-aliasing sub-samples, coverage and corner rays,
+        # stars) go through Embree built without its robust flag (Scene.direct_fast). The robust one
+        # (Scene.direct) casts the geometry pass (the labels), the pixel centres' exact Sun, camera rays
+        # that may start on a face (the camera inside the target's hull), the radiance cache's rays and
+        # the reference path tracer's: only the robust mode reports a face a ray starts on (t = 0), which
+        # the labels and the cache's contact rows count on. Measured (BENCHMARKS.md, "Embree's robust flag
+        # where it matters only"): one frame on both cores 0.924× / 0.891× / 0.911× the time for
+        # ``fast`` / ``balanced``-8 / -16 (median of the 12 scenes' ratios, side by side), the same
+        # errors; sub-pixel primary rays 0.69–0.84× (Cassini's 11 m boom triangles gain most); of 2 M
+        # rays from random surface points of each target, 3 or fewer found no hit where the robust
+        # scene found one, ~1 % another triangle at the same distance (coincident faces, shared edges),
+        # and the hit distances' error along the normal stayed below 0.005 of the rays' offset
+        # ray_eps_m. presets.FAST_TRAVERSAL False: every ray robust.
+        if not presets.FAST_TRAVERSAL or self.direct is None:
             return self.direct
         if self._direct_fast is None:
             from . import _embree
@@ -431,7 +426,7 @@ class Scene:
         batch (Embree 4 loaded, no ``tfar``, a non-empty batch of (n, 3) rows), else None: the
         robust scene (:attr:`direct`), or with ``robust`` False :attr:`direct_fast`. The
         rows become float32, as :meth:`_run` makes them for embreex."""
-        if tfar is not None or not _DIRECT_BATCHES:
+        if tfar is not None or not presets.DIRECT_BATCHES:
             return None
         O = np.asarray(origins)
         D = np.asarray(directions)
@@ -622,7 +617,7 @@ class Scene:
             # start rays just in front of the target (its nearest hull vertex) unless inside it
             z0 = 0.0 if inside else self._near_plane(p_hull)
             fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
-            direct = self.direct if _CAST_IN_ONE_KERNEL and threads is None else None
+            direct = self.direct if presets.CAST_IN_ONE_KERNEL and threads is None else None
             if direct is not None:
                 # rays, Embree and refinement in one kernel on numba's threads (the calling
                 # thread's count), rows handed out a few at a time: the hits crowd into part of

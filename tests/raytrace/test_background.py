@@ -1,4 +1,4 @@
-"""Earth behind the target (raytrace._shading.earth_background): the procedural texture's albedo
+"""Earth behind the target (raytrace._background.earth_background): the procedural texture's albedo
 interpolated on 4 × 4 pixel cells against the same texture evaluated at every pixel (a second
 method), in views from low orbit where the texture is smooth at the pixel scale (nadir) and
 where it is not (the limb, where a pixel spans kilometres)."""
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scipy.ndimage import binary_dilation
 
-from raytrace import _shading as K
-from raytrace import shade
+from raytrace import _context, shade
+from raytrace._background import earth_background
 from raytrace.camera import Camera
 from raytrace.lighting import EARTH_RADIUS_M, SOLAR_CONSTANT_W_M2, Earth, Lighting
 
@@ -33,13 +33,13 @@ def _background(texture: str, tilt_rad: float, step: int, inst=None):
                   R_body_from_earth=_rotation_about_x(0.7) @ np.array([[0.0, 1, 0], [0, 0, 1], [1, 0, 0]]))
     sun = np.array([0.3, -0.4, -0.6])  # above the camera, slanting: day side with a Sun gradient
     light = Lighting(sun_dir_body=tuple(sun / np.linalg.norm(sun)), earth=earth)
-    p, tex = shade._background_params(light)
+    p, tex = _context._background_params(light)
     H, W = CAM.height, CAM.width
     inst = np.zeros((H, W), np.uint16) if inst is None else inst
     earth_px = np.zeros((H, W), bool)
     rad = np.zeros((H, W, 3), np.float32)
-    K.earth_background(inst, np.zeros(3), np.ascontiguousarray(R_body_from_cam), CAM.fx, CAM.fy, CAM.cx, CAM.cy, p,
-                       tex, step, shade._BACKGROUND_TOL, shade._BACKGROUND_CHORD, earth_px, rad)
+    earth_background(inst, np.zeros(3), np.ascontiguousarray(R_body_from_cam), CAM.fx, CAM.fy, CAM.cx, CAM.cy, p, tex,
+                     step, shade._BACKGROUND_TOL, shade._BACKGROUND_CHORD, earth_px, rad)
     return rad, earth_px
 
 

@@ -18,7 +18,7 @@ import scipy.sparse as sp
 import trimesh
 from scipy.sparse.linalg import spsolve
 
-from raytrace import environment as env
+from raytrace import _cache_kernels, environment as env, presets
 from raytrace.lighting import Lighting
 from raytrace.model import Component, TargetModel
 from raytrace.scene import Scene
@@ -104,12 +104,20 @@ def test_solve_matches_a_direct_sparse_solve_and_does_not_depend_on_threads():
 
 @pytest.mark.parametrize("omega", [1.0, 1.95])
 def test_the_over_relaxed_solve_converges_to_the_direct_solve_or_falls_back(monkeypatch, omega):
-    """The sweeps are over-relaxed (cache._SOR_OMEGA); where that does not converge, a sweep
+    """The sweeps are over-relaxed (presets.SOR_OMEGA); where that does not converge, a sweep
     whose residual grows drops back to Gauss–Seidel. ω = 1.95 is far past where the open box's
     facing walls and floor let over-relaxation converge quickly: the solve must still reach the
     LU solution, and ω = 1 (plain Gauss–Seidel) must too."""
     import raytrace.cache as cache_module
-    monkeypatch.setattr(cache_module, "_SOR_OMEGA", omega)
+    monkeypatch.setattr(presets, "SOR_OMEGA", omega)
+    omegas = []
+    sweep = cache_module._gauss_seidel_sweep
+
+    def spy(*a):
+        omegas.append(a[-1])
+        return sweep(*a)
+
+    monkeypatch.setattr(cache_module, "_gauss_seidel_sweep", spy)
     scene = _open_box()
     cache = scene.radiance_cache(spacing_m=0.4, contact_refine=False)
     sun = np.array([0.3, -0.2, 1.0])
@@ -118,6 +126,7 @@ def test_the_over_relaxed_solve_converges_to_the_direct_solve_or_falls_back(monk
     E_lu, scale = _direct_solution(cache, lighting)
     tight = cache.solve(lighting, tolerance=1e-11, max_iterations=5000)
     assert tight.iterations < 5000
+    assert omegas[0] == omega and omegas[-1] == 1.0  # the switch's ω first, plain Gauss–Seidel at the end
     np.testing.assert_allclose(tight.irradiance_W_m2, E_lu[cache._alias], rtol=0.0, atol=1e-8 * scale)
     frame = cache.solve(lighting)
     assert np.abs(frame.irradiance_W_m2 - E_lu[cache._alias]).max() <= 5e-3 * scale
@@ -128,8 +137,8 @@ def test_the_over_relaxed_solve_converges_to_the_direct_solve_or_falls_back(monk
         E = E0.copy()
         Y, Yb = cache._c_rho_ss * E, cache._c_rho_bounce * E
         for _ in range(tight.iterations):
-            cache_module._gauss_seidel_sweep(c["W_ss"].indptr, c["W_ss"].indices, c["W_ss"].data, *c["W_g"],
-                                             cache._c_rho_ss, cache._c_rho_bounce, E0, E, Y, Yb, omega)
+            _cache_kernels._gauss_seidel_sweep(c["W_ss"].indptr, c["W_ss"].indices, c["W_ss"].data, *c["W_g"],
+                                               cache._c_rho_ss, cache._c_rho_bounce, E0, E, Y, Yb, omega)
         E[~cache._c_solved] = 0.0
         assert np.abs(E - E_lu).max() > 1e-2 * scale
 
@@ -160,7 +169,7 @@ def test_cache_rays_in_chunks_on_two_threads_build_the_same_cache(monkeypatch):
     from raytrace import cache as cache_mod
     if numba.get_num_threads() < 2:
         pytest.skip("one numba thread: the chunks run one after the other")
-    monkeypatch.setattr(cache_mod, "_CAST_CHUNK_RAYS", 16 * 128)
+    monkeypatch.setattr(presets, "CAST_CHUNK_RAYS", 16 * 128)
     submitted = []
     submit = cache_mod.submit
 
@@ -171,7 +180,7 @@ def test_cache_rays_in_chunks_on_two_threads_build_the_same_cache(monkeypatch):
     monkeypatch.setattr(cache_mod, "submit", spy)
     built, on_pool = [], []
     for two, threads in ((True, numba.get_num_threads()), (False, numba.get_num_threads()), (True, 1)):
-        monkeypatch.setattr(cache_mod, "_CAST_CHUNKS_ON_TWO_THREADS", two)
+        monkeypatch.setattr(presets, "CAST_CHUNKS_ON_TWO_THREADS", two)
         old = numba.get_num_threads()
         numba.set_num_threads(threads)
         submitted.clear()
@@ -192,11 +201,11 @@ def test_cache_rays_in_chunks_on_two_threads_build_the_same_cache(monkeypatch):
 
 
 def test_csr_assembly_against_scipy():
-    """raytrace.cache._csr_sum (the transfer matrices' assembly) against scipy's COO to CSR
+    """raytrace._cache_kernels._csr_sum (the transfer matrices' assembly) against scipy's COO to CSR
     with duplicates summed: the same pattern (columns ascending per row) and values to the
     last bits' order of summation, on rows in input order and shuffled, with dropped entries,
     one and three channels, a column range not a multiple of 64 and an empty matrix."""
-    from raytrace.cache import _csr_sum
+    from raytrace._cache_kernels import _csr_sum
     rng = np.random.default_rng(4)
     for trial in range(12):
         m, n_rows = int(rng.integers(0, 4000)), int(rng.integers(1, 400))
@@ -220,19 +229,32 @@ def test_csr_assembly_against_scipy():
 
 def test_contact_rows_summed_per_chunk_give_the_listed_matrices(monkeypatch):
     """The contact rows' W_ss and W_sb summed by each chunk of rays as it is cast
-    (``_ASSEMBLE_CONTACT_PER_CHUNK``) are the same bits as those assembled from the lists of
+    (``presets.ASSEMBLE_CONTACT_PER_CHUNK``) are the same bits as those assembled from the lists of
     every hit, with chunks of 16 rows (dozens of them) on one thread and two."""
     from raytrace import cache as cache_mod
-    monkeypatch.setattr(cache_mod, "_CAST_CHUNK_RAYS", 16 * 128)
-    built = []
+    monkeypatch.setattr(presets, "CAST_CHUNK_RAYS", 16 * 128)
+    summed = []  # rows per call of RadianceCache._summed: per chunk, or per matrix from the lists
+    real = cache_mod.RadianceCache._summed
+
+    def spy(self, *a):
+        summed.append(len(a[-1]))
+        return real(self, *a)
+
+    monkeypatch.setattr(cache_mod.RadianceCache, "_summed", spy)
+    built, calls = [], []
     for per_chunk, threads in ((False, 1), (True, 1), (True, max(2, numba.get_num_threads()))):
-        monkeypatch.setattr(cache_mod, "_ASSEMBLE_CONTACT_PER_CHUNK", per_chunk)
+        monkeypatch.setattr(presets, "ASSEMBLE_CONTACT_PER_CHUNK", per_chunk)
         old = numba.get_num_threads()
         numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+        summed.clear()
         try:
             built.append(_open_box().radiance_cache(spacing_m=0.4))
         finally:
             numba.set_num_threads(old)
+        calls.append(len(summed))
+    # from the lists: one call for the coarse rows and one for the contact rows; per chunk: one
+    # call for the coarse rows and one per chunk of contact rows (dozens)
+    assert calls[0] == 2 and calls[1] > 4 and calls[2] == calls[1]
     first = built[0]
     assert first._f is not None and len(first.contact_rows) > 4 * 16
     assert first._f["W_ss"].nnz > 0 and first._f["W_sb"].nnz > 0

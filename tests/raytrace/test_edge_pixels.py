@@ -1,4 +1,4 @@
-"""`raytrace._shading.edge_pixels` against the rule it implements, written out in NumPy.
+"""`raytrace._edges.edge_pixels` against the rule it implements, written out in NumPy.
 
 The kernel decides which pixels ``fast`` and ``balanced`` anti-alias. It runs over row slices
 with a one-pixel margin and special cases at the image's borders, so the reference here is the
@@ -10,7 +10,7 @@ dot product with the pixel's is below 0.9, or a depth more than 3 % of the pixel
 import numpy as np
 import pytest
 
-from raytrace._shading import edge_pixels
+from raytrace._edges import edge_pixels
 
 
 def _reference(inst, lit, normal, depth, earth, rect):

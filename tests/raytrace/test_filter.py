@@ -1,5 +1,5 @@
-"""The residual filter of ``balanced`` (raytrace._shading.atrous) and the per-pixel
-variance that guides it (raytrace._shading.gather_sum), against closed forms and against the
+"""The residual filter of ``balanced`` (raytrace._filter.atrous) and the per-pixel
+variance that guides it (raytrace._gather.gather_sum), against closed forms and against the
 spread of independent estimates."""
 
 from __future__ import annotations
@@ -205,7 +205,7 @@ def test_few_gather_rays_are_still_smoothed_per_pixel(samples):
 _FILTER_RUN = """
 import sys
 import numpy as np
-from raytrace import _shading as K
+from raytrace import _filter
 from raytrace.shade import _atrous_passes
 rng = np.random.default_rng(0)
 H, W = 96, 128

@@ -17,8 +17,7 @@ import pytest
 import trimesh
 
 from orbit.pose import look_at
-from raytrace import _embree, shade
-from raytrace import scene as scene_module
+from raytrace import _embree, _paths, presets, shade
 from raytrace.camera import Camera
 from raytrace.lighting import Earth, Lighting
 from raytrace.model import Component, TargetModel
@@ -59,8 +58,17 @@ def test_direct_embree_hits_equal_embreex_bit_for_bit(scene, monkeypatch):
     D = targets - O
     D[::7] = rng.normal(size=(len(D[::7]), 3))  # and some in any direction (many misses)
     O[::11] = V[rng.integers(0, len(V), len(O[::11]))] * 0.5  # some from inside the parts
-    monkeypatch.setattr(scene_module, "_DIRECT_BATCHES", False)  # Scene.intersect through embreex
+    through_embreex = []
+    run = Scene._run
+
+    def spy(self, *a):
+        through_embreex.append(a[3])
+        return run(self, *a)
+
+    monkeypatch.setattr(Scene, "_run", spy)
+    monkeypatch.setattr(presets, "DIRECT_BATCHES", False)  # Scene.intersect through embreex
     want = scene.intersect(O, D, robust=True)
+    assert through_embreex == ["INTERSECT"]
     direct = scene.direct
     g = np.empty(n, np.int64)
     p = np.empty(n, np.int64)
@@ -81,14 +89,16 @@ def test_direct_embree_hits_equal_embreex_bit_for_bit(scene, monkeypatch):
     np.testing.assert_array_equal(occ, scene.occluded(O, D, robust=True))
     # Scene.intersect / occluded through the direct kernels (the default) of the robust scene:
     # the same arrays and dtypes, from float32 rows and from broadcast float64 rows alike
-    monkeypatch.setattr(scene_module, "_DIRECT_BATCHES", True)
+    monkeypatch.setattr(presets, "DIRECT_BATCHES", True)
     for O_, D_ in ((O, D), (O.astype(np.float32), D.astype(np.float32)),
                    (np.broadcast_to(O[0], O.shape), D)):
-        monkeypatch.setattr(scene_module, "_DIRECT_BATCHES", False)
+        monkeypatch.setattr(presets, "DIRECT_BATCHES", False)
         ref = scene.intersect(O_, D_)
         ref_occ = scene.occluded(O_, D_)
-        monkeypatch.setattr(scene_module, "_DIRECT_BATCHES", True)
+        monkeypatch.setattr(presets, "DIRECT_BATCHES", True)
+        through_embreex.clear()
         got = scene.intersect(O_, D_, robust=True)
+        assert through_embreex == []  # the direct kernels, not embreex
         for k in ("geomID", "primID", "u", "v", "tfar"):
             assert got[k].dtype == ref[k].dtype, k
             np.testing.assert_array_equal(got[k], ref[k], err_msg=k)
@@ -110,7 +120,7 @@ def test_the_fast_scene_finds_the_robust_hits_but_on_edges(scene, monkeypatch):
       the normal, cosine-like directions), the distances agree so well that a hit point
       o + t·d lies within a tenth of that offset of the robust one along the hit's normal (the
       gather's paths continue from o + t·d; measured on the four targets: ≤ 0.005 of it)."""
-    monkeypatch.setattr(scene_module, "_FAST_TRAVERSAL", True)
+    monkeypatch.setattr(presets, "FAST_TRAVERSAL", True)
     rng = np.random.default_rng(8)
     n = 200_000
     V = scene.vertices
@@ -159,7 +169,7 @@ def test_the_fast_scene_finds_the_robust_hits_but_on_edges(scene, monkeypatch):
     along_normal = np.abs(got["tfar"][both].astype(np.float64) - robust["tfar"][both]) * \
         np.abs((d[both] * scene.face_normal[fh]).sum(axis=1))
     assert along_normal.max() < 0.1 * scene.ray_eps_m
-    monkeypatch.setattr(scene_module, "_FAST_TRAVERSAL", False)
+    monkeypatch.setattr(presets, "FAST_TRAVERSAL", False)
     assert scene.direct_fast is scene.direct
 
 
@@ -168,7 +178,7 @@ def _frame(scene, light, monkeypatch, fused: bool, samples: int = 16):
     cam = Camera(W, H, f, f, (W - 1) / 2, (H - 1) / 2)
     eye = np.array([-2.5, -1.5, 2.2])
     R = look_at(eye)
-    monkeypatch.setattr(shade, "_FUSED_GATHER", fused)
+    monkeypatch.setattr(presets, "FUSED_GATHER", fused)
     return shade.render(scene, cam, R, -R @ eye, light, quality="balanced", samples=samples, seed=11).radiance
 
 
@@ -181,19 +191,23 @@ def test_fused_gather_equals_the_batched_gather(scene, monkeypatch, case):
     light = Lighting(sun_dir_body=tuple(SUN), earth=EARTH, ambient_radiance_W_m2_sr=1.0,
                      shadow_fraction=0.0 if case == "eclipsed" else 1.0)
     if case == "alpha-half":
-        monkeypatch.setattr(shade, "GATHER_ALPHA", 0.5)
+        monkeypatch.setattr(presets, "GATHER_ALPHA", 0.5)
     calls = {"gather_traced": [], "lobe_traced": []}
+    alphas = []
     for name in calls:
-        real = getattr(shade._paths, name)
+        real = getattr(_paths, name)
 
         def spy(*a, _real=real, _name=name):
             calls[_name].append(len(a[1]))
+            if _name == "gather_traced":
+                alphas.append(a[-4])  # the control variate's weight
             return _real(*a)
 
-        monkeypatch.setattr(shade._paths, name, spy)
+        monkeypatch.setattr(_paths, name, spy)
     fused = _frame(scene, light, monkeypatch, True)
     # the fused kernels did the gathering and the lobe sampling (gold and silver foil)
     assert sum(calls["gather_traced"]) > 1000 and sum(calls["lobe_traced"]) > 300
+    assert set(alphas) == {0.5 if case == "alpha-half" else 1.0}
     n_calls = {k: len(v) for k, v in calls.items()}
     batched = _frame(scene, light, monkeypatch, False)
     assert {k: len(v) for k, v in calls.items()} == n_calls  # and the batched code did not call them

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import binary_erosion
 
-import raytrace.shade as shade
+from raytrace import _context
 from raytrace.lighting import Lighting
 from raytrace.shade import render
 
@@ -29,7 +29,7 @@ PERIOD_M = 0.04
 def _checker_cache(monkeypatch, amplitude: float) -> None:
     """Multiply the cache's irradiance at every shaded point by 1 ± amplitude, a checker of
     PERIOD_M in the body frame's y and z (plate B lies in x = 0, plate A in z = 0)."""
-    plain = shade._Context.cache_E
+    plain = _context._Context.cache_E
 
     def cache_E(self, s):
         E = plain(self, s)
@@ -37,7 +37,7 @@ def _checker_cache(monkeypatch, amplitude: float) -> None:
         c = np.sign(np.sin(2 * np.pi * P[:, 1] / PERIOD_M) * np.sin(2 * np.pi * (P[:, 2] + P[:, 0]) / PERIOD_M))
         return E * (1.0 + amplitude * c)[:, None]
 
-    monkeypatch.setattr(shade._Context, "cache_E", cache_E)
+    monkeypatch.setattr(_context._Context, "cache_E", cache_E)
 
 
 def _frames(monkeypatch, quality, samples):

@@ -64,18 +64,18 @@ def test_balanced_casts_no_mirror_ray_it_would_weight_by_zero(plate_and_wall, mo
     """``balanced`` blends its mirror term from the mirror ray to E/π by t(α) and casts no
     mirror ray where t = 1 (the white wall, α = 0.5): the image must be bit for bit the one
     with every mirror ray cast (the two places compute t alike)."""
-    from raytrace import shade
+    from raytrace import _context
 
     sc, cam, R, t, light, _ref = plate_and_wall
-    ctx = shade._Context(sc, light, {})
+    ctx = _context._Context(sc, light, {})
     assert ctx.mirror_weighted.tolist() == [True, False]  # gold α = 0.32 is cast, paint is not
     a = render(sc, cam, R, t, light, quality="balanced", samples=8, seed=3).radiance
-    init = shade._Context.__init__
+    init = _context._Context.__init__
 
     def every_ray(self, *args, **kwargs):
         init(self, *args, **kwargs)
         self.mirror_weighted = np.ones_like(self.mirror_weighted)
 
-    monkeypatch.setattr(shade._Context, "__init__", every_ray)
+    monkeypatch.setattr(_context._Context, "__init__", every_ray)
     b = render(sc, cam, R, t, light, quality="balanced", samples=8, seed=3).radiance
     assert np.array_equal(a, b)

@@ -40,8 +40,8 @@ def test_each_helper_is_compiled_once_within_the_first_kernel_that_calls_it():
     from the cache by the others."""
     deps = P.dependencies(SIGNATURES)
     assert set(deps) == set(SIGNATURES)
-    assert {"raytrace.brdf.brdf_cos", "raytrace.brdf._lambda"} <= deps["raytrace._shading.add_mirror"]
-    assert "raytrace.environment.procedural_albedo" in deps["raytrace._shading.earth_background"]
+    assert {"raytrace.brdf.brdf_cos", "raytrace.brdf._lambda"} <= deps["raytrace._surface.add_mirror"]
+    assert "raytrace.environment.procedural_albedo" in deps["raytrace._background.earth_background"]
     assert "raytrace.environment._hash3" in deps["raytrace.environment.procedural_albedo"]
     assert deps["raytrace.brdf._lambda"] == set()
     d = {"k1": {"h", "g"}, "k2": {"h"}, "k3": set(), "h": {"g"}, "g": set()}
@@ -54,11 +54,11 @@ def test_each_helper_is_compiled_once_within_the_first_kernel_that_calls_it():
 
 
 def test_a_share_compiles_into_the_cache_and_reports_a_stale_entry():
-    good = ("raytrace._shading.ray_groups", SIGNATURES["raytrace._shading.ray_groups"][1])
-    stale = ("raytrace._shading.ray_groups", ["(int64,)"])  # wrong arity: a signature from older code
+    good = ("raytrace._edges.ray_groups", SIGNATURES["raytrace._edges.ray_groups"][1])
+    stale = ("raytrace._edges.ray_groups", ["(int64,)"])  # wrong arity: a signature from older code
     assert P._compile_share([good]) == []
     failed = P._compile_share([stale])
-    assert len(failed) == 1 and failed[0].startswith("raytrace._shading.ray_groups(int64,)")
+    assert len(failed) == 1 and failed[0].startswith("raytrace._edges.ray_groups(int64,)")
 
 
 def test_precompile_reports_its_progress_as_each_entry_finishes(tmp_path, monkeypatch):
@@ -67,15 +67,15 @@ def test_precompile_reports_its_progress_as_each_entry_finishes(tmp_path, monkey
     helpers, one calling the other, and a stale entry; the costs made up) compiled by two
     spawned processes into a temporary numba cache."""
     table = {
-        "raytrace.cache._hash32": (1.0, SIGNATURES["raytrace.cache._hash32"][1]),
-        "raytrace.cache._hash01": (2.0, SIGNATURES["raytrace.cache._hash01"][1]),  # calls _hash32
-        "raytrace._shading.permute": (0.5, ["(int64,)"]),  # wrong arity: a signature from older code
+        "raytrace._sampling._hash32": (1.0, SIGNATURES["raytrace._sampling._hash32"][1]),
+        "raytrace._sampling._hash01": (2.0, SIGNATURES["raytrace._sampling._hash01"][1]),  # calls _hash32
+        "raytrace._sampling.permute": (0.5, ["(int64,)"]),  # wrong arity: a signature from older code
     }
     monkeypatch.setattr(P, "entries_to_compile", lambda groups=("fast",): dict(table))
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))  # the workers' cache
     calls = []
     failed = P.precompile(2, ["fast"], progress=lambda done, total: calls.append((done, total)))
-    assert len(failed) == 1 and failed[0].startswith("raytrace._shading.permute(int64,)")
+    assert len(failed) == 1 and failed[0].startswith("raytrace._sampling.permute(int64,)")
     assert len(calls) == len(table)
     assert all(total == 3.5 for _, total in calls)
     done = [d for d, _ in calls]
@@ -84,15 +84,15 @@ def test_precompile_reports_its_progress_as_each_entry_finishes(tmp_path, monkey
     # task of _hash32 that waited for it adds nothing
     assert sorted(b - a for a, b in zip([0.0] + done, done)) == [0.0, 0.5, 3.0]
     index = {p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")}
-    assert {"cache._hash32", "cache._hash01"} <= index
+    assert {"_sampling._hash32", "_sampling._hash01"} <= index
 
 
 def test_precompile_without_a_callback_compiles_and_returns_the_failures(tmp_path, monkeypatch):
-    table = {"raytrace.cache._hash32": (1.0, SIGNATURES["raytrace.cache._hash32"][1])}
+    table = {"raytrace._sampling._hash32": (1.0, SIGNATURES["raytrace._sampling._hash32"][1])}
     monkeypatch.setattr(P, "entries_to_compile", lambda groups=("fast",): dict(table))
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
     assert P.precompile(2) == []
-    assert [p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")] == ["cache._hash32"]
+    assert [p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")] == ["_sampling._hash32"]
 
 
 def _recorder_module():
@@ -118,14 +118,14 @@ def test_recorded_compile_times_are_each_kernels_own(monkeypatch):
         return SimpleNamespace(data={"dispatcher": SimpleNamespace(py_func=func)}, is_start=start)
 
     rec = R._compile_time_recorder()
-    rec.on_start(event("raytrace._shading", "add_mirror", True))  # 0.0
+    rec.on_start(event("raytrace._surface", "add_mirror", True))  # 0.0
     rec.on_start(event("raytrace.brdf", "brdf_cos", True))  # 1.0
     rec.on_end(event("raytrace.brdf", "brdf_cos", False))  # 3.0: 2 s its own
     rec.on_start(event("numba.np.arrayobj", "impl", True))  # 4.0
     rec.on_end(event("numba.np.arrayobj", "impl", False))  # 4.5: stays with the kernel
-    rec.on_end(event("raytrace._shading", "add_mirror", False))  # 7.0
+    rec.on_end(event("raytrace._surface", "add_mirror", False))  # 7.0
     assert rec.spent["raytrace.brdf.brdf_cos"] == 2.0
-    assert rec.spent["raytrace._shading.add_mirror"] == 5.0
+    assert rec.spent["raytrace._surface.add_mirror"] == 5.0
 
 
 def test_numbas_flag_comparison_keeps_its_results():
@@ -155,7 +155,7 @@ def test_numbas_flag_comparison_keeps_its_results():
 def test_load_here_loads_the_recorded_kernels_into_this_process(monkeypatch):
     """load_here (the CLI's pool workers, while the scenes are built): every entry of the table
     compiled or loaded here, none reported as failed."""
-    qualname = "raytrace._shading.ray_groups"
+    qualname = "raytrace._edges.ray_groups"
     monkeypatch.setattr(P, "entries_to_compile", lambda groups=("fast",): {qualname: SIGNATURES[qualname]})
     assert P.load_here() == []
     assert set(SIGNATURES[qualname][1]) <= {repr(tuple(s)) for s in P.dispatcher(qualname).signatures}
@@ -185,7 +185,9 @@ def test_each_preset_group_is_probed_by_a_kernel_of_its_own():
         name = P.probe(group)
         assert name in EXTRA_SIGNATURES[group]
         assert name not in P.group_signatures(P.GROUPS[:P.GROUPS.index(group)])
-        assert P.dispatcher(name).__module__ in ("raytrace._shading", "raytrace.pathtrace", "raytrace.cache",
+        assert P.dispatcher(name).__module__ in ("raytrace._background", "raytrace._cache_kernels", "raytrace._edges",
+                                                 "raytrace._filter", "raytrace._gather", "raytrace._rows",
+                                                 "raytrace._sampling", "raytrace._surface", "raytrace.pathtrace",
                                                  "raytrace.environment")
     assert "raytrace._paths.gather_traced" in EXTRA_SIGNATURES["balanced"]
 
@@ -199,7 +201,7 @@ def test_kernels_calling_embree_are_left_out_only_where_embree_4_is_missing(monk
     monkeypatch.setattr(_embree, "available", lambda: False)
     without = P.entries_to_compile(P.GROUPS)
     assert not [q for q in without if q.startswith(("raytrace._paths.", "raytrace._embree."))]
-    assert "raytrace._shading.gather_sum" in without  # the batched fallback's own gather
+    assert "raytrace._gather.gather_sum" in without  # the batched fallback's own gather
     assert set(without) == {q for q in with_embree if not q.startswith(("raytrace._paths.", "raytrace._embree."))}
 
 

@@ -381,12 +381,22 @@ def test_one_kernel_geometry_pass_equals_the_embreex_chunks_bit_for_bit(monkeypa
     (raytrace._kernels.cast_and_refine); the row chunks through embreex (the fallback, and an
     explicit thread count) give the same AOVs bit for bit, culled or full frame, on a built-in
     target (open and closed parts, thin rods) and the small assembly."""
-    import raytrace.scene as scene_module
+    import raytrace._kernels as kernels
+    from raytrace import presets
     from raytrace.targets import load_target
     if Scene(small_assembly()).direct is None:
         pytest.skip("no Embree 4 in the embreex wheel: the chunks are the only path")
     cam = Camera(width=320, height=240, fx=260.0, fy=280.0, cx=151.3, cy=127.9)
     rng = np.random.default_rng(5)
+    ran = []
+    for name in ("cast_and_refine", "refine_hits"):
+        real = getattr(kernels, name)
+
+        def spy(*a, _real=real, _name=name):
+            ran.append(_name)
+            return _real(*a)
+
+        monkeypatch.setattr(kernels, name, spy)
     for model, far in ((small_assembly(), 30.0), (load_target("cassini"), 40.0)):
         scene = Scene(model)
         for _ in range(3):
@@ -396,8 +406,11 @@ def test_one_kernel_geometry_pass_equals_the_embreex_chunks_bit_for_bit(monkeypa
             R = axis_angle([0, 0, 1.0], rng.uniform(-0.3, 0.3)) @ R
             frames = []
             for one_kernel, kw in ((True, {}), (True, {"cull": False}), (False, {}), (False, {"threads": 2})):
-                monkeypatch.setattr(scene_module, "_CAST_IN_ONE_KERNEL", one_kernel)
+                monkeypatch.setattr(presets, "CAST_IN_ONE_KERNEL", one_kernel)
+                ran.clear()
                 frames.append(scene.render_geometry(cam, R, t, ray_distance=True, geometric_normal=True, **kw))
+                # the path the switch chose ran: the one kernel, or the chunks' refinement
+                assert set(ran) == {"cast_and_refine" if one_kernel else "refine_hits"}, (one_kernel, kw)
             assert frames[0].mask.any()
             for other in frames[1:]:
                 for name in ("depth_m", "normal_cam", "normal_geom_cam", "instance", "face_index", "ray_distance_m"):

@@ -22,6 +22,7 @@ from scipy import integrate
 from scipy.ndimage import binary_erosion
 
 from orbit.pose import look_at
+from raytrace import _antialias, _context, presets
 from raytrace.camera import Camera
 from raytrace.lighting import Earth, Lighting
 from raytrace.model import Component, TargetModel
@@ -298,7 +299,6 @@ def test_context_built_on_a_side_thread_gives_the_same_bytes(monkeypatch, qualit
     the geometry pass; the frame must be the one built in line, bit for bit."""
     import threading
 
-    from raytrace import shade
     if numba.get_num_threads() < 2:
         pytest.skip("one numba thread: render builds the context in line")
     scene = _plates(0.8, 0.6)  # inter-reflection: the cache's solve matters
@@ -307,16 +307,16 @@ def test_context_built_on_a_side_thread_gives_the_same_bytes(monkeypatch, qualit
     light = Lighting(sun_dir_body=tuple(sun / np.linalg.norm(sun)), ambient_radiance_W_m2_sr=1.0,
                      earth=Earth(tuple(earth / np.linalg.norm(earth)), 6.778e6))
     built_on = []
-    init = shade._Context.__init__
+    init = _context._Context.__init__
 
     def spy(self, *a, **k):
         built_on.append(threading.current_thread().name)
         init(self, *a, **k)
 
-    monkeypatch.setattr(shade._Context, "__init__", spy)
-    monkeypatch.setattr(shade, "_CONTEXT_ON_SIDE_THREAD", False)
+    monkeypatch.setattr(_context._Context, "__init__", spy)
+    monkeypatch.setattr(presets, "CONTEXT_ON_SIDE_THREAD", False)
     a = render(scene, CAM, R, t, light, quality=quality, samples=samples, seed=5)
-    monkeypatch.setattr(shade, "_CONTEXT_ON_SIDE_THREAD", True)
+    monkeypatch.setattr(presets, "CONTEXT_ON_SIDE_THREAD", True)
     b = render(scene, CAM, R, t, light, quality=quality, samples=samples, seed=5)
     assert built_on[0] == threading.current_thread().name and built_on[1].startswith("raytrace-context")
     assert a.radiance.tobytes() == b.radiance.tobytes()
@@ -328,25 +328,24 @@ def test_anti_aliasing_chunks_on_two_threads_give_the_same_bytes(monkeypatch, sp
     frame has several, the frame must be the one computed chunk after chunk, bit for bit."""
     import threading
 
-    from raytrace import shade
     if numba.get_num_threads() < 2:
         pytest.skip("one numba thread: the chunks run one after the other")
     R, t = _pose([1.0, -5.0, 2.0])
     light = Lighting(sun_dir_body=(0.6, -0.48, 0.64), ambient_radiance_W_m2_sr=2.0,
                      earth=Earth((0, 0, -1), 6.778e6))
-    monkeypatch.setattr(shade, "_CHUNK_RAYS", 16 * 90)  # 90 edge pixels per chunk (a 4 × 4 grid at 8 rays)
+    monkeypatch.setattr(presets, "CHUNK_RAYS", 16 * 90)  # 90 edge pixels per chunk (a 4 × 4 grid at 8 rays)
     ran_on = []
-    chunk = shade._shade_chunk
+    chunk = _antialias._shade_chunk
 
     def spy(*a, **k):
         ran_on.append(threading.current_thread().name)
         return chunk(*a, **k)
 
-    monkeypatch.setattr(shade, "_shade_chunk", spy)
-    monkeypatch.setattr(shade, "_AA_CHUNKS_ON_TWO_THREADS", False)
+    monkeypatch.setattr(_antialias, "_shade_chunk", spy)
+    monkeypatch.setattr(presets, "AA_CHUNKS_ON_TWO_THREADS", False)
     a = render(sphere, CAM, R, t, light, quality="balanced", samples=8, seed=2).radiance
     serial = len(ran_on)
-    monkeypatch.setattr(shade, "_AA_CHUNKS_ON_TWO_THREADS", True)
+    monkeypatch.setattr(presets, "AA_CHUNKS_ON_TWO_THREADS", True)
     b = render(sphere, CAM, R, t, light, quality="balanced", samples=8, seed=2).radiance
     assert serial > 4 and len(ran_on) == 2 * serial
     assert all(n == threading.current_thread().name for n in ran_on[:serial])
@@ -485,7 +484,7 @@ def test_edge_sub_samples_gather_the_presets_own_ray_count(sphere, monkeypatch):
     assert (q.aa_grid, q.aa_gather_rays) == (8, 4)
     assert shade.quality_preset("balanced", 16).aa_gather_rays == 4  # a quarter below 32 rays
     seen = []
-    gather = shade._Context.gather_E
+    gather = _context._Context.gather_E
 
     def record(self, s, n_rays, pix, *args, **kwargs):
         centres = "counts" in kwargs or "hits" in kwargs
@@ -494,7 +493,7 @@ def test_edge_sub_samples_gather_the_presets_own_ray_count(sphere, monkeypatch):
             assert kwargs["share"] == 64 and pix.min() >= 0 and pix.max() < 64 * CAM.width * CAM.height
         return gather(self, s, n_rays, pix, *args, **kwargs)
 
-    monkeypatch.setattr(shade._Context, "gather_E", record)
+    monkeypatch.setattr(_context._Context, "gather_E", record)
     R, t = _pose([0.0, -5.0, 0.0])
     light = Lighting(sun_dir_body=(1.0, 0.0, 0.0), sun_irradiance_W_m2=1000.0, ambient_radiance_W_m2_sr=5.0)
     preset = shade.quality_preset
@@ -536,7 +535,7 @@ def test_second_sub_sample_pattern_halves_the_silhouette_noise(sphere, monkeypat
 def test_second_sub_sample_pattern_goes_to_the_highest_contrast_pixels(sphere, monkeypatch):
     """``Quality.aa_extra`` = 0.2 on a sphere lit from the side: the second pattern is drawn
     at exactly the 20 % of the anti-aliased pixels whose sub-samples saw the largest contrast
-    (:func:`raytrace._shading.subsample_contrast`), and those lie on the lit limb, none on
+    (:func:`raytrace._rows.subsample_contrast`), and those lie on the lit limb, none on
     the dark limb (black against black)."""
     import dataclasses
 
@@ -546,7 +545,7 @@ def test_second_sub_sample_pattern_goes_to_the_highest_contrast_pixels(sphere, m
     monkeypatch.setattr(shade, "quality_preset",
                         lambda name, samples=None: dataclasses.replace(preset(name, samples), aa_extra=0.2))
     calls = []
-    first = shade._supersample
+    first = _antialias._supersample
 
     def record(*args, **kwargs):
         out = first(*args, **kwargs)
@@ -554,7 +553,7 @@ def test_second_sub_sample_pattern_goes_to_the_highest_contrast_pixels(sphere, m
         calls.append((args[7].copy(), None if contrast is None else contrast.copy()))
         return out
 
-    monkeypatch.setattr(shade, "_supersample", record)
+    monkeypatch.setattr(_antialias, "_supersample", record)
     R, t = _pose([0.0, -5.0, 0.0])
     light = Lighting(sun_dir_body=(1.0, 0.0, 0.0), sun_irradiance_W_m2=1000.0)  # lights the +x half
     render(sphere, CAM, R, t, light, quality="balanced", samples=8, seed=2)
@@ -570,16 +569,16 @@ def test_second_sub_sample_pattern_goes_to_the_highest_contrast_pixels(sphere, m
 
 
 def test_subsample_contrast_is_the_squared_range_of_each_pixels_sub_samples():
-    """raytrace._shading.subsample_contrast against NumPy (the peak-to-peak of R + G + B over
+    """raytrace._rows.subsample_contrast against NumPy (the peak-to-peak of R + G + B over
     each pixel's rows); a uniform pixel has none, and a step of height c gives c² whatever
     fraction of the pixel each side covers."""
-    from raytrace import _shading as K
+    from raytrace import _rows
 
     rng = np.random.default_rng(0)
     for S in (9, 16, 36):
         L = rng.gamma(2.0, 1.5, (5000 * S, 3))
         got = np.empty(5000)
-        K.subsample_contrast(L, S, got)
+        _rows.subsample_contrast(L, S, got)
         want = np.ptp(L.sum(1).reshape(5000, S), axis=1) ** 2
         np.testing.assert_allclose(got, want, rtol=1e-12)
     S = 36
@@ -587,7 +586,7 @@ def test_subsample_contrast_is_the_squared_range_of_each_pixels_sub_samples():
     for p, k in enumerate((0, 1, 18, 35)):
         L[p * S:p * S + k] = [1.3, 0.2, 0.1]  # k of the 36 sub-samples on the bright side
     got = np.empty(4)
-    K.subsample_contrast(L, S, got)
+    _rows.subsample_contrast(L, S, got)
     np.testing.assert_allclose(got, [0.0, 1.0, 1.0, 1.0], atol=1e-12)
 
 
@@ -661,7 +660,7 @@ def test_sliver_pixels_marks_exactly_the_pixels_a_thin_triangle_overlaps():
     """A wire 0.03 px wide and 40 px long, slanted across pixel rows: every pixel square it
     overlaps is marked, no other (against a dense point rasterisation); hidden behind the
     pixels' surface it marks nothing; a wide triangle is no sliver."""
-    from raytrace._shading import sliver_pixels
+    from raytrace._edges import sliver_pixels
     W = H = 100
     f, c, z = 100.0, 49.5, 10.0
     px = np.array([30.3, 70.1, 70.1])
@@ -705,7 +704,7 @@ def test_sliver_pixels_row_spans_mark_what_the_whole_box_test_marks(angle_deg):
     """Wires 0.05 px wide and 10–80 px long at every slant, horizontal and vertical ones
     included (edges less than 10⁻³ px high bound nothing): the pixels marked are those the
     separating-axis test marks over the triangle's whole bounding box."""
-    from raytrace._shading import sliver_pixels
+    from raytrace._edges import sliver_pixels
     W, H = 120, 90
     f, c, z = 100.0, 49.5, 10.0
     rng = np.random.default_rng(int(angle_deg * 1000))
@@ -732,7 +731,7 @@ def test_donor_rows_takes_the_centre_else_the_nearest_neighbour_on_the_same_surf
     """Edge sub-samples take their pixel centre's correction when they lie on its surface;
     otherwise (with borrowing) the nearest neighbouring centre on their own surface, never one
     of another part, a normal more than 25° away or off their plane by more than a footprint."""
-    from raytrace._shading import donor_rows
+    from raytrace._edges import donor_rows
     W = H = 3
     inst = np.full(W * H, 1, dtype=np.uint16)  # part 0 everywhere ...
     inst[2] = 2  # ... but pixel (0, 2): part 1
@@ -773,12 +772,11 @@ def test_one_chunk_traced_before_the_cache_gives_the_chunked_bytes(monkeypatch, 
     the Sun, mirror rays) before it waits for the radiance cache, and shades them after: the
     same bytes as several chunks each traced and shaded in turn, and the trace comes before the
     first look-up in the cache."""
-    from raytrace import shade
     R, t = _pose([1.0, -5.0, 2.0])
     light = Lighting(sun_dir_body=(0.6, -0.48, 0.64), ambient_radiance_W_m2_sr=2.0,
                      earth=Earth((0, 0, -1), 6.778e6))
     events = []
-    trace, cache_E = shade._trace_chunk, shade._Context.cache_E
+    trace, cache_E = _antialias._trace_chunk, _context._Context.cache_E
 
     def spy_trace(*a, **k):
         events.append("trace")
@@ -788,13 +786,13 @@ def test_one_chunk_traced_before_the_cache_gives_the_chunked_bytes(monkeypatch, 
         events.append("cache")
         return cache_E(self, s)
 
-    monkeypatch.setattr(shade, "_trace_chunk", spy_trace)
-    monkeypatch.setattr(shade._Context, "cache_E", spy_cache)
+    monkeypatch.setattr(_antialias, "_trace_chunk", spy_trace)
+    monkeypatch.setattr(_context._Context, "cache_E", spy_cache)
     one = render(sphere, CAM, R, t, light, quality=quality, samples=samples, seed=4).radiance
     assert events[0] == "trace" and events.count("trace") >= 1
     events.clear()
-    monkeypatch.setattr(shade, "_AA_CHUNKS_ON_TWO_THREADS", False)
-    monkeypatch.setattr(shade, "_CHUNK_RAYS", 16 * 40)  # 40 to 71 edge pixels per chunk
+    monkeypatch.setattr(presets, "AA_CHUNKS_ON_TWO_THREADS", False)
+    monkeypatch.setattr(presets, "CHUNK_RAYS", 16 * 40)  # 40 to 71 edge pixels per chunk
     several = render(sphere, CAM, R, t, light, quality=quality, samples=samples, seed=4).radiance
     assert events[0] == "cache" and events.count("trace") > 3
     assert one.tobytes() == several.tobytes()
@@ -805,7 +803,7 @@ def test_put_rows_nonnegative_is_numpys_clamped_assignment():
     """The kernel that writes the shaded rows into the float32 image is NumPy's
     ``out[idx] = np.maximum(src, 0.0)``, bit for bit: negatives and −0 to +0, rounding to
     float32 the same, other rows untouched."""
-    from raytrace import _shading as K
+    from raytrace import _rows
     rng = np.random.default_rng(3)
     src = rng.standard_normal((500, 3)) * 10.0 ** rng.integers(-40, 40, (500, 1))
     src[:7] = [[-0.0, 0.0, -1e-300], [1e-46, -1e-46, 3.4e38], [0.1, 0.2, 0.3], [-5, 5, -0.0],
@@ -815,6 +813,6 @@ def test_put_rows_nonnegative_is_numpys_clamped_assignment():
     b = a.copy()
     with np.errstate(over="ignore"):
         a[idx] = np.maximum(src, 0.0)
-    K.put_rows_nonnegative(idx, src, b)
+    _rows.put_rows_nonnegative(idx, src, b)
     assert a.tobytes() == b.tobytes()
     assert not np.signbit(b[idx]).any() and (b[idx] >= 0).all()

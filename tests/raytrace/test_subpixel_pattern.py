@@ -1,11 +1,11 @@
-"""Sample patterns: the sub-pixel samples of anti-aliased pixels (raytrace._shading.subpixel_rays)
+"""Sample patterns: the sub-pixel samples of anti-aliased pixels (raytrace._edges.subpixel_rays)
 and the final gather's directions (gather_rays):
 correlated multi-jittered (Kensler 2013) — one sample per coarse cell and per fine row and
 column of the domain, uniform over it across seeds."""
 import numpy as np
 import pytest
 
-from raytrace import _shading as K
+from raytrace import _edges, _gather, _sampling, _surface, brdf
 
 FX, FY, CX, CY, W = 800.0, 700.0, 40.0, 30.0, 80
 
@@ -15,7 +15,7 @@ def _offsets(pix, n, seed):
     their directions through the pinhole (identity pose)."""
     pix = np.asarray(pix, dtype=np.int64)
     d = np.empty((len(pix) * n * n, 3))
-    K.subpixel_rays(pix, W, n, seed, np.eye(3), FX, FY, CX, CY, d)
+    _edges.subpixel_rays(pix, W, n, seed, np.eye(3), FX, FY, CX, CY, d)
     u = d[:, 0] / d[:, 2] * FX + CX
     v = d[:, 1] / d[:, 2] * FY + CY
     pu = np.repeat(pix % W, n * n)
@@ -53,7 +53,7 @@ def test_pattern_is_uniform_over_the_pixel_across_seeds_and_differs_between_pixe
 
 @pytest.mark.parametrize("n_rays", [4, 8, 16, 32])
 def test_final_gather_directions_are_multi_jittered_in_radius_squared_and_azimuth(n_rays):
-    """raytrace._shading.gather_rays about the normal +z: u1 = 1 − cos²θ (the squared radius
+    """raytrace._gather.gather_rays about the normal +z: u1 = 1 − cos²θ (the squared radius
     on the unit disc) and u2 = φ / 2π of each point's rays fall one per cell of the gx × gy
     grid and one per fine row and column of the n_rays × n_rays grid."""
     n_pts = 5
@@ -62,8 +62,8 @@ def test_final_gather_directions_are_multi_jittered_in_radius_squared_and_azimut
     o = np.empty((n_pts * n_rays, 3))
     d = np.empty((n_pts * n_rays, 3))
     start = np.arange(n_pts + 1, dtype=np.int64) * n_rays
-    K.gather_rays(P, N, N, start, 0, 9, np.arange(100, 100 + n_pts, dtype=np.int64), 0, 0,
-                  1e-6, o, d)
+    _gather.gather_rays(P, N, N, start, 0, 9, np.arange(100, 100 + n_pts, dtype=np.int64), 0, 0,
+                        1e-6, o, d)
     np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-12)
     u1 = (1.0 - d[:, 2] ** 2).reshape(n_pts, n_rays)
     u2 = (np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi) % 1.0).reshape(n_pts, n_rays)
@@ -80,11 +80,11 @@ def test_final_gather_directions_are_multi_jittered_in_radius_squared_and_azimut
 
 @pytest.mark.parametrize("n", [1, 2, 5, 16, 36, 100, 257])
 def test_hash_permutation_is_a_permutation_and_depends_on_its_key(n):
-    """raytrace._shading.permute (Kensler 2013, §3): for every key, i ↦ permute(i, n, key)
+    """raytrace._sampling.permute (Kensler 2013, §3): for every key, i ↦ permute(i, n, key)
     maps 0 … n − 1 onto itself one to one; different keys give different orders."""
     orders = set()
     for key in (0, 1, 7, 0x9E3779B9, 0xFFFFFFFF, 123456789):
-        perm = [K.permute(i, n, key) for i in range(n)]
+        perm = [_sampling.permute(i, n, key) for i in range(n)]
         assert sorted(perm) == list(range(n))
         orders.add(tuple(perm))
     if n >= 5:
@@ -98,13 +98,13 @@ def _disc_strata(pixels, n, seed):
     pixel = np.repeat(np.asarray(pixels, dtype=np.int64), n)
     number = np.tile(np.arange(n, dtype=np.int64), len(pixels))
     d = np.empty((len(pixel), 3))
-    K.sun_disc_dirs(pixel, number, n, seed, 0.0, 0.0, 1.0, np.cos(half), d)
-    gx = K._strata(n)
+    _surface.sun_disc_dirs(pixel, number, n, seed, 0.0, 0.0, 1.0, np.cos(half), d)
+    gx = _sampling._strata(n)
     gy = n // gx
     u1 = (1.0 - d[:, 2]) / (1.0 - np.cos(half))
     u2 = (np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi)) % 1.0
     # the azimuth is measured from the basis raytrace.brdf.onb builds about the Sun
-    t = K.onb(0.0, 0.0, 1.0)
+    t = brdf.onb(0.0, 0.0, 1.0)
     u2 = (u2 - np.arctan2(t[1], t[0]) / (2 * np.pi)) % 1.0
     a = np.minimum(np.floor(u1 * gx), gx - 1).astype(int)
     b = np.minimum(np.floor(u2 * gy), gy - 1).astype(int)

@@ -1,11 +1,11 @@
 """Edge sub-samples take the gather corrections of the pixel centres around them on their own
-surface, interpolated bilinearly (raytrace._shading.interpolate_rows_into)."""
+surface, interpolated bilinearly (raytrace._edges.interpolate_rows_into)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from raytrace import _shading as K
+from raytrace import _edges
 
 H, W = 4, 6
 
@@ -34,8 +34,8 @@ def _interp(uf, vf, comp, parts, A, B, min_found=1):
     outA = np.zeros((len(uf), 3))
     outB = np.zeros((len(uf), 3))
     added = np.empty(len(uf), dtype=np.bool_)
-    K.interpolate_rows_into(np.arange(len(uf), dtype=np.int64), D, np.eye(3), FX, FY, CX, CY, W, H, comp, P, NS,
-                            row_of_pixel, inst, P_c, N_c, foot, A, B, min_found, outA, outB, added)
+    _edges.interpolate_rows_into(np.arange(len(uf), dtype=np.int64), D, np.eye(3), FX, FY, CX, CY, W, H, comp, P, NS,
+                                 row_of_pixel, inst, P_c, N_c, foot, A, B, min_found, outA, outB, added)
     return outA, outB, added
 
 

@@ -59,16 +59,16 @@ def test_both_builds_have_their_own_entries_in_numbas_cache(tmp_path, monkeypatc
     """numba keys a cache entry by the function's name and the signature, not by ``parallel``:
     the serial build is cached under its own name, so that compiling one build never replaces
     the other (a process would then load code of the other kind)."""
-    qualname = "raytrace._shading.ray_groups"
+    qualname = "raytrace._edges.ray_groups"
     assert P._threaded(P.kernel(qualname))
     table = {qualname: P.group_signatures()[qualname]}
     monkeypatch.setattr(P, "entries_to_compile", lambda groups=("fast",): dict(table))
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
     assert P.precompile(1, serial=True) == []
-    assert [p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")] == ["_shading.ray_groups.serial"]
+    assert [p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")] == ["_edges.ray_groups.serial"]
     assert P.precompile(1, serial=False) == []
     assert sorted(p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")) == \
-        ["_shading.ray_groups", "_shading.ray_groups.serial"]
+        ["_edges.ray_groups", "_edges.ray_groups.serial"]
 
 
 @pytest.mark.skipif(not TWO_THREADS, reason="one numba thread: only the serial builds run here")

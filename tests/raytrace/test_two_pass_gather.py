@@ -5,7 +5,7 @@ kernels, against independent answers:
   solved here with scipy's root finder, and the variance it promises against an even split;
 * same_part_mean: a direct loop over the neighbourhood;
 * filter_variance: the closed forms of one pass inside a part and along a strip one pixel
-  wide, the variance channel of the à-trous filter itself (raytrace._shading.atrous on a flat
+  wide, the variance channel of the à-trous filter itself (raytrace._filter.atrous on a flat
   guide), and, for one pass, the spread of the filtered noise over many noise images;
 * the two-pass estimate of the irradiance a dark plate receives from a lit perpendicular
   plate: its mean over seeds against the one-pass gather's mean (both unbiased) and against
@@ -21,8 +21,7 @@ import pytest
 import trimesh
 from scipy import integrate, optimize
 
-from raytrace import _shading as K
-from raytrace import shade
+from raytrace import _context, _filter, _gather, _sampling, shade
 from raytrace.lighting import Lighting
 from raytrace.model import Component, TargetModel
 from raytrace.scene import Scene
@@ -36,7 +35,7 @@ def test_allocation_matches_the_continuous_neyman_optimum_with_costs():
     n_min, n_max, n_avg = 4, 128, 16
     budget = n_avg * cost.sum()
     out = np.empty(n, dtype=np.int64)
-    K.allocate_rays(sig, cost, n_min, n_max, budget, out)
+    _gather.allocate_rays(sig, cost, n_min, n_max, budget, out)
     assert out.min() >= n_min and out.max() <= n_max
     assert (cost * out).sum() <= budget
     assert (cost * out).sum() >= budget - cost.max() * n * 0.02  # the budget is used, up to rounding
@@ -59,7 +58,7 @@ def test_allocation_matches_the_continuous_neyman_optimum_with_costs():
 
 def test_allocation_without_any_noise_is_an_even_split():
     out = np.empty(10, dtype=np.int64)
-    K.allocate_rays(np.zeros(10), np.full(10, 2.0), 4, 64, 16 * 20.0, out)
+    _gather.allocate_rays(np.zeros(10), np.full(10, 2.0), 4, 64, 16 * 20.0, out)
     assert np.all(out == 16)
 
 
@@ -70,7 +69,7 @@ def test_same_part_mean_is_the_mean_of_the_other_pixels_of_the_same_part():
     img = rng.random(inst.shape)
     out = np.full(inst.shape, -1.0)
     r = 2
-    K.same_part_mean(img, inst, r, out)
+    _filter.same_part_mean(img, inst, r, out)
     H, W = inst.shape
     for v in range(H):
         for u in range(W):
@@ -94,7 +93,7 @@ def _gather_u(counts, first, seed=9, pix=None, share=0):
     o = np.empty((start[-1], 3))
     d = np.empty((start[-1], 3))
     pix = np.arange(100, 100 + n_pts, dtype=np.int64) if pix is None else np.asarray(pix, dtype=np.int64)
-    K.gather_rays(P, N, N, start, first, seed, pix, share, int(counts.max()), 1e-6, o, d)
+    _gather.gather_rays(P, N, N, start, first, seed, pix, share, int(counts.max()), 1e-6, o, d)
     u1 = 1.0 - d[:, 2] ** 2
     u2 = np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi) % 1.0
     return [(u1[start[k]:start[k + 1]], u2[start[k]:start[k + 1]]) for k in range(n_pts)]
@@ -116,7 +115,7 @@ def test_unscrambled_sequence_is_scipys_sobol():
     from scipy.stats import qmc
     ref = qmc.Sobol(d=2, scramble=False, bits=32).random_base2(12)
     idx = [k ^ (k >> 1) for k in range(4096)] + [2**32 - 1, 0x9E3779B9, 0x80000001]
-    ours = np.array([[K._reverse_bits32(i), K._sobol2_y(i)] for i in idx], dtype=np.float64) / 2.0**32
+    ours = np.array([[_sampling._reverse_bits32(i), _sampling._sobol2_y(i)] for i in idx], dtype=np.float64) / 2.0**32
     np.testing.assert_array_equal(ours[:4096], ref)
     # a full 32-bit index (as the shuffled index is) against the direction-number recursion
     for i, (x, y) in zip(idx[4096:], ours[4096:] * 2.0**32):
@@ -220,7 +219,7 @@ def _parts_image(rng, H=40, W=50):
 def test_filter_variance_is_the_propagated_variance_of_the_id_only_passes(passes):
     inst = _parts_image(np.random.default_rng(3))
     out = np.full(inst.shape, -1.0)
-    K.filter_variance(inst, passes, out)
+    _filter.filter_variance(inst, passes, out)
     np.testing.assert_allclose(out, _filter_variance_reference(inst, passes), rtol=1e-12, atol=0)
     # and the variance channel of the à-trous filter itself, on a guide whose normals and depths
     # are all alike (its weights are then the B3 kernel on the pixel's own part)
@@ -239,7 +238,7 @@ def test_filter_variance_closed_forms_and_the_spread_of_filtered_noise():
     inst[2:20, 2:58] = 1
     inst[25, 2:58] = 2
     out = np.empty((H, W))
-    K.filter_variance(inst, 1, out)
+    _filter.filter_variance(inst, 1, out)
     s2 = (B3 ** 2).sum()  # 70/256
     # inside a part: Σ w² with Σ w = 1, the 2-d kernel's (Σ h²)²
     assert out[10, 30] == pytest.approx(s2 * s2, rel=1e-12)
@@ -260,7 +259,7 @@ def test_filter_variance_closed_forms_and_the_spread_of_filtered_noise():
     ones = np.ones((H, W))
     for i in range(n):
         img = rng.standard_normal((H, W, 1))
-        K.atrous(img, ones, ones, ones, inst, normal, depth, 800.0, 800.0, W / 2, H / 2, 1, 0.0, res, res_var)
+        _filter.atrous(img, ones, ones, ones, inst, normal, depth, 800.0, 800.0, W / 2, H / 2, 1, 0.0, res, res_var)
         samples[i] = res[..., 0]
     emp = samples.var(axis=0)
     on = inst > 0
@@ -297,7 +296,7 @@ def plate_points():
     the same grid on its back (facing −x, which sees nothing: no noise at all), as a 6 × 12
     image of two parts."""
     scene = _plates()
-    ctx = shade._Context(scene, Lighting(sun_dir_body=(0, 0, 1), sun_irradiance_W_m2=E_SUN), {})
+    ctx = _context._Context(scene, Lighting(sun_dir_body=(0, 0, 1), sun_irradiance_W_m2=E_SUN), {})
     ys, zs = np.meshgrid(np.linspace(-0.6, 0.6, 6), np.linspace(0.05, 1.5, 6))
     front = np.column_stack([np.ones(ys.size), ys.ravel(), zs.ravel()])
     back = front * [-1.0, 1.0, 1.0]
@@ -306,7 +305,7 @@ def plate_points():
     h = scene.intersect(O, D)
     assert np.all(h["geomID"] == 1)
     face = scene.face_offset[h["geomID"]] + h["primID"].astype(np.int64)
-    s = shade._surfaces(ctx.scene, O, D, face)
+    s = _context._surfaces(ctx.scene, O, D, face)
     inst = np.concatenate([np.full(ys.shape, 2), np.full(ys.shape, 3)], axis=1).astype(np.uint16)
     v, u = np.unravel_index(np.arange(ys.size), ys.shape)
     at = (np.concatenate([v, v]), np.concatenate([u, u + 6]))
@@ -365,7 +364,7 @@ def test_two_passes_are_stratified_as_one(plate_points):
 
 def test_the_filters_passes_give_a_parts_border_more_rays_and_keep_the_mean(plate_points):
     """With ``filter_passes`` the allocation weighs each pixel's noise by what the filter keeps
-    of it (raytrace._shading.filter_variance): the lit plate's border pixels, which the filter
+    of it (raytrace._filter.filter_variance): the lit plate's border pixels, which the filter
     averages over fewer neighbours, get more rays than without, its inner ones fewer; the
     estimate stays an unbiased one of the form factor's irradiance."""
     ctx, s, inst, at, expect = plate_points
@@ -373,7 +372,7 @@ def test_the_filters_passes_give_a_parts_border_more_rays_and_keep_the_mean(plat
     lit = expect > 0
     pix = np.arange(n, dtype=np.int64)
     q = np.empty(inst.shape)
-    K.filter_variance(inst, 2, q)
+    _filter.filter_variance(inst, 2, q)
     q_lit = q[at][lit]
     border = q_lit > np.median(q_lit)
     assert border.any() and (~border).any()

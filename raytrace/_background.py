@@ -1,0 +1,234 @@
+"""Numba kernels of what the camera sees off the target: Earth behind it (per pixel, or from
+its albedo interpolated on cells of pixels), and the environment along given directions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from . import environment as env
+from ._jit import inline, jit, pjit
+
+
+@pjit
+def background(pix, W, o_body, R_body_from_cam, fx, fy, cx, cy, n_grid, p, tex, out):
+    """Earth (no ambient sky) seen through each listed pixel, box-filtered over n_grid²
+    sub-pixel rays; returns nothing, writes out[k]."""
+    S = n_grid * n_grid
+    for k in numba.prange(pix.shape[0]):
+        v = pix[k] // W
+        u = pix[k] % W
+        sr = 0.0
+        sg = 0.0
+        sb = 0.0
+        for j in range(S):
+            du = ((j % n_grid) + 0.5) / n_grid - 0.5
+            dv = ((j // n_grid) + 0.5) / n_grid - 0.5
+            x = (u + du - cx) / fx
+            y = (v + dv - cy) / fy
+            dx = R_body_from_cam[0, 0] * x + R_body_from_cam[0, 1] * y + R_body_from_cam[0, 2]
+            dy = R_body_from_cam[1, 0] * x + R_body_from_cam[1, 1] * y + R_body_from_cam[1, 2]
+            dz = R_body_from_cam[2, 0] * x + R_body_from_cam[2, 1] * y + R_body_from_cam[2, 2]
+            dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+            r, g, b = env.env_radiance(p, tex, o_body[0], o_body[1], o_body[2], dx / dn, dy / dn, dz / dn)
+            sr += r
+            sg += g
+            sb += b
+        out[k, 0] = sr / S
+        out[k, 1] = sg / S
+        out[k, 2] = sb / S
+
+
+@jit
+def _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, mu_min):
+    """Where the unit ray (o, d) meets Earth: (True, albedo RGB, outward normal), or False
+    first on a miss or where the Sun's cosine is ≤ mu_min."""
+    t = env.earth_hit(p, ox, oy, oz, dx, dy, dz)
+    if t < 0.0:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    mx, my, mz = env.earth_normal(p, ox, oy, oz, dx, dy, dz, t)
+    if mx * p[env.P_SX] + my * p[env.P_SY] + mz * p[env.P_SZ] <= mu_min:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    a0, a1, a2 = env.earth_albedo(p, tex, mx, my, mz)
+    return True, a0, a1, a2, mx, my, mz
+
+
+@inline
+def _chord2(M, i0, j0, i1, j1):
+    """Squared distance between the unit normals M[i0, j0] and M[i1, j1]."""
+    a = M[i0, j0, 0] - M[i1, j1, 0]
+    b = M[i0, j0, 1] - M[i1, j1, 1]
+    c = M[i0, j0, 2] - M[i1, j1, 2]
+    return a * a + b * b + c * c
+
+
+@inline
+def _cell_trusted(A, M, C, ok, ok_c, i, j, chord2, tol):
+    """Whether cell (i, j) of :func:`earth_background` interpolates its albedo: all four
+    corners and the centre on Earth's day side, both diagonals shorter than √chord2 on the
+    unit sphere, and the corners' mean within ``tol`` of the centre's albedo (relative)."""
+    if not (ok_c[i, j] and ok[i, j + 1] and ok[i + 1, j] and ok[i + 1, j + 1]):
+        return False
+    if _chord2(M, i, j, i + 1, j + 1) > chord2 or _chord2(M, i, j + 1, i + 1, j) > chord2:
+        return False
+    for c in range(3):
+        mid = 0.25 * (A[i, j, c] + A[i, j + 1, c] + A[i + 1, j, c] + A[i + 1, j + 1, c])
+        if abs(mid - C[i, j, c]) > tol * C[i, j, c]:
+            return False
+    return True
+
+
+@inline
+def _pixel_ray(R, fx, fy, cx, cy, u, v):
+    """Unit body-frame direction of the ray through image point (u, v)."""
+    x = (u - cx) / fx
+    y = (v - cy) / fy
+    dx = R[0, 0] * x + R[0, 1] * y + R[0, 2]
+    dy = R[1, 0] * x + R[1, 1] * y + R[1, 2]
+    dz = R[2, 0] * x + R[2, 1] * y + R[2, 2]
+    dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+    return dx / dn, dy / dn, dz / dn
+
+
+@pjit
+def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, p, tex, step, tol, max_chord, earth_px, rad):
+    """Earth behind the target in one pass over the image: ``earth_px[v, u]`` is set where the
+    pixel's centre ray meets Earth, and there, off the target (``inst`` 0), ``rad[v, u]``
+    (H, W, 3) receives Earth's radiance along it (``p`` without the ambient sky: the sky
+    lights the target but is not drawn).
+
+    Where and whether the ray meets Earth, and the Sun's cosine there (day, night, terminator,
+    limb), are exact per pixel. The procedural texture's albedo (11 octaves of value noise,
+    :func:`raytrace.environment.procedural_albedo`; its finest detail ~60 km, a pixel ~0.1–1 km
+    from low orbit) is, with ``step`` > 1, evaluated on the corners of step × step cells of
+    the image and interpolated bilinearly inside each cell that spans less than ``max_chord``
+    of Earth's radius (its diagonals on the sphere: so not near the limb, where a pixel covers
+    kilometres) and whose centre it matches there to ``tol`` (relative, per channel); a cell
+    that fails, or whose corners do not all see Earth's day side (or its night side within
+    ``max_chord`` of the terminator: the Sun's cosine changes by less than that across a cell
+    that passes), is evaluated per pixel. Other textures (uniform, an image) are looked up per
+    pixel. Whether a cell interpolates is decided once per cell, and the per-pixel hit test and
+    normal work on the unnormalised ray (one square root and one division a pixel); with them
+    the kernel takes ~0.55× the time on one thread where Earth fills the view, the same bytes
+    (BENCHMARKS.md, "Earth behind the target, per pixel in half the time")."""
+    H, W = inst.shape
+    ox, oy, oz = o_body[0], o_body[1], o_body[2]
+    interp = step > 1 and int(p[env.P_TEXTURE]) == env.TEX_PROCEDURAL
+    s = step if interp else 1
+    nv = (H - 1) // s + 2 if interp else 1
+    nu = (W - 1) // s + 2 if interp else 1
+    A = np.empty((nv, nu, 3))  # albedo at the cells' corners,
+    M = np.empty((nv, nu, 3))  # Earth's normal there,
+    C = np.empty((nv, nu, 3))  # the albedo at the cells' centres
+    # cleared by plain loops, not np.zeros or a slice assignment: under parallel=True numba
+    # turns each of those into a parallel loop of its own, compiled like the kernel's own loops
+    # (LLVM's work four libraries over), for arrays that take microseconds to clear (the kernel
+    # compiled in ~1 s less on one core, 4.5 → 3.6 s; the same bytes)
+    ok = np.empty((nv, nu), dtype=np.bool_)
+    ok_c = np.empty((nv, nu), dtype=np.bool_)
+    trusted = np.empty((nv, nu), dtype=np.bool_)
+    for i in range(nv):
+        for j in range(nu):
+            ok[i, j] = False
+            ok_c[i, j] = False
+            trusted[i, j] = False
+    if interp:
+        for i in numba.prange(nv):
+            for j in range(nu):
+                dx, dy, dz = _pixel_ray(R_body_from_cam, fx, fy, cx, cy, float(j * s), float(i * s))
+                hit, A[i, j, 0], A[i, j, 1], A[i, j, 2], M[i, j, 0], M[i, j, 1], M[i, j, 2] = \
+                    _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -max_chord)
+                ok[i, j] = hit
+                if hit:
+                    dx, dy, dz = _pixel_ray(R_body_from_cam, fx, fy, cx, cy, (j + 0.5) * s, (i + 0.5) * s)
+                    hit, C[i, j, 0], C[i, j, 1], C[i, j, 2], _, _, _ = \
+                        _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -2.0)
+                    ok_c[i, j] = hit
+    chord2 = max_chord * max_chord
+    # whether each cell interpolates, decided once per cell (not at each of its pixels)
+    if interp:
+        for i in numba.prange(nv - 1):
+            for j in range(nu - 1):
+                trusted[i, j] = _cell_trusted(A, M, C, ok, ok_c, i, j, chord2, tol)
+    if p[env.P_HAS_EARTH] == 0.0:
+        for v in range(H):
+            for u in range(W):
+                earth_px[v, u] = False
+        return
+    inv = 1.0 / s
+    k_sun = p[env.P_ESUN] / math.pi
+    r = p[env.P_RADIUS]
+    r2 = r * r
+    inv_r = 1.0 / r
+    # Earth's centre from the camera, c; the pixel's ray o + t'·d with d unnormalised,
+    # d = R (x, y, 1) linear in the pixel's x, so |d|² and c × d need no square root or
+    # division per pixel: the ray meets Earth where c·d > 0 and |c × d|² < r²|d|², at
+    # t' = (c·d − √(r²|d|² − |c × d|²)) / |d|², and Earth's normal there is (t'·d − c) / r
+    ccx = p[env.P_DIST] * p[env.P_EX] - ox
+    ccy = p[env.P_DIST] * p[env.P_EY] - oy
+    ccz = p[env.P_DIST] * p[env.P_EZ] - oz
+    sx, sy, sz = p[env.P_SX], p[env.P_SY], p[env.P_SZ]
+    ifx = 1.0 / fx
+    for v in numba.prange(H):
+        i = v // s
+        fv = (v - i * s) * inv
+        y = (v - cy) / fy
+        # d = d0 + x·g, x = (u − cx)/fx
+        d0x = R_body_from_cam[0, 1] * y + R_body_from_cam[0, 2]
+        d0y = R_body_from_cam[1, 1] * y + R_body_from_cam[1, 2]
+        d0z = R_body_from_cam[2, 1] * y + R_body_from_cam[2, 2]
+        gx = R_body_from_cam[0, 0]
+        gy = R_body_from_cam[1, 0]
+        gz = R_body_from_cam[2, 0]
+        for u in range(W):
+            x = (u - cx) * ifx
+            dx = d0x + x * gx
+            dy = d0y + x * gy
+            dz = d0z + x * gz
+            b = dx * ccx + dy * ccy + dz * ccz
+            qx = ccy * dz - ccz * dy
+            qy = ccz * dx - ccx * dz
+            qz = ccx * dy - ccy * dx
+            q2 = qx * qx + qy * qy + qz * qz
+            d2 = dx * dx + dy * dy + dz * dz
+            disc = r2 * d2 - q2
+            hit = b > 0.0 and disc > 0.0
+            earth_px[v, u] = hit
+            if not hit or inst[v, u] != 0:
+                continue
+            t = (b - math.sqrt(disc)) / d2
+            mx = (t * dx - ccx) * inv_r
+            my = (t * dy - ccy) * inv_r
+            mz = (t * dz - ccz) * inv_r
+            mu = mx * sx + my * sy + mz * sz
+            if mu <= 0.0:
+                rad[v, u, 0] = 0.0
+                rad[v, u, 1] = 0.0
+                rad[v, u, 2] = 0.0
+                continue
+            k = k_sun * mu
+            j = u // s
+            if interp and trusted[i, j]:
+                fu = (u - j * s) * inv
+                for c in range(3):
+                    a = (1.0 - fv) * ((1.0 - fu) * A[i, j, c] + fu * A[i, j + 1, c]) + \
+                        fv * ((1.0 - fu) * A[i + 1, j, c] + fu * A[i + 1, j + 1, c])
+                    rad[v, u, c] = a * k
+            else:
+                a0, a1, a2 = env.earth_albedo(p, tex, mx, my, mz)
+                rad[v, u, 0] = a0 * k
+                rad[v, u, 1] = a1 * k
+                rad[v, u, 2] = a2 * k
+
+
+@pjit
+def env_along(o_body, D, p, tex, out):
+    """Environment radiance along unit directions D from o_body."""
+    for k in numba.prange(D.shape[0]):
+        r, g, b = env.env_radiance(p, tex, o_body[0], o_body[1], o_body[2], D[k, 0], D[k, 1], D[k, 2])
+        out[k, 0] = r
+        out[k, 1] = g
+        out[k, 2] = b
