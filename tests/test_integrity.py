@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import cli
 from raytrace import files as F
 from raytrace.dataset import options as opt
 from raytrace.dataset import pool
