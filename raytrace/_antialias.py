@@ -12,6 +12,7 @@ import numpy as np
 from . import _background, _edges, _gather, _rows, presets
 from ._context import _Context, _Sunlight, _surfaces
 from ._kernels import ray_origins32
+from ._lights import SUN_X, SUN_Y, SUN_Z
 from ._sampling import COVERAGE_STREAM, SUB_GATHER_STREAM
 from ._threads import submit as _submit
 from .camera import Camera
@@ -55,7 +56,7 @@ def _aa_pixels(q: Quality, scene: Scene, camera: Camera, R, t, o_body, geo, ligh
         edges.ravel()[pix[thin]] = True
     if corners is not None:  # (``fast`` casts none)
         edges |= _corner_edges(scene, geo, corners, lit_img.reshape(H, W) if sun_corners else None,
-                               lighting.sun_dir_body, sunl.eps)
+                               sunl.sun, sunl.eps)
     if q.slivers:
         _edges.sliver_pixels(scene.vertices, scene.faces, R, t, camera.fx, camera.fy, camera.cx, camera.cy,
                              1e-6 * scene.scale_m, 1.0, geo.depth_m, edges)
@@ -110,13 +111,14 @@ def _corner_rays(scene: Scene, camera: Camera, R, t, o_body, geo):
     return o32, d32, scene.intersect(o32, d32, robust=z0 <= 0.0)
 
 
-def _corner_edges(scene: Scene, geo, corners, lit=None, sun_dir=None, eps: float = 0.0) -> np.ndarray:
+def _corner_edges(scene: Scene, geo, corners, lit=None, sun=None, eps: float = 0.0) -> np.ndarray:
     """Pixels containing geometry their centre ray missed: one extra ray through every pixel
     corner of the cast rectangle (shared by four pixels, so about one ray per pixel; ``corners``
     from :func:`_corner_rays`); a pixel whose corners see another part than its centre holds a
     sub-pixel feature (a mast, a gap between panels, a thin wing seen edge-on) and must be
     supersampled. Features wider than 0.71 px are always caught; thinner ones only where they
-    cross a corner."""
+    cross a corner. With ``lit`` (the centres' sunlit mask) and ``sun`` (the Sun record,
+    :mod:`raytrace._lights`), also pixels whose corners and centre disagree on the Sun."""
     H, W = geo.instance.shape
     u0, v0, u1, v1 = geo.cast_rect
     out = np.zeros((H, W), dtype=bool)
@@ -132,13 +134,13 @@ def _corner_edges(scene: Scene, geo, corners, lit=None, sun_dir=None, eps: float
         # the Sun at every corner hit: a pixel whose corners and centre disagree holds a
         # shadow edge, or the shadow of a rod thinner than a pixel that its centre missed
         n = h * w
-        sx, sy, sz = sun_dir
+        sx, sy, sz = sun[SUN_X], sun[SUN_Y], sun[SUN_Z]
         want = np.empty(n, dtype=bool)
         so = np.empty((n, 3))
         O = np.ascontiguousarray(o32, dtype=np.float64)
         D = np.ascontiguousarray(d32, dtype=np.float64)
         _gather.bounce_sun_rays(O, D, hc["tfar"].astype(np.float64), hc["geomID"], hc["primID"], scene.face_offset,
-                                scene.face_normal, sx, sy, sz, eps, want, so)
+                                scene.face_normal, sun, eps, want, so)
         idx = np.flatnonzero(want)
         c_lit = np.zeros(n, dtype=bool)
         if len(idx):

@@ -14,6 +14,7 @@ from numba.cpython.unsafe.numbers import trailing_zeros
 
 from . import environment as env
 from ._jit import inline, jit, jit_exact, pjit, pjit_exact
+from ._lights import SUN_E, SUN_X, SUN_Y, SUN_Z
 from ._sampling import _hash01
 from .brdf import brdf_cos, cosine_direction, sample_brdf
 
@@ -191,10 +192,12 @@ def _glossy_bounce(idx, o, d, tfar, geom, prim, hu, hv, face_offset, face_normal
 
 @pjit
 def _glints(ptr, rec_face, rec_u, rec_v, rec_side, rec_n, rec_wo, comp_of_face, f0, alpha, valid, face_s, lat_start,
-            lat_ids, E_sun, sx, sy, sz, e_sun, scale, out):
+            lat_ids, E_sun, sun, scale, out):
     """out[row] += scale × Σ over the row's glossy-hit records of the Sun's specular reflection
-    at the hit towards the row: f_s(sun, wo)·cosθ_sun·E_sun·V, V the hit's sunlit fraction
-    interpolated from the lattice (the cache's own shadow rays)."""
+    at the hit towards the row: f_s(sun, wo)·cosθ_sun·ν·E_sun·V, V the hit's sunlit fraction
+    interpolated from the lattice (the cache's own shadow rays); ``sun`` the Sun record
+    (:mod:`raytrace._lights`)."""
+    sx, sy, sz, e_sun = sun[SUN_X], sun[SUN_Y], sun[SUN_Z], sun[SUN_E]
     for r in numba.prange(ptr.shape[0] - 1):
         acc0 = 0.0
         acc1 = 0.0
@@ -239,7 +242,10 @@ def _rows_irradiance(table, nrm, rows, out):
 
 
 @pjit
-def _sun_rays(rows, pos, nrm, eps, sx, sy, sz, cos_out, out_o, out_d):
+def _sun_rays(rows, pos, nrm, eps, sun, cos_out, out_o, out_d):
+    """Per listed row: cos θ of the Sun on the row's side, and a shadow ray towards the Sun
+    (``sun`` the Sun record, :mod:`raytrace._lights`) from the sample offset along that side."""
+    sx, sy, sz = sun[SUN_X], sun[SUN_Y], sun[SUN_Z]
     for r in numba.prange(rows.shape[0]):
         row = rows[r]
         i = row // 2

@@ -78,6 +78,7 @@ class _Sunlight:
     def __init__(self, scene: Scene, lighting: Lighting, prefiltered_glossy: bool = False):
         self.scene = scene
         self.lighting = lighting
+        self.sun = lighting.sun_record()  # the Sun as the kernels take it (raytrace._lights)
         mats = scene.materials
         self.diff = np.array([m.diffuse for m in mats], dtype=np.float64)
         self.f0 = np.array([m.f0 for m in mats], dtype=np.float64)
@@ -111,7 +112,7 @@ class _Sunlight:
         if e_sun > 0.0 and n:
             want = np.empty(n, dtype=bool)
             o = np.empty((n, 3), np.float32)  # Embree's precision: rounded once, as before
-            _surface.sun_rays(s["P"], s["NS"], s["NG"], sx, sy, sz, self.eps, want, o)
+            _surface.sun_rays(s["P"], s["NS"], s["NG"], self.sun, self.eps, want, o)
             idx = np.flatnonzero(want)
             direct = None
             if presets.FUSED_GATHER and occluder_t is None:
@@ -119,9 +120,9 @@ class _Sunlight:
             if len(idx) and direct is not None:
                 # the disc samples drawn and the shadow rays cast in one kernel
                 pixel, number, n_strata, seed = disc if disc is not None else (idx, idx, 0, 0)
-                _paths.sun_visibility(direct.handle, idx, s["P"], s["NG"], float(sx), float(sy), float(sz), self.eps,
+                _paths.sun_visibility(direct.handle, idx, s["P"], s["NG"], self.sun, self.eps,
                                       np.asarray(pixel, np.int64), np.asarray(number, np.int64), int(n_strata),
-                                      int(seed), math.cos(0.5 * light.sun_angular_diameter_rad), vis)
+                                      int(seed), vis)
             elif len(idx):
                 if disc is None:
                     d = np.broadcast_to(np.float32([sx, sy, sz]), (len(idx), 3))
@@ -129,8 +130,7 @@ class _Sunlight:
                     # (float32: they only steer shadow rays)
                     d = np.empty((len(idx), 3), np.float32)
                     pixel, number, n_strata, seed = disc
-                    _surface.sun_disc_dirs(pixel[idx], number[idx], n_strata, seed, sx, sy, sz,
-                                           math.cos(0.5 * light.sun_angular_diameter_rad), d)
+                    _surface.sun_disc_dirs(pixel[idx], number[idx], n_strata, seed, self.sun, d)
                 if occluder_t is None:
                     blocked = self.scene.occluded(o[idx], d, robust=robust)
                 else:
@@ -138,7 +138,7 @@ class _Sunlight:
                     blocked = h["geomID"] >= 0
                     occluder_t[idx[blocked]] = h["tfar"][blocked]
                 vis[idx[~blocked]] = 1.0
-            _surface.shade_sun(s["NS"], s["WO"], s["comp"], self.diff, self.f0, self.alpha, sx, sy, sz, e_sun, vis, L)
+            _surface.shade_sun(s["NS"], s["WO"], s["comp"], self.diff, self.f0, self.alpha, self.sun, vis, L)
         return L, vis
 
     def mirror_hits(self, s):
@@ -201,12 +201,12 @@ class _Sunlight:
             return None
         d = np.empty((len(cand) * n_rays, 3), np.float32)  # as Embree takes them
         _surface.sun_disc_dirs(np.repeat(pix[cand].astype(np.int64), n_rays), np.tile(np.arange(n_rays), len(cand)),
-                               n_rays, seed, sx, sy, sz, math.cos(half), d)
+                               n_rays, seed, self.sun, d)
         o = np.repeat(s["P"][cand] + self.eps * s["NG"][cand], n_rays, axis=0)
         v = 1.0 - self.scene.occluded(o, d).reshape(len(cand), n_rays).mean(axis=1)
         full = np.zeros((len(cand), 3))
-        _surface.shade_sun(s["NS"][cand], s["WO"][cand], s["comp"][cand], self.diff, self.f0, self.alpha, sx, sy, sz,
-                           e_sun, np.ones(len(cand)), full)
+        _surface.shade_sun(s["NS"][cand], s["WO"][cand], s["comp"][cand], self.diff, self.f0, self.alpha, self.sun,
+                           np.ones(len(cand)), full)
         dL = (v - vis[cand])[:, None] * full
         vis[cand] = v
         return cand, dL
@@ -240,7 +240,6 @@ class _Context(_Sunlight):
         self.glossy_level = np.searchsorted(levels, self.alpha).clip(0, max(len(levels) - 1, 0))
         self.glossy_env = env.glossy_table(self.p, levels, cells) if len(levels) else np.zeros((1, 2, 2, 3))
         self.cf = self.cache.solve(lighting, env_irradiance=self.env_irradiance)
-        self.sun = np.array([*lighting.sun_dir_body, lighting.sun_irradiance_at_target_W_m2])
 
     def add_mirror(self, s, E_point, L, hits, lbar_out=None):
         """Adds the cheap specular term of everything but the Sun
@@ -281,12 +280,9 @@ class _Context(_Sunlight):
         if direct is not None:
             val = np.empty((len(idx), 3))
             v = np.empty(len(idx))
-            light = self.lighting
-            sx, sy, sz = (float(x) for x in light.sun_dir_body)
             with parallel_chunksize(_FUSED_CHUNK):
                 _paths.lobe_traced(direct.handle, idx, s["P"], s["NS"], s["NG"], s["WO"], s["comp"], n_rays, seed,
-                                   seed ^ LOBE_PATH_STREAM, np.asarray(pix, dtype=np.int64), self.eps, sx, sy, sz,
-                                   light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
+                                   seed ^ LOBE_PATH_STREAM, np.asarray(pix, dtype=np.int64), self.eps, _GATHER_BOUNCES,
                                    np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(), lbar, val, v)
             out[idx] = val
             if var is not None:
@@ -385,12 +381,9 @@ class _Context(_Sunlight):
         np.cumsum(counts, out=start[1:])
         E = np.empty((n, 3))
         h = np.empty(n, dtype=np.int64)
-        light = self.lighting
-        sx, sy, sz = (float(x) for x in light.sun_dir_body)
         with parallel_chunksize(_FUSED_CHUNK):
             _paths.gather_traced(direct.handle, s["P"], s["NS"], s["NG"], rows, start, first, seeds[0], seeds[1],
-                                 pix.astype(np.int64), share, kmul, self.eps, sx, sy, sz,
-                                 light.sun_irradiance_at_target_W_m2 > 0.0, _GATHER_BOUNCES,
+                                 pix.astype(np.int64), share, kmul, self.eps, _GATHER_BOUNCES,
                                  np.float32(_FIRST_NEAR_SPACINGS * self.cache.spacing_m),
                                  np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(),
                                  self.env_irradiance, presets.GATHER_ALPHA, E, var, h)
@@ -506,7 +499,7 @@ class _Context(_Sunlight):
         want = np.empty(len(d), dtype=bool)
         so = np.empty((len(d), 3))
         _gather.bounce_sun_rays(o, d, h["tfar"].astype(np.float64), h["geomID"], h["primID"], self.scene.face_offset,
-                                self.scene.face_normal, sx, sy, sz, self.eps, want, so)
+                                self.scene.face_normal, self.sun, self.eps, want, so)
         idx = np.flatnonzero(want)
         if len(idx):
             blocked = self.scene.occluded(so[idx], np.broadcast_to(np.float32([sx, sy, sz]), (len(idx), 3)))

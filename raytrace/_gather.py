@@ -14,6 +14,7 @@ import numpy as np
 from . import environment as env
 from ._cache_kernels import glossy_draw, hit_normals
 from ._jit import inline, jit, jit_exact, pjit
+from ._lights import SUN_X, SUN_Y, SUN_Z
 from ._sampling import _cmj_perms, _cmj_point, _hash01, _hash32, _owen_sobol2_keyed, _strata
 from ._surface import incoming, incoming_env
 from .brdf import cosine_direction, sample_brdf
@@ -61,9 +62,11 @@ def gather_rays(P, NS, NG, start, first, seed, pix, share, kmul, eps, out_o, out
 
 
 @pjit
-def bounce_sun_rays(O, D, tfar, geom, prim, face_offset, face_normal, sx, sy, sz, eps, want, out_o):
+def bounce_sun_rays(O, D, tfar, geom, prim, face_offset, face_normal, sun, eps, want, out_o):
     """Shadow rays towards the Sun from the hits of traced rays (o + t·d, offset along the
-    geometric normal on the side the ray arrived from), wanted where that side faces the Sun."""
+    geometric normal on the side the ray arrived from), wanted where that side faces the Sun
+    (``sun`` the Sun record, :mod:`raytrace._lights`)."""
+    sx, sy, sz = sun[SUN_X], sun[SUN_Y], sun[SUN_Z]
     for m in numba.prange(D.shape[0]):
         want[m] = False
         if geom[m] < 0:

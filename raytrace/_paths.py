@@ -24,6 +24,7 @@ from ._cache_kernels import glossy_draw, hit_normals
 from ._embree import intersect1, occluded1, ray_buffer
 from ._gather import add_lobe_term, gather_estimate, gather_start, mean_estimate
 from ._jit import inline, pjit
+from ._lights import SUN_COS_HALF, SUN_E, SUN_X, SUN_Y, SUN_Z
 from ._sampling import _cmj_perms, _cmj_point, _hash01, _hash32, _owen_sobol2_keyed, _strata
 from ._surface import disc_direction, incoming, incoming_env
 from .brdf import cosine_direction, onb, sample_brdf
@@ -33,12 +34,13 @@ _BLOCK = 16
 
 
 @inline
-def _sun_visibility(scene, buf, ox, oy, oz, dx, dy, dz, g, pr, t, face_offset, face_normal, sx, sy, sz, eps, sun_on):
+def _sun_visibility(scene, buf, ox, oy, oz, dx, dy, dz, g, pr, t, face_offset, face_normal, sun, eps):
     """The Sun's visibility at the hit of the ray (o, d) as :meth:`_context._Context._bounce_sun`
-    gives it: −1 at a miss or when there is no sunlight, 0 where the side the ray arrived from
-    faces away from the Sun or a shadow ray (from the hit, offset along that side's normal)
-    is blocked, else 1."""
-    if g < 0 or not sun_on:
+    gives it: −1 at a miss or when there is no sunlight (``sun[SUN_E]`` = 0), 0 where the side
+    the ray arrived from faces away from the Sun or a shadow ray (from the hit, offset along
+    that side's normal) is blocked, else 1. ``sun``: the Sun record (:mod:`raytrace._lights`)."""
+    sx, sy, sz = sun[SUN_X], sun[SUN_Y], sun[SUN_Z]
+    if g < 0 or not sun[SUN_E] > 0.0:
         return -1.0
     f = face_offset[g] + pr
     nx = face_normal[f, 0]
@@ -78,13 +80,14 @@ def _bounce_draw(ox, oy, oz, dx, dy, dz, f, hu, hv, t, face_normal, corner_norma
 
 @inline
 def _traced_indirect(scene, buf, path, ox, oy, oz, dx, dy, dz, g, pr, hu, hv, t, key, seed, levels, first_near,
-                     near, sx, sy, sz, sun_on, eps, lk):
+                     near, eps, lk):
     """The traced estimate of the indirect irradiance at the hit (g ≥ 0) of the gather ray
     (o, d), as :meth:`_context._Context._traced_indirect` computes it with ``levels`` bounces:
     −1 where the cache stands in (a miss; a hit farther than ``first_near`` on a part that is
     not glossy), 0 where the bounce's draw fails, else the weight of the bounce times the
     radiance its ray brings back, the path continued from hits nearer than ``near`` (float32
-    distances, as the batched code compares them) and from every glossy hit. ``path``
+    distances, as the batched code compares them) and from every glossy hit; the Sun from the
+    record ``sun`` of ``lk`` (:mod:`raytrace._lights`). ``path``
     (≥ levels, 14) is scratch for the path's vertices; ``lk`` the tuple of arrays
     :meth:`raytrace._context._Context._lookup` returns (a numba-inlined call takes at most 30
     arguments: CPython passes more as one tuple, which numba's inliner does not take)."""
@@ -106,8 +109,8 @@ def _traced_indirect(scene, buf, path, ox, oy, oz, dx, dy, dz, g, pr, hu, hv, t,
         if not ok:
             break
         g2, p2, u2, v2, t2 = intersect1(scene, buf, o2x, o2y, o2z, d2x, d2y, d2z)
-        vis2 = _sun_visibility(scene, buf, o2x, o2y, o2z, d2x, d2y, d2z, g2, p2, t2, face_offset, face_normal, sx,
-                               sy, sz, eps, sun_on)
+        vis2 = _sun_visibility(scene, buf, o2x, o2y, o2z, d2x, d2y, d2z, g2, p2, t2, face_offset, face_normal, sun,
+                               eps)
         path[n, 0], path[n, 1], path[n, 2] = o2x, o2y, o2z
         path[n, 3], path[n, 4], path[n, 5] = d2x, d2y, d2z
         path[n, 6], path[n, 7], path[n, 8] = wr, wg, wb
@@ -142,10 +145,10 @@ def _traced_indirect(scene, buf, path, ox, oy, oz, dx, dy, dz, g, pr, hu, hv, t,
 
 
 @pjit
-def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, share, kmul, eps, sx, sy, sz, sun_on,
-                  levels, first_near, near, face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
-                  mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, E_unocc, alpha,
-                  out, out_var, out_hits):
+def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, share, kmul, eps, levels, first_near,
+                  near, face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy,
+                  table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, E_unocc, alpha, out, out_var,
+                  out_hits):
     """Final-gather irradiance per point k (at row rows[k] of P, NS and NG; every other array is
     per point) from rays start[k] … start[k + 1] − 1, as
     :meth:`raytrace._context._Context._gather_chunk` computes it from the kernels
@@ -155,7 +158,8 @@ def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, sh
     (:func:`_traced_indirect`, keyed by pix·kmul + j and ``path_seed``) and
     :func:`raytrace._gather.gather_sum` (environment control variate with weight ``alpha``;
     ``out_var`` the estimate's luminance variance). ``out_hits[k]`` counts the rays that hit a
-    part. ``scene`` is a :class:`raytrace._embree.DirectScene` handle."""
+    part. ``sun`` is the Sun record (:mod:`raytrace._lights`: its shadow rays are cast where
+    ``sun[SUN_E]`` > 0), ``scene`` a :class:`raytrace._embree.DirectScene` handle."""
     stream = 2 * seed + 15
     a = alpha
     lk = (face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot,
@@ -206,11 +210,10 @@ def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, sh
                 if not below:  # (then a hit) under the geometric surface nothing arrives
                     hu = np.float64(hu32)
                     hv = np.float64(hv32)
-                    vis = _sun_visibility(scene, buf, ox, oy, oz, dx, dy, dz, g, pr, t, face_offset, face_normal, sx,
-                                          sy, sz, eps, sun_on)
+                    vis = _sun_visibility(scene, buf, ox, oy, oz, dx, dy, dz, g, pr, t, face_offset, face_normal, sun,
+                                          eps)
                     eir, eig, eib = _traced_indirect(scene, buf, path, ox, oy, oz, dx, dy, dz, g, pr, hu, hv, t,
-                                                     pix[k] * kmul + j, path_seed, levels, first_near, near, sx, sy,
-                                                     sz, sun_on, eps, lk)
+                                                     pix[k] * kmul + j, path_seed, levels, first_near, near, eps, lk)
                     r, gg, b = incoming(g, pr, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_normal, corner_normal,
                                         comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun,
                                         valid, face_s, lat_start, lat_ids, p, tex, vis, eir, eig, eib)
@@ -226,7 +229,7 @@ def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, sh
 
 
 @pjit
-def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, eps, sx, sy, sz, sun_on, levels, near,
+def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, eps, levels, near,
                 face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun,
                 E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, CV, out, out_var):
     """Each listed point's (idx[j]) sampled specular reflection minus its control variate, as
@@ -234,7 +237,7 @@ def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, e
     (n_rays lobe directions, keyed by pixel and ``seed``), the shadow rays and paths of their
     hits (:func:`_traced_indirect`: the first bounce from every hit, further ones from hits
     nearer than ``near``; keyed by pix·n_rays + r and ``path_seed``) and :func:`raytrace._gather.lobe_sum`; a draw that fails (weight 0) casts
-    no ray."""
+    no ray. ``sun``: the Sun record (:mod:`raytrace._lights`)."""
     gx = _strata(n_rays)
     gy = n_rays // gx
     lk = (face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot,
@@ -271,11 +274,10 @@ def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, e
                 else:
                     hu = np.float64(hu32)
                     hv = np.float64(hv32)
-                    vis = _sun_visibility(scene, buf, ox, oy, oz, lx, ly, lz, g, pr, t, face_offset, face_normal, sx,
-                                          sy, sz, eps, sun_on)
+                    vis = _sun_visibility(scene, buf, ox, oy, oz, lx, ly, lz, g, pr, t, face_offset, face_normal, sun,
+                                          eps)
                     eir, eig, eib = _traced_indirect(scene, buf, path, ox, oy, oz, lx, ly, lz, g, pr, hu, hv, t,
-                                                     pix[k] * n_rays + r, path_seed, levels, every, near, sx, sy, sz,
-                                                     sun_on, eps, lk)
+                                                     pix[k] * n_rays + r, path_seed, levels, every, near, eps, lk)
                     a, b, cc = incoming(g, pr, hu, hv, ox, oy, oz, lx, ly, lz, face_offset, face_normal, corner_normal,
                                         comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun,
                                         valid, face_s, lat_start, lat_ids, p, tex, vis, eir, eig, eib)
@@ -284,12 +286,14 @@ def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, e
 
 
 @pjit
-def sun_visibility(scene, idx, P, NG, sx, sy, sz, eps, pixel, number, n_strata, seed, cos_half, out):
+def sun_visibility(scene, idx, P, NG, sun, eps, pixel, number, n_strata, seed, out):
     """out[k] = 1 where the shadow ray of listed point k = idx[j] reaches the Sun, else 0 (the
     rest untouched), as :meth:`raytrace._context._Sunlight.sunlight` casts it: from P + ε·NG
     (float32, as Embree takes it) towards the Sun's centre, or with ``n_strata`` > 0 towards
     the solar-disc sample :func:`raytrace._surface.sun_disc_dirs` draws for (pixel[k],
-    number[k]) — the same directions, without their array."""
+    number[k]) — the same directions, without their array. ``sun``: the Sun record
+    (:mod:`raytrace._lights`)."""
+    sx, sy, sz, cos_half = sun[SUN_X], sun[SUN_Y], sun[SUN_Z], sun[SUN_COS_HALF]
     gx = _strata(max(n_strata, 1))
     gy = max(n_strata, 1) // gx
     tx, ty, tz, bx, by, bz = onb(sx, sy, sz)

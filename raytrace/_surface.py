@@ -17,6 +17,7 @@ from . import environment as env
 from ._cache_kernels import interpolate_rows, lattice_rows
 from ._jit import FASTMATH, inline, pjit, pjit_exact
 from ._kernels import moller_trumbore, normals_facing
+from ._lights import SUN_COS_HALF, SUN_E, SUN_X, SUN_Y, SUN_Z
 from ._sampling import _hash01, _hash32, _strata, permute
 from .brdf import brdf_cos, onb, specular_albedo
 
@@ -71,9 +72,11 @@ def surfaces(O, D, face, V, F, face_normal, corner_normal, P, NS, NG, WO, B, SID
 
 
 @pjit
-def sun_rays(P, NS, NG, sx, sy, sz, eps, want, out_o):
+def sun_rays(P, NS, NG, sun, eps, want, out_o):
     """Which points can see the Sun's direction at all (both normals towards it), and the
-    shadow-ray origins (offset along the geometric normal)."""
+    shadow-ray origins (offset along the geometric normal). ``sun``: the Sun record
+    (:mod:`raytrace._lights`)."""
+    sx, sy, sz = sun[SUN_X], sun[SUN_Y], sun[SUN_Z]
     for k in numba.prange(P.shape[0]):
         ok = (NS[k, 0] * sx + NS[k, 1] * sy + NS[k, 2] * sz > 0.0) and \
              (NG[k, 0] * sx + NG[k, 1] * sy + NG[k, 2] * sz > 0.0)
@@ -83,16 +86,17 @@ def sun_rays(P, NS, NG, sx, sy, sz, eps, want, out_o):
 
 
 @pjit
-def sun_disc_dirs(pixel, number, n_strata, seed, sx, sy, sz, cos_half, out_d):
-    """Directions uniform over the solar disc (the cone of half-angle acos(cos_half) about
-    the Sun's centre direction): sample ``number[m]`` (< n_strata) of ``pixel[m]`` takes
-    stratum permute(number, n_strata) of an exact gx × gy grid in (1 − cos θ, φ), the
+def sun_disc_dirs(pixel, number, n_strata, seed, sun, out_d):
+    """Directions uniform over the solar disc (the cone of half-angle acos(sun[SUN_COS_HALF])
+    about the Sun's centre direction; ``sun`` the Sun record, :mod:`raytrace._lights`): sample
+    ``number[m]`` (< n_strata) of ``pixel[m]`` takes stratum permute(number, n_strata) of an exact gx × gy grid in (1 − cos θ, φ), the
     permutation drawn per pixel and seed (:func:`raytrace._sampling.permute`), jittered from a hash of (pixel,
     number, seed). The permutation decouples the disc stratum from the sample's number, which
     also indexes its sub-pixel cell (:func:`raytrace._edges.subpixel_rays`): with stratum = number, sub-samples
     in the pixel's left column always took the disc's inner ring, and a penumbra crossing the
     pixel was estimated from 6 correlated pairs, not 36 samples (measured: Cassini ``earth``,
     ``balanced``-16, ±30 % from seed to seed on the dish's shadow edge)."""
+    sx, sy, sz, cos_half = sun[SUN_X], sun[SUN_Y], sun[SUN_Z], sun[SUN_COS_HALF]
     gx = _strata(n_strata)
     gy = n_strata // gx
     tx, ty, tz, bx, by, bz = onb(sx, sy, sz)
@@ -104,7 +108,9 @@ def sun_disc_dirs(pixel, number, n_strata, seed, sx, sy, sz, cos_half, out_d):
 @inline
 def disc_direction(pixel, number, n_strata, gx, gy, seed, tx, ty, tz, bx, by, bz, sx, sy, sz, cos_half):
     """One direction of :func:`sun_disc_dirs` ((t, b) the basis about the Sun's direction s
-    that :func:`raytrace.brdf.onb` gives)."""
+    that :func:`raytrace.brdf.onb` gives). It takes the Sun record's entries as scalars, read
+    once by the kernels that call it per sample before their loop: the basis is computed
+    there too, once per kernel."""
     j = permute(number, n_strata, _hash32(pixel, 4 * seed + 23))
     key = pixel * n_strata + number
     u1 = ((j % gx) + _hash01(key, 4 * seed + 21)) / gx
@@ -117,8 +123,10 @@ def disc_direction(pixel, number, n_strata, gx, gy, seed, tx, ty, tz, bx, by, bz
 
 
 @pjit
-def shade_sun(NS, WO, comp, mat_diff, mat_f0, mat_alpha, sx, sy, sz, e_sun, vis, out):
-    """out += V·f·cosθ·E_sun with V the visible fraction of the solar disc (radiance, RGB)."""
+def shade_sun(NS, WO, comp, mat_diff, mat_f0, mat_alpha, sun, vis, out):
+    """out += V·f·cosθ·ν·E_sun with V the visible fraction of the solar disc (radiance, RGB);
+    ``sun`` the Sun record (:mod:`raytrace._lights`)."""
+    sx, sy, sz, e_sun = sun[SUN_X], sun[SUN_Y], sun[SUN_Z], sun[SUN_E]
     for k in numba.prange(NS.shape[0]):
         if vis[k] <= 0.0:
             continue
@@ -188,7 +196,7 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
     that escaped, :func:`incoming_env`): that surface's radiance towards the ray from the
     cache: diffuse ρ_d/π·E,
     the exact specular reflection of the Sun towards −d and the specular albedo times the
-    rest of its irradiance over π. ``sun`` = (s_x, s_y, s_z, ν·E_sun). The Sun's visibility at
+    rest of its irradiance over π. ``sun``: the Sun record (:mod:`raytrace._lights`). The Sun's visibility at
     the hit comes from the cache when ``vis_sun`` < 0, else it is ``vis_sun`` (a shadow ray
     cast from the hit): then the hit's sunlight is exact and only its indirect light comes
     from the cache, so shadows finer than the cache's lattice are not blurred into the light
@@ -218,10 +226,10 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
     nx /= nn
     ny /= nn
     nz /= nn
-    cs = nx * sun[0] + ny * sun[1] + nz * sun[2]
+    cs = nx * sun[SUN_X] + ny * sun[SUN_Y] + nz * sun[SUN_Z]
     traced_spec = eir >= 0.0 and glossy[c]
     if vis_sun >= 0.0:  # exact sunlight replaces the cache's
-        ex = vis_sun * sun[3] * cs if cs > 0.0 else 0.0
+        ex = vis_sun * sun[SUN_E] * cs if cs > 0.0 else 0.0
     else:
         ex = es
     if eir >= 0.0 and not traced_spec:  # a traced estimate replaces the indirect light
@@ -239,13 +247,13 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
     if mat_f0[c, 0] > 0.0 or mat_f0[c, 1] > 0.0 or mat_f0[c, 2] > 0.0:
         mu = -(nx * dx + ny * dy + nz * dz)
         if mu > 0.0:
-            if es > 0.0 and cs > 0.0 and sun[3] > 0.0:
-                vis = min(es / (sun[3] * cs), 1.0)
-                sr, sg, sb = brdf_cos(nx, ny, nz, -dx, -dy, -dz, sun[0], sun[1], sun[2], 0.0, 0.0, 0.0,
+            if es > 0.0 and cs > 0.0 and sun[SUN_E] > 0.0:
+                vis = min(es / (sun[SUN_E] * cs), 1.0)
+                sr, sg, sb = brdf_cos(nx, ny, nz, -dx, -dy, -dz, sun[SUN_X], sun[SUN_Y], sun[SUN_Z], 0.0, 0.0, 0.0,
                                       mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2], mat_alpha[c])
-                lr += sr * sun[3] * vis
-                lg += sg * sun[3] * vis
-                lb += sb * sun[3] * vis
+                lr += sr * sun[SUN_E] * vis
+                lg += sg * sun[SUN_E] * vis
+                lb += sb * sun[SUN_E] * vis
             if traced_spec:
                 lr += eir
                 lg += eig

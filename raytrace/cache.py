@@ -770,8 +770,7 @@ class RadianceCache:
             o = np.empty((len(rows), 3), np.float32)
             d = np.empty((len(rows), 3), np.float32)
             cosv = np.empty(len(rows))
-            sx, sy, sz = lighting.sun_dir_body
-            _sun_rays(rows, pos, nrm, self.eps_m, sx, sy, sz, cosv, o, d)
+            _sun_rays(rows, pos, nrm, self.eps_m, lighting.sun_record(), cosv, o, d)
             lit = cosv > 0.0
             seen = ~self.scene.occluded(o[lit], d[lit], robust=True)
             vals = np.zeros(len(rows))
@@ -790,9 +789,8 @@ class RadianceCache:
                 E0[:, c] += math.pi * (mats["W_gb"][c] @ L_env[:, c])
             if e_sun > 0.0:
                 gl = mats["glint"]
-                sx, sy, sz = lighting.sun_dir_body
                 hits = E_sun[self._c_alias] if E_sun_hits is None else E_sun_hits
                 _glints(gl["ptr"], gl["face"], gl["u"], gl["v"], gl["side"], gl["n"], gl["wo"],
                         self.scene.component_of_face, self.f0, self.alpha, self._c_valid, self._c_face_s,
-                        self._c_lat_start, self._c_lat_ids, hits, sx, sy, sz, e_sun, math.pi / self.G, E0)
+                        self._c_lat_start, self._c_lat_ids, hits, lighting.sun_record(), math.pi / self.G, E0)
         return E_sun, E0

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _lights
 from . import environment as env
 from ._checks import finite_number, rotation, unit3
 from .constants import EARTH_RADIUS_M, EARTH_TEXTURES, SOLAR_CONSTANT_W_M2, SUN_ANGULAR_DIAMETER_RAD
@@ -137,6 +138,12 @@ class Lighting:
     def sun_irradiance_at_target_W_m2(self) -> float:
         """ν · E_sun: the direct solar irradiance on a surface facing the Sun [W/m²]."""
         return self.shadow_fraction * self.sun_irradiance_W_m2
+
+    def sun_record(self) -> np.ndarray:
+        """The Sun as the kernels take it (:mod:`raytrace._lights`): direction, ν·E_sun and
+        the cosine of the solar disc's angular radius, one float64 array."""
+        return _lights.sun_record(self.sun_dir_body, self.sun_irradiance_at_target_W_m2,
+                                  self.sun_angular_diameter_rad)
 
     def packed(self) -> tuple[np.ndarray, np.ndarray]:
         """The parameter vector and texture array the environment kernels take."""

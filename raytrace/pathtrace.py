@@ -28,6 +28,7 @@ import numpy as np
 from . import environment as env
 from ._background import background
 from ._jit import jit, pjit
+from ._lights import SUN_COS_HALF, SUN_E, SUN_X, SUN_Y, SUN_Z
 from ._surface import surfaces
 from .brdf import brdf_cos, onb, sample_brdf
 
@@ -87,10 +88,12 @@ def _escape(idx, pix_of, O, D, thr, p, tex, acc):
 
 
 @pjit
-def _vertex(pix_of, s, seed, depth, P, NS, NG, WO, comp, mat_diff, mat_f0, mat_alpha, thr, sx, sy, sz, cos_half,
-            e_sun, eps, sh_o, sh_d, sh_c, sh_ok, nx_o, nx_d, alive):
+def _vertex(pix_of, s, seed, depth, P, NS, NG, WO, comp, mat_diff, mat_f0, mat_alpha, thr, sun, eps, sh_o, sh_d,
+            sh_c, sh_ok, nx_o, nx_d, alive):
     """At each hit: a Sun sample for next-event estimation (shadow ray + its would-be
-    contribution) and the next direction from the BRDF (throughput updated, roulette)."""
+    contribution; ``sun`` the Sun record, :mod:`raytrace._lights`) and the next direction from
+    the BRDF (throughput updated, roulette)."""
+    sx, sy, sz, cos_half, e_sun = sun[SUN_X], sun[SUN_Y], sun[SUN_Z], sun[SUN_COS_HALF], sun[SUN_E]
     for k in numba.prange(P.shape[0]):
         q = pix_of[k]
         c = comp[k]
@@ -177,9 +180,7 @@ def render_reference(scene, camera, R, t, lighting, geo, *, spp: int, seed: int)
     p, tex = lighting.packed()
     p_bg = p.copy()
     p_bg[env.P_AMBIENT] = 0.0
-    e_sun = lighting.sun_irradiance_at_target_W_m2
-    sx, sy, sz = lighting.sun_dir_body
-    cos_half = math.cos(0.5 * lighting.sun_angular_diameter_rad)
+    sun = lighting.sun_record()
     eps = scene.ray_eps_m
     out = np.zeros((H * W, 3))
     # pixels where the target may appear (plus a 1-pixel border: jittered rays reach it)
@@ -241,8 +242,8 @@ def render_reference(scene, camera, R, t, lighting, geo, *, spp: int, seed: int)
             nx_o = np.empty((m, 3))
             nx_d = np.empty((m, 3))
             alive = np.empty(m, dtype=bool)
-            _vertex(pix_of, s, seed, depth, P, NS, NG, WO, comp, diff, f0, alpha, thr, sx, sy, sz, cos_half,
-                    e_sun, eps, sh_o, sh_d, sh_c, sh_ok, nx_o, nx_d, alive)
+            _vertex(pix_of, s, seed, depth, P, NS, NG, WO, comp, diff, f0, alpha, thr, sun, eps, sh_o, sh_d, sh_c,
+                    sh_ok, nx_o, nx_d, alive)
             sidx = np.flatnonzero(sh_ok)
             if len(sidx):
                 blocked = scene.occluded(sh_o[sidx], sh_d[sidx], robust=True)

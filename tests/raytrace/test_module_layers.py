@@ -10,7 +10,7 @@ PACKAGE = Path(__file__).resolve().parents[2] / "raytrace"
 
 # modules that hold numba kernels (and their constants) and nothing that drives them
 KERNELS = {"_sampling", "_surface", "_rows", "_gather", "_filter", "_edges", "_background", "_paths",
-           "_cache_kernels", "_kernels", "_embree"}
+           "_cache_kernels", "_kernels", "_embree", "_lights"}
 # what a kernel module may import besides the other kernel modules: numba's policy and the kernels
 # of the environment and the BRDF
 KERNEL_DEPENDENCIES = {"_jit", "environment", "brdf"}

@@ -5,7 +5,7 @@ column of the domain, uniform over it across seeds."""
 import numpy as np
 import pytest
 
-from raytrace import _edges, _gather, _sampling, _surface, brdf
+from raytrace import _edges, _gather, _lights, _sampling, _surface, brdf
 
 FX, FY, CX, CY, W = 800.0, 700.0, 40.0, 30.0, 80
 
@@ -98,7 +98,8 @@ def _disc_strata(pixels, n, seed):
     pixel = np.repeat(np.asarray(pixels, dtype=np.int64), n)
     number = np.tile(np.arange(n, dtype=np.int64), len(pixels))
     d = np.empty((len(pixel), 3))
-    _surface.sun_disc_dirs(pixel, number, n, seed, 0.0, 0.0, 1.0, np.cos(half), d)
+    sun = _lights.sun_record((0.0, 0.0, 1.0), 1361.0, 2 * half)
+    _surface.sun_disc_dirs(pixel, number, n, seed, sun, d)
     gx = _sampling._strata(n)
     gy = n // gx
     u1 = (1.0 - d[:, 2]) / (1.0 - np.cos(half))
