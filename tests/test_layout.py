@@ -1,6 +1,7 @@
 """The house rules of the layout, read from the source (no imports run): the three packages never
 import each other (only ``cli.py`` joins them), no import cycle between any two modules (lazy
-imports inside functions count), and no module grows past what one reader holds."""
+imports inside functions count), the modules of numba kernels import no module of the objects
+that drive them, and no module grows past what one reader holds."""
 
 import ast
 from pathlib import Path
@@ -9,6 +10,12 @@ ROOT = Path(__file__).resolve().parents[1]
 ROOMS = ("orbit", "raytrace", "degrade")
 MAX_LINES = {"cli.py": 1000, "raytrace": 900}
 """Largest file [lines]: ``cli.py`` (the face and the composition root), any module of ``raytrace``."""
+KERNELS = {f"raytrace.{m}" for m in ("_sampling", "_surface", "_rows", "_gather", "_filter", "_edges", "_background",
+                                     "_paths", "_cache_kernels", "_kernels", "_embree", "_lights")}
+"""The modules of ``raytrace`` that hold numba kernels (and their constants) and nothing that drives them."""
+KERNEL_DEPENDENCIES = {"raytrace._jit", "raytrace.environment", "raytrace.brdf"}
+"""What a kernel module may import besides the other kernel modules: numba's policy and the
+kernels of the environment and the BRDF."""
 
 
 def _modules() -> dict:
@@ -53,14 +60,12 @@ def test_the_three_packages_never_import_each_other_nor_the_command_line():
     assert not bad, bad
 
 
-def test_no_import_cycle_between_modules():
-    graph = _graph()
-    # Tarjan's strongly connected components: a component of more than one module is a cycle
-    index, low, stack, on_stack, cycles, counter = {}, {}, [], set(), [], [0]
+def _cycles(graph: dict) -> list:
+    """The strongly connected components of more than one module (Tarjan)."""
+    index, low, stack, on_stack, cycles = {}, {}, [], set(), []
 
     def visit(v):
-        index[v] = low[v] = counter[0]
-        counter[0] += 1
+        index[v] = low[v] = len(index)
         stack.append(v)
         on_stack.add(v)
         for w in graph[v]:
@@ -83,7 +88,20 @@ def test_no_import_cycle_between_modules():
     for v in graph:
         if v not in index:
             visit(v)
-    assert not cycles, cycles
+    return cycles
+
+
+def test_no_import_cycle_between_modules():
+    assert _cycles(_graph()) == []
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_kernel_modules_import_no_module_of_objects():
+    graph = _graph()
+    assert KERNELS <= set(graph)
+    allowed = KERNELS | KERNEL_DEPENDENCIES
+    for name in sorted(KERNELS | KERNEL_DEPENDENCIES):
+        assert graph[name] <= allowed, (name, graph[name] - allowed)
 
 
 def test_the_checker_sees_imports_and_cycles():
@@ -92,6 +110,9 @@ def test_the_checker_sees_imports_and_cycles():
     assert "orbit.plan" in graph["cli"] and "raytrace.dataset.run" in graph["cli"]
     assert "raytrace.dataset.pool" in graph["raytrace.dataset.run"]  # `from . import folder, jit, pool`
     assert "degrade.chain" in graph["degrade.presets"]  # a lazy import inside a function
+    assert "raytrace.cache" in graph["raytrace.scene"]  # inside a method
+    assert "raytrace.model" in graph["raytrace.targets.cassini"]  # from ..model
+    assert {"raytrace._context", "raytrace._antialias", "raytrace.presets"} <= graph["raytrace.shade"]
 
 
 def test_no_module_is_larger_than_a_reader_holds():
