@@ -81,8 +81,10 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{PROG}: error: {message}\n")
 
 
-# --------------------------------------------------------------------------- value parsers (others: raytrace.dataset.options)
+# --------------------------------------------------------------------------- the options
 def _utc(text: str) -> str:
+    """``--epoch``: an ISO 8601 UTC time within the solar formulae's validity (the other value
+    parsers: :mod:`raytrace.dataset.options`)."""
     from orbit.epoch import to_unix_seconds
     from orbit.sun import VALID_UTC_RANGE_S
     try:
@@ -93,9 +95,6 @@ def _utc(text: str) -> str:
         raise argparse.ArgumentTypeError(f"must be an ISO 8601 UTC time in 1950-2050 such as 2026-03-20T12:00:00Z, "
                                          f"got {text!r}")
     return text
-
-
-# --------------------------------------------------------------------------- the options
 
 
 def _options() -> tuple:
