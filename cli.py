@@ -435,7 +435,7 @@ def run_plans(jobs: list, args: argparse.Namespace, *, desc: str | None = None) 
     :func:`run_frame`, as the parsed ``args`` ask (workers, shard, scheduler, quiet)."""
     quality = jobs[0][0]["cfg"]["render"]["quality"] if jobs else "fast"
     return runner.run_plans(jobs, run_frame, config_text=config_toml, workers=args.workers, shard=args.shard,
-                            scheduler=args.scheduler, quiet=args.quiet, quality=getattr(args, "quality", "fast"),
+                            scheduler=args.scheduler, quiet=args.quiet, quality=quality,
                             desc=desc, ready=functools.partial(_worker_ready, quality))
 
 

@@ -238,3 +238,18 @@ def test_the_compile_is_of_the_builds_the_frames_will_call(tmp_path, monkeypatch
     assert asked == [per_worker == 1, numba.config.NUMBA_NUM_THREADS == 1]
     assert pool.frame_threads(2, 4) == per_worker
     assert pool.frame_threads(4, 1) == pool.frame_threads(1, 9) == numba.config.NUMBA_NUM_THREADS
+
+
+def test_the_compile_is_of_the_preset_the_configuration_asks_for(tmp_path, monkeypatch):
+    """The kernels compiled first are those of the sequence's preset, whether a flag or the
+    ``--config`` file sets it (the file's ``balanced`` once compiled only the ``fast`` group)."""
+    asked = []
+    monkeypatch.setattr(jit, "kernels_not_compiled",
+                        lambda quality="fast", serial=False: asked.append(quality) or [])
+    conf = tmp_path / "c.toml"
+    conf.write_text('[render]\nquality = "balanced"\n')
+    small = ["--target", "icesat", "--frames", "1", "--width", "64", "--height", "48", "--modalities", "mask",
+             "--workers", "1"]
+    assert run_main(*small, "--config", conf, "--out", tmp_path / "a") == 0
+    assert run_main(*small, "--quality", "reference", "--out", tmp_path / "b") == 0
+    assert asked == ["balanced", "reference"]
