@@ -104,8 +104,6 @@ def _read_bytes(path: str) -> bytes:
 
 
 SCENARIO_FORMAT = "orbitsynth sequence 1"
-
-
 _SCENARIO_LIMIT = 256 << 20  # bytes; a million frames' scenario.json is ~30 MB
 
 

@@ -22,6 +22,12 @@ from ._cores import available_cores
 # every core (scenes.prebuild_scenes) rather than each building its own; False: each builds its own.
 PREBUILD_SCENES = True
 
+_IN_POOL_WORKER = False  # set in the pool's worker processes
+_IN_FRAME = False  # run_frame is running (in a worker: what _abandon_frame waits for)
+_WORKER_STOPPING = False
+_PARENT_POLL_S = 0.5
+_STOP_GRACE_S = 30.0  # a worker whose parent died exits by then even if its frame has not let go
+
 
 def _worker_init(threads: int) -> None:
     """Process-pool initializer: share the cores between the workers; stop on SIGINT or
@@ -38,21 +44,6 @@ def _worker_init(threads: int) -> None:
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
     except Exception as exc:  # noqa: BLE001 - a thread count is an optimisation, never an error
         warn(f"could not set the worker's thread count ({exc})")
-
-
-_IN_POOL_WORKER = False  # set in the pool's worker processes
-
-
-_IN_FRAME = False  # run_frame is running (in a worker: what _abandon_frame waits for)
-
-
-_WORKER_STOPPING = False
-
-
-_PARENT_POLL_S = 0.5
-
-
-_STOP_GRACE_S = 30.0  # a worker whose parent died exits by then even if its frame has not let go
 
 
 def _worker_stop(signum, frame) -> None:
@@ -250,7 +241,6 @@ FRAME_BYTES_PER_PIXEL = 160
 """Peak memory of one worker per pixel of its frame [bytes]: measured 137–139 B/px (peak RSS of a
 one-frame run with one worker, 320×240 to 2560×1920, ``fast`` and ``balanced``, default
 modalities and ``physical`` degradation), with room on top."""
-
 
 WORKER_BASE_BYTES = 700 << 20
 """Peak memory of one worker besides its frame's pixels (libraries, scene, radiance cache) [bytes]."""

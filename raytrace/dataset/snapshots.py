@@ -32,26 +32,20 @@ the default camera's field of view), clean RGB, mask, depth, normals and RGB deg
 presets (paper D4, physical), on a fixed orbit geometry (the equinox epoch, Ω = u₀ = 0: the
 main job's automatic phase would move the references with any change to its search)."""
 
-
 SNAPSHOT_MODALITIES = ("rgb", "rgb_paper", "rgb_physical", "mask", "depth", "normal")
-
 
 SNAPSHOT_PSNR_DB = 45.0
 """RGB passes when its PSNR, over every frame and over the target's window in it, is at least this [dB]."""
 
-
 SNAPSHOT_DEPTH_TOL = (1e-4, 1e-5)
 """Depth passes when |Δ| <= atol + rtol · depth (atol [m], rtol [-]) and misses stay misses."""
-
 
 SNAPSHOT_NORMAL_ATOL = 1e-4
 """Normals pass when every component differs by at most this [-] (background stays 0)."""
 
-
 SNAPSHOT_MASK_TIES = 0.01
 """Mask pixels may differ by ties between touching parts (:func:`_mask_ties`) on at most this
 fraction of the target's pixels [-]; beyond it every differing pixel fails."""
-
 
 _WINDOW_MARGIN_PX = 8
 
