@@ -5,10 +5,19 @@ processes."""
 from __future__ import annotations
 
 import contextlib
+import os
 
 import numba
 
 _POOLS = {}
+
+
+def available_cores() -> int:
+    """The CPUs this process may use (its CPU affinity where the system has one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
 
 
 def submit(name: str, workers: int, fn, *args):

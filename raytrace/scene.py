@@ -17,7 +17,6 @@ runs in robust (watertight) mode: no ray slips between triangles sharing an edge
 from __future__ import annotations
 
 import math
-import os
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -25,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _kernels, presets
-from ._threads import parallel_chunksize
+from ._threads import available_cores, parallel_chunksize
 from .camera import Camera
 from .model import TargetModel
 
@@ -41,10 +40,7 @@ _POOL: ThreadPoolExecutor | None = None
 
 def default_threads() -> int:
     """Threads for the geometry pass: the CPUs this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on Linux
-        return max(1, os.cpu_count() or 1)
+    return available_cores()
 
 
 def _pool() -> ThreadPoolExecutor:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 import sys
 
-from ._cores import available_cores
+from .._threads import available_cores
 
 def precompile_groups(quality: str) -> list:
     """The kernel groups of raytrace._precompile a ``quality`` frame calls: the main job's, the

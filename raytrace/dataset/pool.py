@@ -16,7 +16,7 @@ import os
 import time
 
 from . import UsageError, jit, scenes, warn
-from ._cores import available_cores
+from .._threads import available_cores
 
 # A pool's workers load the scenes (BVH aside) and radiance caches this process built once on
 # every core (scenes.prebuild_scenes) rather than each building its own; False: each builds its own.
