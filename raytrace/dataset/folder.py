@@ -58,7 +58,7 @@ def scenario_doc(plan: dict) -> dict:
     """The ``scenario.json`` document of a plan: the configuration, the versions, the plan's
     scenario fields (its frames aside) and how the images were exposed and seeded."""
     res, cfg, model = plan["result"], plan["cfg"], plan["model"]
-    scen = {"format": "orbitsynth sequence 1", "config": cfg, "seed": cfg["sequence"]["seed"],
+    scen = {"format": SCENARIO_FORMAT, "config": cfg, "seed": cfg["sequence"]["seed"],
             "versions": _versions()}
     scen.update({k: v for k, v in res.items() if k != "frames"})
     scen["target_model"] = {

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Modality", "MODALITIES", "NAMES", "DEFAULT", "PICTURES", "needs_radiance", "produce", "relpath"]
+__all__ = ["Modality", "MODALITIES", "NAMES", "DEFAULT", "PICTURES", "needs_radiance", "relpath"]
 
 
 @dataclass(frozen=True)
@@ -83,11 +83,6 @@ PICTURES = tuple(m.name for m in MODALITIES.values() if m.picture)
 def needs_radiance(names) -> bool:
     """Whether making the modalities ``names`` needs the shaded radiance."""
     return any(MODALITIES[n].shaded for n in names)
-
-
-def produce(name: str, geometry, radiance) -> np.ndarray:
-    """The pixels of modality ``name`` made from the frame's geometry and radiance."""
-    return MODALITIES[name].produce(geometry, radiance)
 
 
 def relpath(name: str, frame: int | str) -> str:
