@@ -118,3 +118,25 @@ class Camera:
         uu, vv = np.meshgrid(np.arange(u0, u1, dtype=np.float64), np.arange(v0, v1, dtype=np.float64))
         return np.column_stack([((uu - self.cx) / self.fx).ravel(), ((vv - self.cy) / self.fy).ravel(),
                                 np.ones(uu.size)])
+
+    def project(self, p_cam) -> np.ndarray:
+        """Pixel coordinates (u, v) of camera-frame points: u = f_x·x/z + c_x, v = f_y·y/z + c_y.
+
+        Parameters
+        ----------
+        p_cam : array_like, shape (N, 3)
+            Points in the camera frame [m].
+
+        Returns
+        -------
+        ndarray, shape (N, 2), float64
+            Pixel coordinates (integer values at pixel centres) [px]; NaN for points at or
+            behind the optical centre (z ≤ 0).
+        """
+        p = np.asarray(p_cam, dtype=np.float64).reshape(-1, 3)
+        z = p[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x, y = p[:, 0] / z, p[:, 1] / z
+        uv = np.column_stack([self.fx * x + self.cx, self.fy * y + self.cy])
+        uv[~(z > 0)] = np.nan
+        return uv

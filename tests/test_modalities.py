@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 import cli
-from raytrace import export
+from raytrace.export import _read as export
 from raytrace import files as F
 from raytrace.dataset import folder
 from raytrace.dataset.modalities import DEFAULT, MODALITIES, NAMES, PICTURES, relpath
