@@ -107,6 +107,8 @@ def _options() -> tuple:
           "body frame = the file's frame (raytrace.meshio.load_mesh)", "FILE"),
         O("--mesh-unit-m", "sequence", opt.float_in(0.0, 1e3, lo_open=True, unit="m"), 1.0,
           "metres per mesh-file unit (0.001 for millimetres)"),
+        O("--keypoints", "sequence", opt.path, None, "the target's keypoints: JSON, model/keypoints.json's schema or a list "
+          "of [x, y, z] [m] in the body frame (default: 11 by farthest-point sampling of its convex hull)", "FILE.json"),
         O("--pattern", "sequence", opt.choice(PATTERNS), "spiral", "relative-motion pattern"),
         O("--frames", "sequence", opt.int_in(1, 1_000_000), DEFAULT_FRAMES,
           "number of frames, evenly spaced over the window"),
@@ -274,7 +276,7 @@ def resolve_config(args: argparse.Namespace, defaults: dict | None = None) -> tu
     if getattr(args, "target", None) is not None or getattr(args, "mesh", None) is not None:
         # the flag chooses the model: a file's mesh (or target) gives way to it, as flags override the file
         file_cfg = {**file_cfg, "sequence": {k: v for k, v in file_cfg.get("sequence", {}).items()
-                                             if k not in ("target", "mesh", "mesh_unit_m")}}
+                                             if k not in ("target", "mesh", "mesh_unit_m", "keypoints")}}
     for o in OPTIONS:
         value = getattr(args, o.key, None)
         if value is None and o.key in file_cfg.get(o.section, {}):
@@ -297,8 +299,9 @@ def resolve_config(args: argparse.Namespace, defaults: dict | None = None) -> tu
             raise CLIError(f"argument --offset-dn: must be at most half the ADC's full scale, {full_scale / 2:g} DN at "
                            f"--bit-depth {d['bit_depth']} (a black level above it leaves the signal no room), got "
                            f"{d['offset_dn']:g}")
-    if cfg["sequence"]["mesh"] is not None:
-        cfg["sequence"]["mesh"] = os.path.abspath(cfg["sequence"]["mesh"])
+    for key in ("mesh", "keypoints"):
+        if cfg["sequence"][key] is not None:
+            cfg["sequence"][key] = os.path.abspath(cfg["sequence"][key])
     return cfg, given
 
 
@@ -346,6 +349,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
     except PlanError as exc:
         raise CLIError(f"argument --{exc.key.replace('_', '-')}: {exc}") from None
     plan.update({"model": model, "model_spec": spec, "camera": camera, "cfg": cfg,
+                 "keypoints": scenes.keypoints_of(model, seq["keypoints"]),
                  "name": f"{target}_{plan['result']['pattern']}"})
     return plan
 
@@ -417,6 +421,7 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
     info.update({"bbox": None if bbox is None else [int(v) for v in bbox],
                  "visible_fraction": None if math.isnan(vf) else float(vf),
                  "pixel_counts": [int(v) for v in geo.pixel_counts]})
+    info.update(scenes.keypoint_fields(task, scene, camera, R, t))
     return images, info
 
 
@@ -513,17 +518,18 @@ def dataset_main(argv: list) -> int:
                    help="built-in targets, comma-separated, in the order of the table (default: all)")
     p.add_argument("--patterns", action="store_true", help="all four patterns per target (default: --pattern only)")
     defaults = {"frames": DATASET_FRAMES, "degrade": "none", "modalities": list(DATASET_MODALITIES)}
-    opt.add_options(p, OPTIONS, defaults, skip=("target", "mesh", "mesh_unit_m"))
+    opt.add_options(p, OPTIONS, defaults, skip=("target", "mesh", "mesh_unit_m", "keypoints"))
     _add_exec(p, out_help="dataset folder; one sub-folder TARGET_PATTERN per sequence (default: output/dataset)")
     args = p.parse_args(argv)
-    for key in ("target", "mesh", "mesh_unit_m"):
+    for key in ("target", "mesh", "mesh_unit_m", "keypoints"):
         setattr(args, key, None)
     t0 = time.perf_counter()
 
     def plan_and_run():
         cfg, given = resolve_config(args, defaults)
-        if cfg["sequence"]["mesh"] is not None:
-            raise CLIError("--config: [sequence] mesh is not used by the dataset command (built-in targets only)")
+        for key in ("mesh", "keypoints"):
+            if cfg["sequence"][key] is not None:
+                raise CLIError(f"--config: [sequence] {key} is not used by the dataset command (built-in targets only)")
         if args.patterns and (cfg["pattern"]["amplitude_m"] is not None or cfg["pattern"]["kappa"] is not None):
             # one (A, kappa) is one pattern: the four would all be it, in one folder
             raise CLIError("argument --patterns: draws each pattern from --seed; drop --amplitude-m/--kappa")

@@ -478,3 +478,53 @@ def test_a_fresh_numba_cache_is_detected_and_filled_by_the_precompile_step(tmp_p
                        check=False)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["fast,reference", "[]", "reference", "-"]
+
+
+def test_keypoints_option_labels_and_sequence_identity(tmp_path, capsys):
+    """--keypoints: the file's points land in model/keypoints.json; each frame's keypoints_px is
+    OpenCV's projection with the frame's pose and camera.json's K; no point is visible or
+    shadowed by the target while Earth's shadow holds the frame; other points are another
+    sequence (refused), the same points resume; a bad file is one line and writes nothing."""
+    import hashlib
+
+    import cv2
+    from tests.cli_helpers import run_main
+    pts = [[0.5, -3.8, 0.0], [-0.4, 3.8, 0.0], [1.1, 0.6, -0.6], [0.0, 0.0, 0.97], [-2.0, -0.5, 0.4]]
+    kp = tmp_path / "kp.json"
+    kp.write_text(json.dumps({"names": ["tip-y", "tip+y", "st", "top", "shade"], "points_body_m": pts}))
+    small = ["--target", "icesat", "--frames", "8", "--width", "96", "--height", "72", "--focal-length-mm", "0.3",
+             "--modalities", "mask,depth", "--arg-lat-deg", "90", "--workers", "1", "--quiet"]
+    seq = tmp_path / "seq"
+    assert run_main(*small, "--keypoints", kp, "--out", seq) == 0
+    doc = json.loads((seq / "model/keypoints.json").read_text())
+    assert doc["names"] == ["tip-y", "tip+y", "st", "top", "shade"] and doc["points_body_m"] == pts
+    assert doc["frame"] == "body" and doc["unit"] == "m" and doc["source"] == "file kp.json"
+    K = np.array(json.loads((seq / "camera.json").read_text())["K"])
+    labels = json.loads((seq / "labels.json").read_text())
+    seen_dark = set()
+    for lab in labels:
+        R = np.array(lab["R_cam_from_body"]).reshape(3, 3)
+        ref, _ = cv2.projectPoints(np.array(pts), cv2.Rodrigues(R)[0], np.array(lab["t_cam_m"]), K, np.zeros(5))
+        np.testing.assert_allclose(np.array(lab["keypoints_px"], dtype=float), ref.reshape(-1, 2), atol=1e-6)
+        assert len(lab["keypoints_state"]) == 5 and set(lab["keypoints_state"]) <= {"visible", "shadowed", "occluded",
+                                                                                       "outside"}
+        if lab["shadow_fraction"] < 0.5:
+            seen_dark.update(lab["keypoints_state"])
+    assert "visible" not in seen_dark and "shadowed" in seen_dark  # the phase ends in Earth's shadow
+    digest = hashlib.sha256((seq / "model/keypoints.json").read_bytes()).hexdigest()
+    assert json.loads((seq / "manifest.json").read_text())["files"]["model/keypoints.json"] == digest
+    # the same points (same file) resume; other points at the same path are another sequence
+    capsys.readouterr()
+    assert run_main(*small, "--keypoints", kp, "--out", seq) == 0
+    pts[0][0] = 0.6
+    kp.write_text(json.dumps(pts))
+    before = sorted(p.name for p in seq.rglob("*"))
+    assert run_main(*small, "--keypoints", kp, "--out", seq) == 2
+    assert "holds another sequence" in capsys.readouterr().err
+    assert sorted(p.name for p in seq.rglob("*")) == before
+    # a bad file: one line naming the option, nothing written
+    kp.write_text("[[0, 0, NaN]]")
+    assert run_main(*small, "--keypoints", kp, "--out", tmp_path / "bad") == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("cli.py: error: argument --keypoints: ") and "point 0 must be" in err and "\n" not in err
+    assert not (tmp_path / "bad").exists()

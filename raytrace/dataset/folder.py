@@ -15,6 +15,7 @@ per-frame labels), ``cfg`` (the configuration), ``model``, ``model_spec``, ``cam
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 
@@ -66,6 +67,11 @@ def scenario_doc(plan: dict) -> dict:
         "n_triangles": model.n_triangles,
         "components": [{"id": k + 1, "name": c.name, "material": c.material, "semantic": c.semantic}
                        for k, c in enumerate(model.components)]}
+    if plan.get("keypoints") is not None:  # the points by their file's digest: other points, another sequence
+        kp = plan["keypoints"]
+        scen["target_model"]["keypoints"] = {
+            "file": KEYPOINTS_FILE, "count": len(kp["names"]), "source": kp["source"],
+            "sha256": hashlib.sha256(json_text(kp).encode("utf-8")).hexdigest()}
     scen["visible"] = [f["visible"] for f in res["frames"]]
     scen["frames_written"] = frames_to_write(plan)
     scen["exposure"] = ("fixed: linear = radiance * pi / 1361 W/m2 (a white Lambertian surface facing the Sun "
@@ -104,6 +110,8 @@ def _read_bytes(path: str) -> bytes:
 
 
 SCENARIO_FORMAT = "orbitsynth sequence 1"
+KEYPOINTS_FILE = "model/keypoints.json"
+"""The sequence's keypoints (:mod:`raytrace.keypoints`), beside the model."""
 _SCENARIO_LIMIT = 256 << 20  # bytes; a million frames' scenario.json is ~30 MB
 
 
@@ -262,6 +270,8 @@ def prepare_sequence(plan: dict, seq_dir: str, *, config_text: str, shared: bool
         blobs = {scen["target_model"]["file"]: F.model_ply_bytes(plan["model"]),
                  "camera.json": json_text(camerajson_text(plan["camera"], plan["cfg"])).encode("utf-8"),
                  "config.toml": config_text.encode("utf-8")}
+        if plan.get("keypoints") is not None:
+            blobs[KEYPOINTS_FILE] = json_text(plan["keypoints"]).encode("utf-8")
         for rel, data in blobs.items():
             path = os.path.join(seq_dir, rel)
             if not (os.path.isfile(path) and _read_bytes(path) == data):
@@ -322,7 +332,9 @@ def finish_sequence(plan: dict, seq_dir: str, verified=frozenset()) -> dict:
     if done:
         labels = [records[i]["label"] for i in wanted]
         files = {}
-        for rel in ("scenario.json", "camera.json", "config.toml", scenario_doc(plan)["target_model"]["file"]):
+        model = scenario_doc(plan)["target_model"]
+        kp_file = [model["keypoints"]["file"]] if "keypoints" in model else []
+        for rel in ("scenario.json", "camera.json", "config.toml", model["file"], *kp_file):
             files[rel] = F.sha256_file(os.path.join(seq_dir, rel))
         for i in wanted:
             files.update(records[i]["files"])
@@ -348,6 +360,7 @@ def tasks_for(plan: dict, seq_dir: str, shard: tuple | None, *, write: bool = Tr
         k, n = shard
         wanted = [i for i in wanted if i % n == k - 1]
     tasks, skipped = [], 0
+    kp_points = plan["keypoints"]["points_body_m"] if plan.get("keypoints") is not None else None
     for i in wanted:
         if write and F.frame_complete(seq_dir, i) is not None:
             skipped += 1
@@ -356,7 +369,7 @@ def tasks_for(plan: dict, seq_dir: str, shard: tuple | None, *, write: bool = Tr
         tasks.append({"frame": i, "out": seq_dir, "write": write, "cfg": cfg, "model_spec": plan["model_spec"],
                       "camera": (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy),
                       "R_cam_from_body": label["R_cam_from_body"], "t_cam_m": label["t_cam_m"],
-                      "light": plan["lights"][i], "label": label,
+                      "light": plan["lights"][i], "label": label, "keypoints_body_m": kp_points,
                       "modalities": cfg["output"]["modalities"] if write else [], "want_rgb": not write})
     return tasks, skipped
 

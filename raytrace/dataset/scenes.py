@@ -13,6 +13,8 @@ from __future__ import annotations
 import math
 import os
 
+import numpy as np
+
 from . import UsageError, warn
 from .modalities import needs_radiance
 
@@ -164,3 +166,38 @@ def lighting_of(light: dict, r: dict, stars=None):
                     shadow_fraction=light["shadow_fraction"], earth=earth,
                     ambient_radiance_W_m2_sr=r["ambient_W_m2_sr"], stars=stars,
                     R_body_from_eci=None if stars is None else light["R_body_from_eci"])
+
+
+KEYPOINTS_FAR = 10.0
+"""A keypoint farther from the body origin than this many bounding radii is warned about (a
+wrong unit or frame)."""
+
+
+def keypoints_of(model, path: str | None) -> dict:
+    """The ``model/keypoints.json`` document of a sequence: the user's file ``path``
+    (:func:`raytrace.keypoints.read_keypoints`; errors name ``--keypoints``, one line on stderr
+    for points far outside the target) or, without one, the default set of ``model``
+    (:func:`raytrace.keypoints.default_keypoints`)."""
+    from .. import keypoints as K
+    if path is None:
+        names, points = K.default_keypoints(model)
+        return K.keypoints_document(names, points, f"{K.DEFAULT_SOURCE}, n = {K.DEFAULT_COUNT}")
+    try:
+        names, points, source = K.read_keypoints(path)
+    except ValueError as exc:
+        raise UsageError(f"argument --keypoints: {exc}") from None
+    r = float(np.linalg.norm(points, axis=1).max())
+    if r > KEYPOINTS_FAR * model.bounding_radius_m:
+        warn(f"--keypoints {path}: a point lies {r:.4g} m from the body origin, {r / model.bounding_radius_m:.3g}x "
+             f"the target's bounding radius ({model.bounding_radius_m:.4g} m): are they in metres, in its body frame?")
+    return K.keypoints_document(names, points, source or f"file {os.path.basename(path)}")
+
+
+def keypoint_fields(task: dict, scene, camera, R_cam_from_body, t_cam_m) -> dict:
+    """A frame's ``keypoints_px`` and ``keypoints_state`` (:func:`raytrace.keypoints.frame_keypoints`
+    of the task's ``keypoints_body_m`` and its light); {} for a task without keypoints."""
+    points = task.get("keypoints_body_m")
+    if points is None:
+        return {}
+    from ..keypoints import frame_keypoints
+    return frame_keypoints(scene, camera, R_cam_from_body, t_cam_m, points, task["light"])
