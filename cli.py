@@ -312,8 +312,8 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
     """Load and check the target, then :func:`orbit.plan.plan_orbit`: everything but the pixels.
 
     Returns a dict: ``result`` (plain-Python scenario and per-frame labels without image
-    quantities, the ``--json`` document), ``model``, ``model_spec``, ``camera`` and per-frame
-    ``lights`` (Sun, Earth and ν in the body frame)."""
+    quantities, the ``--json`` document), ``model``, ``model_spec``, ``camera``, ``keypoints`` (the
+    model/keypoints.json document) and per-frame ``lights`` (Sun, Earth and ν in the body frame)."""
     from orbit.plan import PlanError, plan_orbit
     from raytrace.camera import Camera
 

@@ -232,8 +232,12 @@ def keypoint_states(scene, camera, R_cam_from_body, t_cam_m, points_body_m, sun_
     """
     R = np.asarray(R_cam_from_body, dtype=np.float64).reshape(3, 3)
     t = np.asarray(t_cam_m, dtype=np.float64).reshape(3)
-    P = np.asarray(points_body_m, dtype=np.float64).reshape(-1, 3)
+    P = np.asarray(points_body_m, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != 3 or not np.isfinite(P).all():
+        raise ValueError(f"points_body_m must be an (N, 3) array of finite numbers [m], got shape {P.shape}")
     s = np.asarray(sun_dir_body, dtype=np.float64).reshape(3)
+    if not (np.isfinite(s).all() and np.linalg.norm(s) > 0):
+        raise ValueError(f"sun_dir_body must be a finite non-zero vector, got {s.tolist()}")
     s = s / np.linalg.norm(s)
     tol = tolerance_m(scene) if tol_m is None else float(tol_m)
     p_cam = P @ R.T + t

@@ -528,3 +528,19 @@ def test_keypoints_option_labels_and_sequence_identity(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("cli.py: error: argument --keypoints: ") and "point 0 must be" in err and "\n" not in err
     assert not (tmp_path / "bad").exists()
+
+
+def test_a_config_files_keypoints_go_with_its_model(tmp_path, capsys):
+    """A [sequence] keypoints file belongs to the file's model: read (as an absolute path) with it,
+    dropped when a --target or --mesh flag chooses another model; the dataset command refuses it."""
+    from tests.cli_helpers import run_main
+    conf = tmp_path / "c.toml"
+    conf.write_text('[sequence]\ntarget = "icesat"\nkeypoints = "kp.json"\n')
+    cfg, given = cli.resolve_config(cli.build_parser().parse_args(["--config", str(conf)]))
+    assert cfg["sequence"]["keypoints"] == os.path.abspath("kp.json") and "keypoints" in given
+    cfg, given = cli.resolve_config(cli.build_parser().parse_args(["--config", str(conf), "--target", "cassini"]))
+    assert cfg["sequence"]["keypoints"] is None and "keypoints" not in given
+    assert run_main("dataset", "--config", conf, "--frames", "2", "--out", tmp_path / "ds") == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "cli.py: error: --config: [sequence] keypoints is not used by the dataset command (built-in targets only)"
+    assert not (tmp_path / "ds").exists()

@@ -1,16 +1,17 @@
 """The sequence folder: its format, its claim by one run, resume, and completion.
 
 A sequence folder holds ``scenario.json`` (the configuration and the plan, written first: it
-identifies the sequence), ``camera.json``, ``config.toml``, the target's ``model/``, one folder
-per modality (:mod:`.modalities`) with a file per frame, a manifest record per complete frame
-(``.manifest/NNNNNN.json``, with checksums) and, once every frame is complete,
+identifies the sequence), ``camera.json``, ``config.toml``, the target's ``model/`` (mesh and
+keypoints), one folder per modality (:mod:`.modalities`) with a file per frame, a manifest
+record per complete frame (``.manifest/NNNNNN.json``, with checksums) and, once every frame is complete,
 ``labels.json`` and ``manifest.json``. A run claims the folder (its lock), skips the frames
 already complete, writes each frame's files under temporary names and renames them, and
 removes what it leaves incomplete. docs/formats.md gives every file; docs/cli.md the rules.
 
 A *plan* is the dict the command line makes of one sequence: ``result`` (the scenario and the
 per-frame labels), ``cfg`` (the configuration), ``model``, ``model_spec``, ``camera``,
-``lights`` and ``name``. A *task* is one frame of it, as :func:`tasks_for` makes it.
+``lights``, ``name`` and ``keypoints`` (the ``model/keypoints.json`` document, optional). A
+*task* is one frame of it, as :func:`tasks_for` makes it.
 """
 
 from __future__ import annotations

@@ -253,3 +253,13 @@ def test_occlusion_agrees_with_the_depth_image_on_clear_cases():
                 assert st != "occluded"
                 counts["seen"] += 1
     assert counts["seen"] >= 30 and counts["hidden"] >= 30, counts  # measured: 50 and 54
+
+
+def test_states_bad_input_is_one_line():
+    scene = _box_scene()
+    with pytest.raises(ValueError, match=r"^points_body_m must be an \(N, 3\) array of finite numbers"):
+        keypoint_states(scene, CAM, R_IDENT, T_BOX, [[0.0, 0.0, math.nan]], [0, 0, -1.0])
+    with pytest.raises(ValueError, match=r"^points_body_m must be an \(N, 3\)"):
+        keypoint_states(scene, CAM, R_IDENT, T_BOX, [0.0, 0.0, 1.0], [0, 0, -1.0])
+    with pytest.raises(ValueError, match="^sun_dir_body must be a finite non-zero vector"):
+        keypoint_states(scene, CAM, R_IDENT, T_BOX, [[0.0, 0.0, 1.0]], [0, 0, 0])
