@@ -88,6 +88,33 @@ def test_default_keypoints_of_the_builtin_targets_spread_over_their_hull(target)
     assert min_pair > 0.05 * diameter, (target, min_pair / diameter)  # measured: 0.078 (Tiangong) to 0.22
 
 
+def test_default_keypoints_of_a_large_mesh_come_from_one_vertex_per_grid_cell(monkeypatch):
+    """Beyond HULL_MAX_POINTS vertices: still mesh vertices, on the hull within a grid cell, the
+    same whatever the vertex order, and spread as the exact hull's sampling."""
+    from raytrace import keypoints
+    mesh = trimesh.creation.icosphere(subdivisions=4)  # 2562 vertices, all on the hull
+    model = TargetModel("ball", (Component("ball", mesh, "white_paint", "bus", 1.0),))
+    _, exact = default_keypoints(model, n=16)
+    monkeypatch.setattr(keypoints, "HULL_MAX_POINTS", 1000)
+    calls = []
+    grid = keypoints._grid_representatives
+    monkeypatch.setattr(keypoints, "_grid_representatives", lambda V: calls.append(len(V)) or grid(V, cells=16))
+    _, P = default_keypoints(model, n=16)
+    assert calls == [len(mesh.vertices)]
+    V = np.asarray(mesh.vertices)
+    assert (np.abs(V[None] - P[:, None]).max(axis=2).min(axis=1) == 0).all()
+    perm = np.random.default_rng(2).permutation(len(V))
+    shuffled = trimesh.Trimesh(V[perm], np.argsort(perm)[mesh.faces], process=False)
+    _, P2 = default_keypoints(TargetModel("ball", (Component("ball", shuffled, "white_paint", "bus", 1.0),)), n=16)
+    np.testing.assert_array_equal(P2, P)
+
+    def min_pair(Q):
+        d = np.linalg.norm(Q[:, None] - Q[None], axis=2)
+        return d[np.triu_indices(len(Q), 1)].min()
+
+    assert min_pair(P) > 0.9 * min_pair(exact)
+
+
 def test_default_keypoints_count_is_checked():
     for bad in (3, 65, 4.0, True):
         with pytest.raises(ValueError, match=r"^n must be an integer in \[4, 64\]"):
