@@ -266,3 +266,53 @@ def test_bad_input(sequence, tmp_path):
     with pytest.raises(ValueError, match=r"distCoeffs beyond \(k1, k2, p1, p2, k3\) must be 0"):
         export_speedplus(bad, tmp_path / "o5")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad"]
+
+
+def spnv2_preprocess_row(datadir, domain, label, camera, keypts3d, load_masks=True):
+    """The loop body of spnv2 tools/preprocess.py for one label (image resizing left out), as a
+    user runs it on the export: the CSV row [filename, xmin, ymin, xmax, ymax, q (4), t (3),
+    origin (2), keypoints (2N)], all image quantities normalised by Nu, Nv. Deviation: the
+    script reshapes to 24 numbers (11 keypoints); here 2 (N + 1)."""
+    filename = label["filename"]
+    mask = cv2.imread(str(datadir / domain / "masks" / filename), cv2.IMREAD_GRAYSCALE) if load_masks else None
+    q_vbs2tango = np.array(label["q_vbs2tango_true"], dtype=np.float32)
+    r_Vo2To_vbs = np.array(label["r_Vo2To_vbs_true"], dtype=np.float32)
+    keypts3d_origin = np.concatenate((np.zeros((3, 1), dtype=np.float32), np.transpose(keypts3d)), axis=1)
+    keypts2d = project_keypoints(q_vbs2tango, r_Vo2To_vbs, camera["cameraMatrix"], camera["distCoeffs"],
+                                 keypts3d_origin)
+    keypts2d[0] = keypts2d[0] / camera["Nu"]
+    keypts2d[1] = keypts2d[1] / camera["Nv"]
+    keypts2d_vec = np.reshape(np.transpose(keypts2d), (2 * keypts3d_origin.shape[1],))
+    if load_masks:
+        seg = np.where(mask > 0)
+        xmin, ymin = np.min(seg[1]) / camera["Nu"], np.min(seg[0]) / camera["Nv"]
+        xmax, ymax = np.max(seg[1]) / camera["Nu"], np.max(seg[0]) / camera["Nv"]
+    else:
+        xmin, ymin = np.min(keypts2d[0]), np.min(keypts2d[1])
+        xmax, ymax = np.max(keypts2d[0]), np.max(keypts2d[1])
+    return [filename, xmin, ymin, xmax, ymax] + q_vbs2tango.tolist() + r_Vo2To_vbs.tolist() + keypts2d_vec.tolist()
+
+
+def test_spnv2_preprocessing_of_the_export(exported, sequence):
+    root, geometry, kp_body, _ = sequence
+    camera = load_camera_intrinsics(exported / "camera.json")
+    keypts3d = np.transpose(np.array(loadmat(exported / "models" / "icesatPoints.mat")["tango3Dpoints"],
+                                     dtype=np.float32))  # load_tango_3d_keypoints as SPNv2 has it
+    labels = labels_of(root)
+    for entry in json.loads((exported / "synthetic" / "validation.json").read_text()):
+        frame = int(entry["filename"][:6])
+        rec = labels[frame]
+        if rec["bbox"] is None:  # target wholly outside: the script stops on the empty mask ...
+            with pytest.raises(ValueError):
+                spnv2_preprocess_row(exported, "synthetic", entry, camera, keypts3d)
+            spnv2_preprocess_row(exported, "synthetic", entry, camera, keypts3d, load_masks=False)  # ... or not
+            continue
+        row = spnv2_preprocess_row(exported, "synthetic", entry, camera, keypts3d)
+        x, y, w, h = rec["bbox"]
+        assert_allclose(row[1:5], [x / W, y / H, (x + w - 1) / W, (y + h - 1) / H], rtol=1e-6)
+        R, t, _ = geometry[frame]
+        assert_allclose(row[12:14], [CAMERA.fx * t[0] / t[2] + CAMERA.cx, CAMERA.fy * t[1] / t[2] + CAMERA.cy]
+                        / np.array([W, H]), atol=1e-5)  # the target origin; float32 pose
+        for uv, want in zip(np.reshape(row[14:], (-1, 2)), rec["keypoints_px"]):
+            if want is not None:
+                assert_allclose(uv * [W, H], want, atol=2e-3)  # float32 pose and points, as the script
