@@ -20,6 +20,7 @@ from ..files import process_folder, remove_stale_process_folders
 
 _IMAGE_MODALITIES = PICTURES
 _ROTATION_TOL = 1e-6
+_KEYPOINT_STATES = ("visible", "shadowed", "occluded", "outside")
 
 
 # --------------------------------------------------------------------------- reading
@@ -32,6 +33,8 @@ class _Frame:
     t_cam_m: np.ndarray  # (3,) float64
     q_cam_from_body: np.ndarray  # (4,) float64, Hamilton, scalar first
     files: dict
+    keypoints_px: np.ndarray | None = None  # (N, 2) float64 [px], NaN for null; None: no keypoints
+    keypoints_state: tuple | None = None  # N of _KEYPOINT_STATES
 
 
 @dataclass(frozen=True, slots=True)
@@ -45,6 +48,8 @@ class _Sequence:
     height: int
     frames: tuple
     model_path: Path
+    keypoints_body_m: np.ndarray | None = None  # (N, 3) float64 [m], model/keypoints.json
+    keypoint_names: tuple | None = None
 
 
 def _load_json(path: Path, what: str):
@@ -110,7 +115,37 @@ def _parse_frame(i: int, rec) -> _Frame:
     is_object = isinstance(files, dict)
     if not is_object:
         raise ValueError(f"{where}: files must be an object (modality → relative path), got {files!r}")
-    return _Frame(frame, R, t, q, dict(files))
+    return _Frame(frame, R, t, q, dict(files), *_frame_keypoints(where, rec))
+
+
+def _frame_keypoints(where: str, rec: dict) -> tuple:
+    """(keypoints_px, keypoints_state) of a frame record, (None, None) without keypoints."""
+    if rec.get("keypoints_px") is None:
+        return None, None
+    pts, states = rec["keypoints_px"], rec.get("keypoints_state")
+    if not isinstance(pts, list) or not isinstance(states, list) or len(states) != len(pts):
+        raise ValueError(f"{where}: keypoints_px and keypoints_state must be lists of the same length")
+    uv = np.array([[np.nan, np.nan] if p is None else finite_numbers(f"{where}: keypoints_px", p, 2)
+                   for p in pts], dtype=np.float64).reshape(-1, 2)
+    bad = [s for s in states if s not in _KEYPOINT_STATES]
+    if bad:
+        raise ValueError(f"{where}: keypoints_state must hold {', '.join(_KEYPOINT_STATES)}; got {bad[0]!r}")
+    return uv, tuple(states)
+
+
+def _keypoints_model(root: Path) -> tuple:
+    """(points_body_m (N, 3), names) from model/keypoints.json, (None, None) if absent."""
+    path = root / "model" / "keypoints.json"
+    if not path.is_file():
+        return None, None
+    doc = _load_json(path, "model/keypoints.json")
+    if not isinstance(doc, dict) or doc.get("frame") != "body" or doc.get("unit") != "m":
+        raise ValueError("model/keypoints.json must be an object with frame 'body' and unit 'm'")
+    names = doc.get("names")
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise ValueError("model/keypoints.json: names must be a non-empty list of strings")
+    pts = finite_numbers("model/keypoints.json: points_body_m", doc.get("points_body_m"), 3 * len(names))
+    return pts.reshape(-1, 3), tuple(names)
 
 
 def _read_sequence(sequence_dir) -> _Sequence:
@@ -152,7 +187,8 @@ def _read_sequence(sequence_dir) -> _Sequence:
     if len(plys) != 1:
         found = ", ".join(p.name for p in plys) or "none"
         raise ValueError(f"model/ must hold exactly one .ply (the rendered mesh in metres), found {found}")
-    return _Sequence(root, cam, K, width, height, tuple(frames), plys[0])
+    kp_body, kp_names = _keypoints_model(root)
+    return _Sequence(root, cam, K, width, height, tuple(frames), plys[0], kp_body, kp_names)
 
 
 def _frame_file(seq: _Sequence, f: _Frame, modality: str) -> Path | None:
