@@ -106,38 +106,49 @@ def _depth_scale(max_depth_mm: float) -> float:
 
 
 def _gt_info(visib: np.ndarray, codes: np.ndarray, R: np.ndarray, t: np.ndarray, scene, K: np.ndarray,
-             hull_m: np.ndarray) -> dict:
-    n_visib = int(np.count_nonzero(visib))
-    n_valid = int(np.count_nonzero(visib & (codes > 0)))
+             hull_m: np.ndarray, box: tuple | None = None) -> dict:
+    """calc_gt_info's record of one object; ``box`` = (x0, y0, x1, y1), end exclusive, holds
+    every set pixel of ``visib`` (only that window is scanned; default the whole image)."""
+    x0, y0, x1, y1 = box or (0, 0, visib.shape[1], visib.shape[0])
+    visib_box = visib[y0:y1, x0:x1]
+    n_visib = int(np.count_nonzero(visib_box))
+    n_valid = int(np.count_nonzero(visib_box & (codes[y0:y1, x0:x1] > 0)))
     bbox_visib = bbox_obj = [-1, -1, -1, -1]
     # as calc_gt_info: px_count_all over the 3W × 3H canvas for every object, even one wholly
     # outside the image; the boxes only for a visible one
     n_out, cols_out, rows_out = _silhouette_beyond(scene, K, visib.shape[1], visib.shape[0], R, t, hull_m)
     n_all = n_visib + n_out
     if n_visib > 0:
-        rows, cols = np.nonzero(visib)
+        rows, cols = np.nonzero(visib_box)
+        rows, cols = rows + y0, cols + x0
         bbox_visib = _bop_bbox(cols, rows)
         bbox_obj = _bop_bbox(np.concatenate([cols, cols_out]), np.concatenate([rows, rows_out]))
     return {"bbox_obj": bbox_obj, "bbox_visib": bbox_visib, "px_count_all": n_all, "px_count_valid": n_valid,
             "px_count_visib": n_visib, "visib_fract": n_visib / n_all if n_all > 0 else 0.0}
 
 
-def _rle(mask: np.ndarray) -> dict:
+def _rle(mask: np.ndarray, x0: int = 0, x1: int | None = None) -> dict:
     """Uncompressed COCO RLE of a binary mask, as bop_toolkit ``pycoco_utils.binary_mask_to_rle``
     makes it: run lengths over the column-major (Fortran) order, starting with a run of zeros
-    (0 when the first pixel is set)."""
-    flat = mask.ravel(order="F")
-    counts = [0] if flat.size and flat[0] else []
+    (0 when the first pixel is set). Columns outside [x0, x1) must be empty; only those inside
+    are scanned."""
+    H, W = mask.shape
+    x1 = W if x1 is None else x1
+    flat = mask[:, x0:x1].ravel(order="F")
+    runs = []
     if flat.size:
         changes = np.flatnonzero(flat[1:] != flat[:-1]) + 1
-        counts.extend(np.diff(np.concatenate(([0], changes, [flat.size]))).tolist())
-    return {"counts": counts, "size": list(mask.shape)}
-
-
-def _coco_bbox(visib: np.ndarray) -> list:
-    """[x, y, w, h] with w = x_max − x_min + 1 (pycoco_utils.bbox_from_binary_mask)."""
-    rows, cols = np.flatnonzero(visib.any(axis=1)), np.flatnonzero(visib.any(axis=0))
-    return [int(cols[0]), int(rows[0]), int(cols[-1] - cols[0] + 1), int(rows[-1] - rows[0] + 1)]
+        runs = np.diff(np.concatenate(([0], changes, [flat.size]))).tolist()
+        if flat[0]:
+            runs.insert(0, 0)
+    else:
+        runs = [0]
+    runs[0] += x0 * H  # the empty columns before: zeros
+    if len(runs) % 2 == 1:  # ends with zeros
+        runs[-1] += (W - x1) * H
+    elif W > x1:
+        runs.append((W - x1) * H)
+    return {"counts": runs, "size": [H, W]}
 
 
 def _read_depth_rows(path: Path, y0: int, y1: int, shape: tuple) -> np.ndarray:
@@ -182,8 +193,11 @@ def _export_frame(job: dict) -> dict:
     visib = _read_image(Path(job["mask"]), "uint16", (H, W)) > 0
     codes = np.zeros((H, W), np.uint16)
     rows = np.flatnonzero(visib.any(axis=1))
+    box = (0, 0, 0, 0)
     if rows.size:  # depth only where the target is: the rest of the rows are background (0)
         y0, y1 = int(rows[0]), int(rows[-1]) + 1
+        cols = np.flatnonzero(visib[y0:y1].any(axis=0))
+        box = (int(cols[0]), y0, int(cols[-1]) + 1, y1)
         z = np.rint(_read_depth_rows(Path(job["depth"]), y0, y1, (H, W)).astype(np.float64)
                     * (1000.0 / job["depth_scale"]))
         z[~np.isfinite(z) | (z > 65535)] = 0  # background, or beyond 16 bits: no depth
@@ -195,11 +209,13 @@ def _export_frame(job: dict) -> dict:
 
     R, t = np.asarray(job["R"]), np.asarray(job["t"])
     K = np.asarray(job["K"])
-    info = _gt_info(visib, codes, R, t, lambda: _scene_of(job["model"]), K, np.asarray(job["hull"]))
+    info = _gt_info(visib, codes, R, t, lambda: _scene_of(job["model"]), K, np.asarray(job["hull"]), box)
     coco = None
     if info["px_count_visib"] > 0:
+        x0, y0, x1, y1 = box
         coco = {"category_id": job["obj_id"], "iscrowd": 0, "area": info["px_count_visib"],
-                "bbox": _coco_bbox(visib), "segmentation": _rle(visib), "width": W, "height": H,
+                "bbox": [x0, y0, x1 - x0, y1 - y0],  # pycoco_utils.bbox_from_binary_mask: w = x_max − x_min + 1
+                "segmentation": _rle(visib, x0, x1), "width": W, "height": H,
                 "ignore": info["visib_fract"] < BOP_VISIB_MIN}
     K_bop = K.copy()
     K_bop[:2, 2] += BOP_PIXEL_CENTRE_SHIFT

@@ -441,3 +441,19 @@ def test_bop_test_targets(merged):
         (out / "test" / f"{e['scene_id']:06d}" / "scene_gt_info.json").read_text())[str(e["im_id"])][0]["visib_fract"]
         >= 0.1)
     assert not (out / "train" / "test_targets_bop19.json").exists()
+
+
+@pytest.mark.parametrize("case", ["first_pixel", "last_column", "middle", "full"])
+def test_rle_of_a_window_decodes_with_pycocotools(case):
+    from pycocotools import mask as mask_utils
+
+    m = np.zeros((7, 9), bool)
+    x0, x1 = {"first_pixel": (0, 3), "last_column": (6, 9), "middle": (3, 6), "full": (0, 9)}[case]
+    rng = np.random.default_rng(len(case))
+    m[:, x0:x1] = rng.random((7, x1 - x0)) < 0.5
+    m[0, x0] = True
+    m[-1, x1 - 1] = case != "middle"
+    rle = bop_module._rle(m, x0, x1)
+    assert sum(rle["counts"]) == m.size
+    decoded = mask_utils.decode(mask_utils.frPyObjects(rle, *rle["size"]))
+    assert_array_equal(decoded.astype(bool), m)
