@@ -457,3 +457,33 @@ def test_rle_of_a_window_decodes_with_pycocotools(case):
     assert sum(rle["counts"]) == m.size
     decoded = mask_utils.decode(mask_utils.frPyObjects(rle, *rle["size"]))
     assert_array_equal(decoded.astype(bool), m)
+
+
+def test_a_pool_of_workers_writes_the_same_bytes(merged, tmp_path, capsys):
+    out, _ = merged
+    record = json.loads((out / ".export.json").read_text())
+    pooled = tmp_path / "bop"  # the same folder name: scene_gt_coco.json names the dataset
+    assert run(["--format", "bop", *record["sequences"], "--out", str(pooled), "--split", "train=0.6,test=0.4",
+                "--seed", "5", "--workers", "2"], capsys)[0] == 0
+    assert tree(pooled) == tree(out)
+
+
+def test_a_failure_while_writing_keeps_the_finished_part(two_targets, tmp_path, monkeypatch, capsys):
+    ice = two_targets["icesat"][0]
+    real = bop_module._export_frame
+    calls = []
+
+    def full_disk(job):
+        if len(calls) == 2:
+            raise OSError(28, "No space left on device")
+        calls.append(job["im"])
+        return real(job)
+
+    monkeypatch.setattr(bop_module, "_export_frame", full_disk)
+    out = tmp_path / "bop"
+    status, _, err = run(["--format", "bop", str(ice), "--out", str(out), "--workers", "1"], capsys)
+    assert status == 1 and "No space left on device" in err and "rerun the same command" in err
+    assert (tmp_path / ".bop.export-partial").is_dir() and not out.exists()
+    monkeypatch.setattr(bop_module, "_export_frame", lambda job: (calls.append(job["im"]), real(job))[1])
+    assert run(["--format", "bop", str(ice), "--out", str(out), "--workers", "1"], capsys)[0] == 0
+    assert len(calls) == 3 and sorted(os.listdir(tmp_path)) == ["bop"]
