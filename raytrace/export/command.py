@@ -16,6 +16,7 @@ is one line and exit status 2, with nothing written.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import os
@@ -26,6 +27,7 @@ from pathlib import Path
 
 from ..dataset import PROG, UsageError
 from ..dataset import options as opt
+from ..files import remove_stale_temporaries
 from ._atomic import sha256_bytes_of, write_json
 from ._read import _IMAGE_MODALITIES, _read_sequence
 from .splits import SPLIT_BY, assign, parse_split_spec
@@ -193,13 +195,48 @@ def run_export(args: argparse.Namespace, plan: dict, *, progress=None) -> Path |
         parent = parent.parent
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
+        lock = _lock(out)
+    except OSError as exc:
+        _remove(created)
+        raise UsageError(f"argument --out: cannot create a folder beside {args.out} ({exc.strerror})") from None
+    try:
+        return _run_locked(args, plan, writer, out, staging, created, progress)
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(lock[1])
+        os.close(lock[0])
+
+
+def _remove(folders: list) -> None:
+    for d in folders:  # deepest first
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def _lock(out: Path) -> tuple:
+    """An exclusive ``flock`` on ``.NAME.export-lock`` beside ``out``: (fd, path); UsageError if
+    another export holds it."""
+    import fcntl
+
+    path = out.parent / f".{out.name}.export-lock"
+    fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise UsageError(f"argument --out: {out} is being exported by another run") from None
+    return fd, path
+
+
+def _run_locked(args, plan, writer, out: Path, staging: Path, created: list, progress) -> Path:
+    record = plan["record"]
+    try:
         if staging.exists() and not _same(record, _read_record(staging)):
             shutil.rmtree(staging)  # another export's, or of inputs since changed: start afresh
         staging.mkdir(exist_ok=True)
+        remove_stale_temporaries(str(staging))  # of an interrupted run's processes
         write_json(staging / RECORD, record)
     except OSError as exc:
-        for d in created:
-            shutil.rmtree(d, ignore_errors=True)
+        _remove(created)
         raise UsageError(f"argument --out: cannot create {staging} ({exc.strerror})") from None
     kwargs = {}
     if args.format == "bop":
@@ -208,9 +245,9 @@ def run_export(args: argparse.Namespace, plan: dict, *, progress=None) -> Path |
         writer(staging, plan["splits"], modality=args.modality, link=not args.copy, progress=progress, **kwargs)
     except ValueError:  # bad input found while writing: nothing is left
         shutil.rmtree(staging, ignore_errors=True)
-        for d in created:
-            shutil.rmtree(d, ignore_errors=True)
+        _remove(created)
         raise
+    remove_stale_temporaries(str(staging))  # the workers are gone: any temporary left is debris
     if out.exists():
         out.rmdir()  # empty (checked above)
     os.rename(staging, out)

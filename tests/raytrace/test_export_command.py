@@ -344,13 +344,11 @@ def rasterise(pts_mm, faces, K, R, t_mm, width, height):
     uv = (p @ K.T)[:, :2] / p[:, 2:3]
     out = np.zeros((height, width), bool)
     tri = uv[faces]  # (n, 3, 2)
-    lo = np.floor(tri.min(axis=1) - 0.5).astype(int)
-    hi = np.ceil(tri.max(axis=1) - 0.5).astype(int)
-    for k in range(len(faces)):
-        x0, y0 = max(lo[k, 0], 0), max(lo[k, 1], 0)
-        x1, y1 = min(hi[k, 0], width - 1), min(hi[k, 1], height - 1)
-        if x1 < x0 or y1 < y0:
-            continue
+    # pixel i's centre i + 0.5 lies in [min, max] for i in [ceil(min − 0.5), floor(max − 0.5)]
+    lo = np.maximum(np.ceil(tri.min(axis=1) - 0.5), 0).astype(int)
+    hi = np.minimum(np.floor(tri.max(axis=1) - 0.5), [width - 1, height - 1]).astype(int)
+    for k in np.flatnonzero((hi >= lo).all(axis=1)):  # triangles that can cover a pixel centre
+        (x0, y0), (x1, y1) = lo[k], hi[k]
         xs, ys = np.meshgrid(np.arange(x0, x1 + 1) + 0.5, np.arange(y0, y1 + 1) + 0.5)
         a, b, c = tri[k]
         e0 = (b[0] - a[0]) * (ys - a[1]) - (b[1] - a[1]) * (xs - a[0])
@@ -487,3 +485,17 @@ def test_a_failure_while_writing_keeps_the_finished_part(two_targets, tmp_path, 
     monkeypatch.setattr(bop_module, "_export_frame", lambda job: (calls.append(job["im"]), real(job))[1])
     assert run(["--format", "bop", str(ice), "--out", str(out), "--workers", "1"], capsys)[0] == 0
     assert len(calls) == 3 and sorted(os.listdir(tmp_path)) == ["bop"]
+
+
+def test_a_second_export_into_the_same_folder_is_refused(two_targets, tmp_path, capsys):
+    import fcntl
+
+    fd = os.open(tmp_path / ".bop.export-lock", os.O_CREAT | os.O_RDWR)
+    fcntl.flock(fd, fcntl.LOCK_EX)  # as a running export holds it (flock is per open file)
+    try:
+        status, _, err = run(["--format", "bop", str(two_targets["icesat"][0]), "--out", str(tmp_path / "bop"),
+                              "--workers", "1"], capsys)
+    finally:
+        os.close(fd)
+    assert status == 2 and "is being exported by another run" in err
+    assert sorted(os.listdir(tmp_path)) == [".bop.export-lock"]
