@@ -499,3 +499,37 @@ def test_a_second_export_into_the_same_folder_is_refused(two_targets, tmp_path, 
         os.close(fd)
     assert status == 2 and "is being exported by another run" in err
     assert sorted(os.listdir(tmp_path)) == [".bop.export-lock"]
+
+
+def test_cli_dispatches_export_and_calls_a_writer_with_the_shared_signature(two_targets, tmp_path, monkeypatch,
+                                                                             capsys):
+    """``cli.py export`` reaches the command; a format writer gets the staging folder, the splits
+    as (sequence, frame) lists, modality, link and progress, and its folder becomes --out."""
+    import cli
+    from raytrace.export import command
+
+    seen = {}
+
+    def writer(tmp, splits, *, modality, link, progress=None):
+        seen.update(tmp=tmp, splits={k: [(s.root, f.frame) for s, f in v] for k, v in splits.items()},
+                    modality=modality, link=link)
+        (tmp / "listing.txt").write_text(repr(seen["splits"]))
+        if progress is not None:  # None with --quiet
+            progress(sum(len(v) for v in splits.values()))
+
+    monkeypatch.setattr(command, "_writer", lambda fmt: writer)
+    ice, dragon = two_targets["icesat"][0], two_targets["spacedragon"][0]
+    out = tmp_path / "sp"
+    assert cli.main(["export", "--format", "speedplus", str(ice), str(dragon), "--out", str(out), "--split",
+                     "train=1,val=1", "--split-by", "sequence", "--seed", "1", "--modality", "rgb_degraded",
+                     "--copy", "--quiet"]) == 0
+    order = np.random.default_rng(1).permutation(2)
+    roots = [ice, dragon]
+    assert seen["splits"] == {"train": [(roots[order[0]], k) for k in (0, 3, 7)],
+                              "val": [(roots[order[1]], k) for k in (0, 3, 7)]}
+    assert (seen["modality"], seen["link"]) == ("rgb_degraded", False)
+    assert seen["tmp"] == tmp_path / ".sp.export-partial"
+    assert (out / "listing.txt").is_file() and not seen["tmp"].exists()
+    assert "2 sequence(s), 6 frames (train 3, val 3)" in capsys.readouterr().out
+    assert cli.main(["export", "--format", "bop", str(ice), "--out", str(tmp_path / "x"), "--split", "train=2"]) == 2
+    assert "argument --split: counts sum to 2 but there are 3 frame(s) to split" in capsys.readouterr().err
