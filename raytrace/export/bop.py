@@ -19,6 +19,7 @@ the same pixels as our mask.
 from __future__ import annotations
 
 import math
+import re
 import shutil
 from pathlib import Path
 
@@ -53,6 +54,7 @@ BOP_VISIB_MIN = 0.1
 an instance is no BOP'19 localisation target."""
 
 _NEEDED = ("mask", "depth")
+_SPLIT_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _RECORDS = ".frames"
 
 
@@ -358,7 +360,9 @@ def write_bop(tmp, splits: dict, *, modality: str, link: bool, progress=None, wo
     name : str, optional
         Dataset name for ``scene_gt_coco.json`` (default: the folder's name).
 
-    Layout: see :func:`export_bop`; besides ``models_eval/`` (the same meshes: for
+    Layout: see :func:`export_bop` (the root ``camera.json`` is the first sequence's camera with
+    the largest ``depth_scale``: BOP's is for sensor simulation, each image's ``cam_K`` is in
+    ``scene_camera.json``); besides ``models_eval/`` (the same meshes: for
     spacecraft there is no resampled model), ``scene_gt_coco.json`` per scene (calc_gt_coco.py,
     amodal boxes, RLE) and, when a split is named ``test`` or ``test_*``, ``test_targets_bop19.json``
     (instances with ``visib_fract`` ≥ 0.1) and ``test_targets_bop24.json`` (every image).
@@ -374,9 +378,13 @@ def write_bop(tmp, splits: dict, *, modality: str, link: bool, progress=None, wo
         for seq, _ in items:
             if not any(s is seq for s in order):
                 order.append(seq)
+    if not order:
+        raise ValueError("splits must hold at least one (sequence, frame) item")
     for seq in order:
         _check_camera(seq)
     for split, items in splits.items():
+        if not isinstance(split, str) or not _SPLIT_NAME.match(split):
+            raise ValueError(f"split names must be folder names (letters, digits, '_', '-'), got {split!r}")
         for seq, f in items:
             missing = [m for m in (modality, *_NEEDED) if f.files.get(m) is None]
             if missing:
@@ -444,7 +452,8 @@ def write_bop(tmp, splits: dict, *, modality: str, link: bool, progress=None, wo
     for (split, scene_id), recs in records.items():
         scene_dir = tmp / split / f"{scene_id:06d}"
         for fname, content in _scene_files(recs, name, split, categories).items():
-            write_json(scene_dir / f"{fname}.json", content)
+            # the RLE counts would take a line each: the COCO file is written compact
+            write_json(scene_dir / f"{fname}.json", content, indent=None if fname == "scene_gt_coco" else 1)
     _write_test_targets(tmp, records)
     shutil.rmtree(tmp / _RECORDS, ignore_errors=True)
 
