@@ -533,3 +533,29 @@ def test_cli_dispatches_export_and_calls_a_writer_with_the_shared_signature(two_
     assert "2 sequence(s), 6 frames (train 3, val 3)" in capsys.readouterr().out
     assert cli.main(["export", "--format", "bop", str(ice), "--out", str(tmp_path / "x"), "--split", "train=2"]) == 2
     assert "argument --split: counts sum to 2 but there are 3 frame(s) to split" in capsys.readouterr().err
+
+
+def test_cameras_of_different_sizes_merge_in_bop_not_in_speedplus(two_targets, tmp_path, monkeypatch, capsys):
+    import tests.raytrace.test_export as te
+    from raytrace.camera import Camera
+
+    small = Camera(width=128, height=96, fx=110.0, fy=110.0, cx=63.5, cy=47.5)
+    monkeypatch.setattr(te, "CAMERA", small)
+    monkeypatch.setattr(te, "W", 128)
+    monkeypatch.setattr(te, "H", 96)
+    other = tmp_path / "small"
+    te.make_sequence(other, two_targets["icesat"][2])
+    ice = two_targets["icesat"][0]
+    out = tmp_path / "bop"
+    assert run(["--format", "bop", str(ice), str(other), "--out", str(out), "--workers", "1"], capsys)[0] == 0
+    for scene, (w, h, K) in {0: (W, H, te.Camera(width=W, height=H, fx=145.0, fy=145.0, cx=79.5, cy=59.5).K),
+                             1: (128, 96, small.K)}.items():
+        scene_dir = out / "train" / f"{scene:06d}"
+        cam = json.loads((scene_dir / "scene_camera.json").read_text())["3"]
+        assert_allclose(np.reshape(cam["cam_K"], (3, 3)), K + [[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]])
+        assert read_image(scene_dir / "mask" / "000003_000000.png").shape == (h, w)
+        coco = json.loads((scene_dir / "scene_gt_coco.json").read_text())
+        assert {(i["width"], i["height"]) for i in coco["images"]} == {(w, h)}
+    status, _, err = run(["--format", "speedplus", str(ice), str(other), "--out", str(tmp_path / "sp")], capsys)
+    assert status == 2 and "has another camera (K, size or distCoeffs)" in err
+    assert not (tmp_path / "sp").exists()
