@@ -30,8 +30,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from raytrace._threads import available_cores  # noqa: E402
-from raytrace.export.command import export_main  # noqa: E402
+from raytrace._threads import available_cores
+from raytrace.export.command import export_main
 
 
 def long_sequence(src: Path, dst: Path, frames: int) -> None:

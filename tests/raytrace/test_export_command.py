@@ -57,7 +57,8 @@ def tree(folder):
     for root, _, names in os.walk(folder):
         for name in names:
             p = os.path.join(root, name)
-            out[os.path.relpath(p, folder)] = open(p, "rb").read()
+            with open(p, "rb") as fh:
+                out[os.path.relpath(p, folder)] = fh.read()
     return out
 
 
@@ -149,7 +150,7 @@ def test_merge_of_two_targets(merged):
 
 
 def test_finished_export_is_recognised_and_a_foreign_folder_refused(merged, capsys, tmp_path):
-    out, targets = merged
+    out, _ = merged
     record = json.loads((out / ".export.json").read_text())
     argv = ["--format", "bop", *record["sequences"], "--out", str(out), "--split", "train=0.6,test=0.4",
             "--seed", "5", "--workers", "1"]
