@@ -36,6 +36,9 @@ def _commit(tmp: str, dst: Path) -> None:
         with _suppress():
             os.unlink(tmp)
         raise
+    if os.path.lexists(tmp):  # rename(2) does nothing when both names are links of one file
+        with _suppress():
+            os.unlink(tmp)
 
 
 class _suppress:

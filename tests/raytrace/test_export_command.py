@@ -560,3 +560,52 @@ def test_cameras_of_different_sizes_merge_in_bop_not_in_speedplus(two_targets, t
     status, _, err = run(["--format", "speedplus", str(ice), str(other), "--out", str(tmp_path / "sp")], capsys)
     assert status == 2 and "has another camera (K, size or distCoeffs)" in err
     assert not (tmp_path / "sp").exists()
+
+
+def test_an_export_killed_mid_way_resumes(two_targets, tmp_path):
+    """``cli.py export`` as a program, killed with SIGKILL (a crash: no clean-up runs) once some
+    frames are complete: the staging folder stays, the same command finishes the export, and
+    no temporary file is left in it (nor one of the rerun: renaming a hard link onto another link
+    of the same file, an image placed before the kill, does nothing and keeps the temporary)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    src = two_targets["icesat"][0]
+    seq = tmp_path / "long"
+    shutil.copytree(src, seq, ignore=shutil.ignore_patterns("rgb*", "mask", "depth", "normal"))
+    labels = [r for r in json.loads((src / "labels.json").read_text()) if r.get("files")]
+    long = []
+    for k in range(300):  # hard links of the three rendered frames
+        rec = dict(labels[k % 3], frame=k, files={})
+        for m, rel in labels[k % 3]["files"].items():
+            (seq / m).mkdir(exist_ok=True)
+            os.link(src / rel, seq / m / f"{k:06d}{Path(rel).suffix}")
+            rec["files"][m] = f"{m}/{k:06d}{Path(rel).suffix}"
+        long.append(rec)
+    (seq / "labels.json").write_text(json.dumps(long))
+    root = Path(__file__).resolve().parents[2]
+    out = tmp_path / "bop"
+    cmd = [sys.executable, str(root / "cli.py"), "export", "--format", "bop", str(seq), "--out", str(out),
+           "--workers", "1", "--quiet"]
+    env = dict(os.environ, PYTHONPATH=str(root))
+    proc = subprocess.Popen(cmd, cwd=root, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    records = tmp_path / ".bop.export-partial" / ".frames" / "train" / "000000"
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline:
+        if records.is_dir() and len(os.listdir(records)) >= 20:
+            proc.send_signal(signal.SIGKILL)
+            break
+        time.sleep(0.01)
+    proc.communicate()
+    assert proc.returncode == -signal.SIGKILL, "the export finished before it could be killed"
+    assert not out.exists() and (tmp_path / ".bop.export-partial" / ".export.json").is_file()
+    done = subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    gt = json.loads((out / "train" / "000000" / "scene_gt.json").read_text())
+    assert sorted(int(k) for k in gt) == list(range(300))
+    leftovers = [n for _, _, names in os.walk(out) for n in names if ".tmp" in n]
+    assert leftovers == [] and len(os.listdir(out / "train" / "000000" / "depth")) == 300
+    assert sorted(os.listdir(tmp_path)) == ["bop", "long"]
