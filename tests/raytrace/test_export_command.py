@@ -602,7 +602,7 @@ def test_an_export_killed_mid_way_resumes(two_targets, tmp_path):
     proc.communicate()
     assert proc.returncode == -signal.SIGKILL, "the export finished before it could be killed"
     assert not out.exists() and (tmp_path / ".bop.export-partial" / ".export.json").is_file()
-    done = subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True)
+    done = subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True, check=False)
     assert done.returncode == 0, done.stderr
     gt = json.loads((out / "train" / "000000" / "scene_gt.json").read_text())
     assert sorted(int(k) for k in gt) == list(range(300))
