@@ -383,8 +383,9 @@ def write_bop(tmp, splits: dict, *, modality: str, link: bool, progress=None, wo
     for seq in order:
         _check_camera(seq)
     for split, items in splits.items():
-        if not isinstance(split, str) or not _SPLIT_NAME.match(split):
-            raise ValueError(f"split names must be folder names (letters, digits, '_', '-'), got {split!r}")
+        if not isinstance(split, str) or not _SPLIT_NAME.match(split) or split in ("models", "models_eval"):
+            raise ValueError(f"split names must be folder names (letters, digits, '_', '-') other than models and "
+                             f"models_eval, got {split!r}")
         for seq, f in items:
             missing = [m for m in (modality, *_NEEDED) if f.files.get(m) is None]
             if missing:

@@ -1,7 +1,8 @@
 """Splitting the frames of several sequences into named subsets (train, val, test, ...).
 
 A split spec is ``name=share,name=share,...``: every share a fraction (the fractions sum to 1
-within 1e-9) or every share a count (whole numbers summing to the number of items). Items are
+within 1e-9) or every share a count (whole numbers summing to the number of items); a single
+``name=1`` is the fraction 1 (everything in one split). Items are
 frames (all sequences' frames pooled) or whole sequences. They are shuffled with
 ``numpy.random.default_rng(seed).permutation`` and cut in the order the names are given; a
 fraction becomes a count by the largest-remainder (Hamilton) method: each split gets
@@ -44,6 +45,8 @@ def parse_split_spec(text: str) -> tuple[tuple[str, float | int], ...]:
         counts = tuple((n, int(s)) for n, s in out)
         if any(c < 1 for _, c in counts):
             raise ValueError(f"counts must be whole numbers >= 1; got {text!r}")
+        if len(counts) == 1 and counts[0][1] == 1:  # "train=1": one split holding everything
+            return ((counts[0][0], 1.0),)
         return counts
     try:
         fracs = [(n, float(s)) for n, s in out]

@@ -70,6 +70,7 @@ def test_split_counts_by_largest_remainder():
     assert share_counts(parse_split_spec("train=0.8,val=0.1,test=0.1"), 13) == [11, 1, 1]  # 10.4, 1.3, 1.3
     assert share_counts(parse_split_spec("train=0.5,val=0.5"), 5) == [3, 2]  # 2.5, 2.5: tie to the first
     assert share_counts(parse_split_spec("train=4,test=2"), 6) == [4, 2]
+    assert share_counts(parse_split_spec("train=1"), 6) == [6]  # one split: everything, not a count of 1
     with pytest.raises(ValueError, match="counts sum to 6 but there are 7"):
         share_counts(parse_split_spec("train=4,test=2"), 7)
     with pytest.raises(ValueError, match="split 'test' gets no frame of 3"):
@@ -239,6 +240,7 @@ def _unfinished(src, dst):
     ("twice", [], r"argument SEQ_DIR: .* is given twice"),
     (_unfinished, [], r"argument SEQ_DIR: .* is not a finished sequence folder \(no labels\.json"),
     (_distorted, [], r"BOP has no lens distortion"),
+    (None, ["--split", "models=1"], r"split names must be folder names .* other than models and models_eval"),
 ])
 def test_bad_input_one_line_exit_2_nothing_written(two_targets, tmp_path, capsys, make, args, match):
     ice = two_targets["icesat"][0]
