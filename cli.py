@@ -926,8 +926,14 @@ def _snapshots_run(args, names: list, diff_dir: str) -> int:
         return _fail(CLIError(f"--dir: {exc}"))
 
 
+def export_main(argv: list) -> int:
+    """``cli.py export``: sequence folders to BOP, SPEED+ or COCO (:mod:`raytrace.export.command`)."""
+    from raytrace.export.command import export_main as run
+    return run(argv)
+
+
 COMMANDS = {"render-scene": render_scene_main, "dataset": dataset_main, "ablation": ablation_main,
-            "preview": preview_main, "snapshots": snapshots_main}
+            "preview": preview_main, "snapshots": snapshots_main, "export": export_main}
 
 
 def _unknown_command(word: str) -> int:

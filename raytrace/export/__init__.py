@@ -13,6 +13,9 @@ integer pixel coordinates at pixel centres.
 Frames whose ``files`` lack an image the export needs (frames the pipeline did not render)
 are left out; a file that is listed but missing or unreadable is an error.
 
+The command ``cli.py export`` (:mod:`raytrace.export.command`) exports many sequences at once,
+split into train/val/test, resumably; the functions below export one sequence.
+
 Both exports are all or nothing: everything is written into a hidden temporary folder next
 to ``out_dir`` (same file system) and renamed to ``out_dir`` at the end; on any failure the
 temporary folder (and any parent folder the call created) is removed. ``out_dir`` must not
@@ -34,7 +37,7 @@ doi:10.1109/AERO53065.2022.9843439; label convention as used by the authors' bas
 
 from __future__ import annotations
 
-from .bop import BOP_DEPTH_MAX_CODE, export_bop
+from .bop import BOP_DEPTH_MAX_CODE, BOP_PIXEL_CENTRE_SHIFT, export_bop, write_bop
 from .speedplus import export_speedplus
 
-__all__ = ["BOP_DEPTH_MAX_CODE", "export_bop", "export_speedplus"]
+__all__ = ["BOP_DEPTH_MAX_CODE", "BOP_PIXEL_CENTRE_SHIFT", "export_bop", "export_speedplus", "write_bop"]

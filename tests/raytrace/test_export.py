@@ -142,9 +142,10 @@ def test_bop_layout(bop):
                     f"mask_visib/{im:06d}_000000.png"):
             assert (scene_dir / rel).is_file(), rel
         assert js["scene_gt"][str(im)][0]["obj_id"] == 3
-        assert_allclose(js["scene_camera"][str(im)]["cam_K"], CAMERA.K.ravel())
+        # bop_toolkit's renderers put pixel centres at i + 0.5, this project's K at integers
+        assert_allclose(js["scene_camera"][str(im)]["cam_K"], (CAMERA.K + [[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]]).ravel())
     cam = json.loads((out / "camera.json").read_text())
-    assert (cam["width"], cam["height"], cam["fx"], cam["cx"]) == (W, H, 145.0, 79.5)
+    assert (cam["width"], cam["height"], cam["fx"], cam["cx"], cam["cy"]) == (W, H, 145.0, 80.0, 60.0)
     assert not [p for p in out.parent.iterdir() if p.name.startswith(".")]  # no staging folder left
 
 
@@ -187,6 +188,7 @@ def test_bop_pose_and_depth_back_project_onto_the_model(bop):
         v, u = np.nonzero(z)
         pick = rng.choice(u.size, 60, replace=False)
         u, v, z = u[pick], v[pick], z[v[pick], u[pick]]
+        u, v = u + 0.5, v + 0.5  # the toolkit's pixel centres (cam_K has cx, cy + 0.5)
         p_cam = np.column_stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z])
         p_model = (p_cam - t) @ R  # R^T (p − t), row vectors
         assert point_mesh_distance(p_model, V, F).max() < scale  # quantisation ≤ scale/2 along the ray
@@ -383,7 +385,7 @@ def test_bop_toolkit_reads_the_export(bop):
     gts = inout.load_scene_gt(str(scene_dir / "scene_gt.json"))
     info = inout.load_json(str(scene_dir / "scene_gt_info.json"), keys_to_int=True)
     for im, (R, t, g) in geometry.items():
-        assert_allclose(cams[im]["cam_K"], CAMERA.K)
+        assert_allclose(cams[im]["cam_K"], CAMERA.K + [[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]])
         assert_allclose(gts[im][0]["cam_R_m2c"], R, atol=1e-12)
         assert_allclose(gts[im][0]["cam_t_m2c"].ravel(), 1000 * t)
         assert info[im][0]["px_count_visib"] == int(np.count_nonzero(g.instance))
