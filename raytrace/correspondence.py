@@ -1,0 +1,231 @@
+"""Where each pixel's hit lies on the target, and where it goes in the next frame: the ``coords``
+and ``flow`` modalities, both from the geometry pass's hit record.
+
+*Body coordinates.* The geometry pass (:meth:`raytrace.scene.Scene.render_geometry`) reports per
+pixel the triangle hit (``face_index``) and a float32 z-depth. The body-frame point is taken
+from neither the depth nor Embree's float32 hit: the pixel's ray — origin the optical centre
+``o = −Rᵀ t``, direction ``Rᵀ d_cam`` with ``d_cam`` from :meth:`raytrace.camera.Camera.ray_directions_cam`
+(z = 1) — is intersected in float64 with the plane of its hit triangle,
+``s = n·(v₀ − o) / n·d``, ``p = o + s·d`` (M. Pharr, W. Jakob, G. Humphreys, *Physically Based
+Rendering*, 3rd ed., §3.1.2–3.6, https://pbr-book.org/3ed-2018/Shapes/Triangle_Meshes), so the
+point lies on the triangle's plane and on the pixel's ray to float64 round-off (≈10⁻¹⁵ of the
+range), where ``z·d_cam`` from the stored float32 depth is off along the ray by up to
+z·2⁻²⁴ (6 µm at 100 m). ``s`` is the z-depth of the hit.
+
+*Flow.* A body point p of frame t lands in the next planned frame at
+``uv₁ = camera.project(R₁ p + t₁)``; the flow is ``uv₁ − (u, v)``. It is *valid* where uv₁ lies in
+the image (−0.5 ≤ u < W − 0.5, −0.5 ≤ v < H − 0.5) and the next frame's camera sees p: the
+segment from p to the next optical centre ``c₁ = −R₁ᵀ t₁`` crosses no triangle of the target —
+the exact form of "the next frame's ray through p hits p first", with no neighbouring pixel or
+depth interpolation involved. The segment is cast from p's end (Embree holds float32
+coordinates: near the target they are target-sized, at the camera range-sized), starting
+:attr:`raytrace.scene.Scene.ray_eps_m` off p's own triangle on the camera's side so that it
+cannot hit that triangle; a point on a triangle seen exactly edge-on is not valid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .camera import Camera
+
+__all__ = ["PixelHits", "FrameHits", "pixel_hits", "coords_image", "flow_image"]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PixelHits:
+    """The target pixels of a frame and their hit points.
+
+    Attributes
+    ----------
+    rows, cols : ndarray, shape (N,), int64
+        Pixel coordinates (v, u) of the pixels that hit the target, row-major order.
+    face : ndarray, shape (N,), int64
+        Global triangle index hit (:attr:`raytrace.scene.GeometryFrame.face_index`).
+    p_body_m : ndarray, shape (N, 3), float64
+        Body-frame point hit [m]: the pixel's ray intersected with its triangle's plane.
+    depth_m : ndarray, shape (N,), float64
+        Its z-depth in the camera frame [m].
+    shape : tuple
+        (H, W) of the image.
+    """
+
+    rows: np.ndarray
+    cols: np.ndarray
+    face: np.ndarray
+    p_body_m: np.ndarray
+    depth_m: np.ndarray
+    shape: tuple
+
+
+def _pose(R_cam_from_body, t_cam_m) -> tuple:
+    R = np.asarray(R_cam_from_body, dtype=np.float64).reshape(3, 3)
+    t = np.asarray(t_cam_m, dtype=np.float64).reshape(3)
+    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+        raise ValueError("R_cam_from_body and t_cam_m must be finite")
+    return R, t
+
+
+def pixel_hits(vertices, faces, camera: Camera, R_cam_from_body, t_cam_m, face_index) -> PixelHits:
+    """The body-frame points of a frame's primary hits (module docstring: ray ∩ triangle plane, float64).
+
+    Parameters
+    ----------
+    vertices : array_like, shape (V, 3)
+        The target's vertices in the body frame [m] (:attr:`raytrace.scene.Scene.vertices`).
+    faces : array_like, shape (F, 3)
+        Triangles as vertex indices (:attr:`raytrace.scene.Scene.faces`).
+    camera : Camera
+        The camera the frame was rendered with.
+    R_cam_from_body : array_like, shape (3, 3)
+        Pose of the frame (``p_cam = R p_body + t``) [-].
+    t_cam_m : array_like, shape (3,)
+        [m].
+    face_index : ndarray, shape (H, W), int
+        Triangle hit per pixel, −1 on background (:attr:`raytrace.scene.GeometryFrame.face_index`).
+
+    Returns
+    -------
+    PixelHits
+    """
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a raytrace.camera.Camera, got {type(camera).__name__}")
+    face_index = np.asarray(face_index)
+    if face_index.shape != (camera.height, camera.width):
+        raise ValueError(f"face_index must have the camera's shape ({camera.height}, {camera.width}), "
+                         f"got {face_index.shape}")
+    R, t = _pose(R_cam_from_body, t_cam_m)
+    V = np.asarray(vertices, dtype=np.float64)
+    Fc = np.asarray(faces, dtype=np.int64)
+    rows, cols = np.nonzero(face_index >= 0)
+    face = face_index[rows, cols].astype(np.int64)
+    if face.size and face.max() >= len(Fc):
+        raise ValueError(f"face_index must index the {len(Fc)} faces, got {int(face.max())}")
+    if not face.size:
+        z = np.zeros((0, 3))
+        return PixelHits(rows, cols, face, z, np.zeros(0), face_index.shape)
+    u0, v0, u1, v1 = int(cols.min()), int(rows.min()), int(cols.max()) + 1, int(rows.max()) + 1
+    d_cam = camera.ray_directions_cam(u0, v0, u1, v1)[(rows - v0) * (u1 - u0) + (cols - u0)]
+    d_body = d_cam @ R  # Rᵀ d for each row
+    o_body = -R.T @ t
+    a = V[Fc[face, 0]]
+    n = np.cross(V[Fc[face, 1]] - a, V[Fc[face, 2]] - a)
+    w = o_body - a  # from the triangle's first vertex to the optical centre
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = -np.einsum("ij,ij->i", n, w) / np.einsum("ij,ij->i", n, d_body)
+    p = a + (w + s[:, None] * d_body)
+    return PixelHits(rows, cols, face, p, s * d_cam[:, 2], face_index.shape)
+
+
+def coords_image(hits: PixelHits) -> np.ndarray:
+    """The ``coords`` image: body-frame point of each pixel's hit, shape (H, W, 3), float32 [m];
+    0 on background."""
+    out = np.zeros(hits.shape + (3,), dtype=np.float32)
+    out[hits.rows, hits.cols] = hits.p_body_m
+    return out
+
+
+def flow_image(scene, camera: Camera, hits: PixelHits, next_pose) -> np.ndarray:
+    """The ``flow`` image: (du, dv, valid) of each pixel to the next frame (module docstring),
+    shape (H, W, 3), float32.
+
+    Parameters
+    ----------
+    scene : raytrace.scene.Scene
+        The target's scene (its occlusion rays, vertices and :attr:`~raytrace.scene.Scene.ray_eps_m`).
+    camera : Camera
+        The camera of both frames.
+    hits : PixelHits
+        This frame's hits (:func:`pixel_hits`).
+    next_pose : tuple or None
+        (R_cam_from_body, t_cam_m) of the next planned frame; None for the last frame of a
+        sequence: every pixel (0, 0, 0).
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3), float32
+        du, dv [px] where the point lies in front of the next frame's camera (0 elsewhere,
+        and on background); validity 1 where it lies in the next image and is seen there, else 0.
+    """
+    out = np.zeros(hits.shape + (3,), dtype=np.float32)
+    if next_pose is None or not hits.face.size:
+        return out
+    R1, t1 = _pose(*next_pose)
+    p = hits.p_body_m
+    uv1 = camera.project(p @ R1.T + t1)
+    front = np.isfinite(uv1[:, 0])
+    du = np.where(front, uv1[:, 0] - hits.cols, 0.0)
+    dv = np.where(front, uv1[:, 1] - hits.rows, 0.0)
+    W, H = camera.width, camera.height
+    with np.errstate(invalid="ignore"):
+        inside = front & (uv1[:, 0] >= -0.5) & (uv1[:, 0] < W - 0.5) & (uv1[:, 1] >= -0.5) & (uv1[:, 1] < H - 0.5)
+    valid = np.zeros(p.shape[0], dtype=bool)
+    idx = np.flatnonzero(inside)
+    if idx.size:
+        valid[idx] = seen_from(scene, p[idx], hits.face[idx], -R1.T @ t1)
+    out[hits.rows, hits.cols, 0] = du
+    out[hits.rows, hits.cols, 1] = dv
+    out[hits.rows, hits.cols, 2] = valid
+    return out
+
+
+def seen_from(scene, p_body_m, face, centre_body_m) -> np.ndarray:
+    """Whether an optical centre sees the points ``p_body_m`` on their triangles ``face``: no
+    triangle of ``scene`` crosses the segment from each point to the centre (cast from the
+    point's end, :attr:`raytrace.scene.Scene.ray_eps_m` off its triangle on the centre's side);
+    False for a triangle seen edge-on. Shape (N,), bool."""
+    V, Fc = scene.vertices, scene.faces
+    a = V[Fc[face, 0]]
+    n = np.cross(V[Fc[face, 1]] - a, V[Fc[face, 2]] - a)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    c = np.asarray(centre_body_m, dtype=np.float64)
+    side = np.einsum("ij,ij->i", n, c - p_body_m)
+    ok = side != 0.0
+    origins = p_body_m + (np.sign(side) * scene.ray_eps_m)[:, None] * n
+    directions = c - origins
+    # with the centre outside the target's convex hull, the segment's continuation past the centre
+    # stays outside the hull: an unbounded ray (the fast robust batch) answers the same
+    hull_cam_z = (scene.hull_vertices - c) @ _axis_away(scene.hull_vertices, c)
+    if np.all(hull_cam_z > 0.0):
+        blocked = scene.occluded(origins[ok], directions[ok], robust=True)
+    else:
+        blocked = scene.occluded(origins[ok], directions[ok], tfar=1.0, robust=True)
+    seen = np.zeros(len(p_body_m), dtype=bool)
+    seen[ok] = ~blocked
+    return seen
+
+
+def _axis_away(points: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """A unit direction from ``c`` towards the points' centroid: when every point lies strictly on
+    its side of the plane through ``c`` normal to it, ``c`` is outside their convex hull."""
+    d = points.mean(axis=0) - c
+    nrm = np.linalg.norm(d)
+    return d / nrm if nrm > 0 else np.array([0.0, 0.0, 1.0])
+
+
+class FrameHits:
+    """What the ``coords`` and ``flow`` producers of one frame share (:mod:`raytrace.dataset.modalities`):
+    the scene, camera, pose, the geometry pass's frame and the next planned frame's pose (None
+    for the last), with the hit points computed once on first use."""
+
+    def __init__(self, scene, camera: Camera, R_cam_from_body, t_cam_m, geometry, next_pose=None):
+        self.scene, self.camera, self.geometry, self.next_pose = scene, camera, geometry, next_pose
+        self.R, self.t = _pose(R_cam_from_body, t_cam_m)
+        self._hits = None
+
+    @property
+    def hits(self) -> PixelHits:
+        if self._hits is None:
+            self._hits = pixel_hits(self.scene.vertices, self.scene.faces, self.camera, self.R, self.t,
+                                    self.geometry.face_index)
+        return self._hits
+
+    def coords(self) -> np.ndarray:
+        """:func:`coords_image` of this frame."""
+        return coords_image(self.hits)
+
+    def flow(self) -> np.ndarray:
+        """:func:`flow_image` of this frame to the next."""
+        return flow_image(self.scene, self.camera, self.hits, self.next_pose)
