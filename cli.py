@@ -210,7 +210,8 @@ def _options() -> tuple:
           "each frame's blur from the target's own image motion during the exposure"),
         # [output]
         O("--modalities", "output", opt.subset(MODALITIES), None,
-          "files per frame, comma-separated (default: all but semantic and hdr; no rgb_degraded with --degrade none)",
+          f"files per frame, comma-separated (default: {','.join(DEFAULT_MODALITIES)}; no rgb_degraded with --degrade "
+          "none)",
           "LIST"),
         O("--only-visible", "output", opt.boolean, False,
           "drop frames whose flags say the target cannot be seen (default: render them, flags in labels)",

@@ -68,7 +68,8 @@ def _pose(R_cam_from_body, t_cam_m) -> tuple:
     return R, t
 
 
-def pixel_hits(vertices, faces, camera: Camera, R_cam_from_body, t_cam_m, face_index) -> PixelHits:
+def pixel_hits(vertices, faces, camera: Camera, R_cam_from_body, t_cam_m, face_index, *,
+               rect: tuple | None = None) -> PixelHits:
     """The body-frame points of a frame's primary hits (module docstring: ray ∩ triangle plane, float64).
 
     Parameters
@@ -85,6 +86,9 @@ def pixel_hits(vertices, faces, camera: Camera, R_cam_from_body, t_cam_m, face_i
         [m].
     face_index : ndarray, shape (H, W), int
         Triangle hit per pixel, −1 on background (:attr:`raytrace.scene.GeometryFrame.face_index`).
+    rect : tuple of int, keyword-only, optional
+        (u0, v0, u1, v1), end exclusive: a rectangle holding every hit (the frame's
+        :attr:`~raytrace.scene.GeometryFrame.cast_rect`), searched instead of the whole image.
 
     Returns
     -------
@@ -99,7 +103,9 @@ def pixel_hits(vertices, faces, camera: Camera, R_cam_from_body, t_cam_m, face_i
     R, t = _pose(R_cam_from_body, t_cam_m)
     V = np.asarray(vertices, dtype=np.float64)
     Fc = np.asarray(faces, dtype=np.int64)
-    rows, cols = np.nonzero(face_index >= 0)
+    ru0, rv0, ru1, rv1 = (0, 0, camera.width, camera.height) if rect is None else (int(r) for r in rect)
+    rows, cols = np.nonzero(face_index[rv0:rv1, ru0:ru1] >= 0)
+    rows, cols = rows + rv0, cols + ru0
     face = face_index[rows, cols].astype(np.int64)
     if face.size and face.max() >= len(Fc):
         raise ValueError(f"face_index must index the {len(Fc)} faces, got {int(face.max())}")
@@ -219,7 +225,7 @@ class FrameHits:
     def hits(self) -> PixelHits:
         if self._hits is None:
             self._hits = pixel_hits(self.scene.vertices, self.scene.faces, self.camera, self.R, self.t,
-                                    self.geometry.face_index)
+                                    self.geometry.face_index, rect=self.geometry.cast_rect)
         return self._hits
 
     def coords(self) -> np.ndarray:

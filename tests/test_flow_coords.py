@@ -103,6 +103,9 @@ def test_coords_are_the_pixel_rays_exact_hits_on_their_triangles(two_boxes):
     geo = scene.render_geometry(CAM, R, t)
     hits = pixel_hits(scene.vertices, scene.faces, CAM, R, t, geo.face_index)
     assert hits.face.size > 1500
+    in_rect = pixel_hits(scene.vertices, scene.faces, CAM, R, t, geo.face_index, rect=geo.cast_rect)
+    assert geo.cast_rect != (0, 0, CAM.width, CAM.height)
+    assert all(np.array_equal(getattr(hits, k), getattr(in_rect, k)) for k in ("rows", "cols", "face", "p_body_m"))
     # a brute-force caster, independent of Embree and of the plane intersection
     O, D = pixel_rays_body(CAM, R, t, hits.rows.astype(float), hits.cols.astype(float))
     t_ref, f_ref = nearest_hits(scene.vertices, scene.faces, O, D)
