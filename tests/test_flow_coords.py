@@ -7,13 +7,16 @@ OpenImageIO."""
 
 import json
 
+import cli
+
 import numpy as np
 import OpenImageIO as oiio
 import pytest
 import trimesh
 
 from raytrace.camera import Camera
-from raytrace.correspondence import FrameHits, coords_image, flow_image, pixel_hits
+from raytrace.correspondence import FrameHits, coords_image, flow_image, pixel_hits, seen_from
+from raytrace.dataset import folder
 from raytrace.model import Component, TargetModel
 from raytrace.scene import Scene
 from tests.cli_helpers import run_main
@@ -181,6 +184,37 @@ def test_the_last_frame_has_no_flow_and_bad_input_is_refused(two_boxes):
         pixel_hits(scene.vertices, scene.faces, CAM, R, t, geo.face_index[:-1])
     with pytest.raises(ValueError, match="camera must be"):
         pixel_hits(scene.vertices, scene.faces, (120, 90), R, t, geo.face_index)
+
+
+def test_visibility_from_a_centre_inside_the_targets_hull():
+    # two boxes 6 m apart and the camera between them: the segment test must stop at the centre
+    # (the box behind it is on the same line); every point of the boxes, by brute force
+    a, b = trimesh.creation.box(extents=(1.0, 1.0, 1.0)), trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    a.apply_translation((3.0, 0.0, 0.0))
+    b.apply_translation((-3.0, 0.2, 0.1))
+    scene = Scene(TargetModel("pair", (Component("a", a, "white_paint", "bus", 1.0),
+                                       Component("b", b, "white_paint", "bus", 1.0))))
+    rng = np.random.default_rng(3)
+    face = rng.integers(0, len(scene.faces), 400)
+    w = rng.dirichlet((1.0, 1.0, 1.0), 400)
+    p = np.einsum("ij,ijk->ik", w, scene.vertices[scene.faces[face]])
+    c = np.array([0.1, 0.05, 0.02])
+    seen = seen_from(scene, p, face, c)
+    t_hit, _ = nearest_hits(scene.vertices, scene.faces, np.broadcast_to(c, p.shape), p - c)
+    # one face of each box faces the centre: about a sixth of the points are seen, on both boxes
+    assert np.array_equal(seen, t_hit > 1.0 - 1e-9) and 40 < seen.sum() < 100
+    assert seen[p[:, 0] > 0].any() and seen[p[:, 0] < 0].any()
+
+
+def test_each_frame_task_carries_the_next_planned_frames_pose():
+    cfg, given = cli.resolve_config(cli.build_parser().parse_args(["--target", "icesat", "--frames", "4"]))
+    plan = cli.plan_sequence(cfg, given)
+    frames = plan["result"]["frames"]
+    tasks, _ = folder.tasks_for(plan, "", None, write=False, frames=[0, 2, 3])  # frame 1 not written
+    assert [t["frame"] for t in tasks] == [0, 2, 3]
+    assert tasks[0]["next_pose"] == (frames[1]["R_cam_from_body"], frames[1]["t_cam_m"])
+    assert tasks[1]["next_pose"] == (frames[3]["R_cam_from_body"], frames[3]["t_cam_m"])
+    assert tasks[2]["next_pose"] is None
 
 
 # ------------------------------------------------------------------ the command line
