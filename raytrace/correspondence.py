@@ -48,6 +48,8 @@ class PixelHits:
         Body-frame point hit [m]: the pixel's ray intersected with its triangle's plane.
     depth_m : ndarray, shape (N,), float64
         Its z-depth in the camera frame [m].
+    normal_body : ndarray, shape (N, 3), float64
+        The hit triangle's normal (v₁ − v₀) × (v₂ − v₀), unnormalised, in the body frame [m²].
     shape : tuple
         (H, W) of the image.
     """
@@ -57,6 +59,7 @@ class PixelHits:
     face: np.ndarray
     p_body_m: np.ndarray
     depth_m: np.ndarray
+    normal_body: np.ndarray
     shape: tuple
 
 
@@ -111,7 +114,7 @@ def pixel_hits(vertices, faces, camera: Camera, R_cam_from_body, t_cam_m, face_i
         raise ValueError(f"face_index must index the {len(Fc)} faces, got {int(face.max())}")
     if not face.size:
         z = np.zeros((0, 3))
-        return PixelHits(rows, cols, face, z, np.zeros(0), face_index.shape)
+        return PixelHits(rows, cols, face, z, np.zeros(0), z, face_index.shape)
     u0, v0, u1, v1 = int(cols.min()), int(rows.min()), int(cols.max()) + 1, int(rows.max()) + 1
     d_cam = camera.ray_directions_cam(u0, v0, u1, v1)[(rows - v0) * (u1 - u0) + (cols - u0)]
     d_body = d_cam @ R  # Rᵀ d for each row
@@ -122,14 +125,14 @@ def pixel_hits(vertices, faces, camera: Camera, R_cam_from_body, t_cam_m, face_i
     with np.errstate(divide="ignore", invalid="ignore"):
         s = -np.einsum("ij,ij->i", n, w) / np.einsum("ij,ij->i", n, d_body)
     p = a + (w + s[:, None] * d_body)
-    return PixelHits(rows, cols, face, p, s * d_cam[:, 2], face_index.shape)
+    return PixelHits(rows, cols, face, p, s * d_cam[:, 2], n, face_index.shape)
 
 
 def coords_image(hits: PixelHits) -> np.ndarray:
     """The ``coords`` image: body-frame point of each pixel's hit, shape (H, W, 3), float32 [m];
     0 on background."""
     out = np.zeros(hits.shape + (3,), dtype=np.float32)
-    out[hits.rows, hits.cols] = hits.p_body_m
+    out.reshape(-1, 3)[hits.rows * hits.shape[1] + hits.cols] = hits.p_body_m
     return out
 
 
@@ -160,7 +163,7 @@ def flow_image(scene, camera: Camera, hits: PixelHits, next_pose) -> np.ndarray:
         return out
     R1, t1 = _pose(*next_pose)
     p = hits.p_body_m
-    uv1 = camera.project(p @ R1.T + t1)
+    uv1 = camera.project(p @ np.ascontiguousarray(R1.T) + t1)  # not a transposed view: 300x slower in numpy
     front = np.isfinite(uv1[:, 0])
     du = np.where(front, uv1[:, 0] - hits.cols, 0.0)
     dv = np.where(front, uv1[:, 1] - hits.rows, 0.0)
@@ -170,36 +173,43 @@ def flow_image(scene, camera: Camera, hits: PixelHits, next_pose) -> np.ndarray:
     valid = np.zeros(p.shape[0], dtype=bool)
     idx = np.flatnonzero(inside)
     if idx.size:
-        valid[idx] = seen_from(scene, p[idx], hits.face[idx], -R1.T @ t1)
-    out[hits.rows, hits.cols, 0] = du
-    out[hits.rows, hits.cols, 1] = dv
-    out[hits.rows, hits.cols, 2] = valid
+        valid[idx] = seen_from(scene, p[idx], hits.face[idx], -R1.T @ t1, normal_body=hits.normal_body[idx])
+    out.reshape(-1, 3)[hits.rows * camera.width + hits.cols] = np.column_stack([du, dv, valid])
     return out
 
 
-def seen_from(scene, p_body_m, face, centre_body_m) -> np.ndarray:
+def seen_from(scene, p_body_m, face, centre_body_m, *, normal_body=None) -> np.ndarray:
     """Whether an optical centre sees the points ``p_body_m`` on their triangles ``face``: no
     triangle of ``scene`` crosses the segment from each point to the centre (cast from the
     point's end, :attr:`raytrace.scene.Scene.ray_eps_m` off its triangle on the centre's side);
-    False for a triangle seen edge-on. Shape (N,), bool."""
-    V, Fc = scene.vertices, scene.faces
-    a = V[Fc[face, 0]]
-    n = np.cross(V[Fc[face, 1]] - a, V[Fc[face, 2]] - a)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    False for a triangle seen edge-on. ``normal_body``: the triangles' normals (any length), if
+    known. Shape (N,), bool.
+
+    With the centre outside the target's convex hull, a point on a closed component wound
+    outwards (:attr:`raytrace.scene.Scene.two_sided` False) whose triangle faces away from the
+    centre is hidden by that component itself: no ray is cast for it (about half the points)."""
+    face = np.asarray(face, dtype=np.int64)
+    if normal_body is None:
+        V, Fc = scene.vertices, scene.faces
+        a = V[Fc[face, 0]]
+        normal_body = np.cross(V[Fc[face, 1]] - a, V[Fc[face, 2]] - a)
+    n = normal_body / np.linalg.norm(normal_body, axis=1, keepdims=True)
     c = np.asarray(centre_body_m, dtype=np.float64)
     side = np.einsum("ij,ij->i", n, c - p_body_m)
-    ok = side != 0.0
-    origins = p_body_m + (np.sign(side) * scene.ray_eps_m)[:, None] * n
-    directions = c - origins
     # with the centre outside the target's convex hull, the segment's continuation past the centre
     # stays outside the hull: an unbounded ray (the fast robust batch) answers the same
-    hull_cam_z = (scene.hull_vertices - c) @ _axis_away(scene.hull_vertices, c)
-    if np.all(hull_cam_z > 0.0):
-        blocked = scene.occluded(origins[ok], directions[ok], robust=True)
+    outside = bool(np.all((scene.hull_vertices - c) @ _axis_away(scene.hull_vertices, c) > 0.0))
+    cast = side != 0.0
+    if outside:
+        cast &= (side > 0.0) | scene.two_sided[scene.component_of_face[face]]
+    origins = p_body_m[cast] + (np.sign(side[cast]) * scene.ray_eps_m)[:, None] * n[cast]
+    directions = c - origins
+    if outside:
+        blocked = scene.occluded(origins, directions, robust=True)
     else:
-        blocked = scene.occluded(origins[ok], directions[ok], tfar=1.0, robust=True)
+        blocked = scene.occluded(origins, directions, tfar=1.0, robust=True)
     seen = np.zeros(len(p_body_m), dtype=bool)
-    seen[ok] = ~blocked
+    seen[cast] = ~blocked
     return seen
 
 
