@@ -25,12 +25,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import cli  # noqa: E402
-from raytrace import files as F  # noqa: E402
-from raytrace.camera import Camera  # noqa: E402
-from raytrace.correspondence import FrameHits  # noqa: E402
-from raytrace.dataset import folder, scenes  # noqa: E402
-from raytrace.dataset.modalities import DEFAULT, MODALITIES, relpath  # noqa: E402
+import cli
+from raytrace import files as F
+from raytrace.camera import Camera
+from raytrace.correspondence import FrameHits
+from raytrace.dataset import folder, scenes
+from raytrace.dataset.modalities import DEFAULT, MODALITIES, relpath
 
 
 def frame_seconds(task: dict, out: str) -> float:

@@ -33,7 +33,7 @@ import numpy as np
 
 from .camera import Camera
 
-__all__ = ["PixelHits", "FrameHits", "pixel_hits", "coords_image", "flow_image"]
+__all__ = ["FrameHits", "PixelHits", "coords_image", "flow_image", "pixel_hits", "seen_from"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -165,7 +165,7 @@ def flow_image(scene, camera: Camera, hits: PixelHits, next_pose) -> np.ndarray:
         return out
     R1, t1 = _pose(*next_pose)
     p = hits.p_body_m
-    uv1 = camera.project(p @ np.ascontiguousarray(R1.T) + t1)  # a transposed view: ~300x slower here
+    uv1 = camera.project(p @ np.ascontiguousarray(R1.T) + t1)  # R1.T itself (a view): ~300x slower
     front = np.isfinite(uv1[:, 0])
     du = np.where(front, uv1[:, 0] - hits.cols, 0.0)
     dv = np.where(front, uv1[:, 1] - hits.rows, 0.0)

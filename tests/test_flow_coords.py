@@ -7,15 +7,20 @@ OpenImageIO."""
 
 import json
 
-import cli
-
 import numpy as np
 import OpenImageIO as oiio
 import pytest
 import trimesh
 
+import cli
 from raytrace.camera import Camera
-from raytrace.correspondence import FrameHits, coords_image, flow_image, pixel_hits, seen_from
+from raytrace.correspondence import (
+    FrameHits,
+    coords_image,
+    flow_image,
+    pixel_hits,
+    seen_from,
+)
 from raytrace.dataset import folder
 from raytrace.model import Component, TargetModel
 from raytrace.scene import Scene
