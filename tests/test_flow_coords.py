@@ -13,6 +13,7 @@ import pytest
 import trimesh
 
 import cli
+from raytrace import correspondence
 from raytrace.camera import Camera
 from raytrace.correspondence import (
     FrameHits,
@@ -105,7 +106,14 @@ def two_boxes():
     return Scene(model)
 
 
-def test_coords_are_the_pixel_rays_exact_hits_on_their_triangles(two_boxes):
+# the producers work in batches of correspondence._CHUNK pixels (row bands for the rays): 97 makes
+# one image row per band and ~20 batches here
+BATCHES = pytest.mark.parametrize("chunk", [correspondence._CHUNK, 97], ids=["one batch", "batches of 97"])
+
+
+@BATCHES
+def test_coords_are_the_pixel_rays_exact_hits_on_their_triangles(two_boxes, chunk, monkeypatch):
+    monkeypatch.setattr(correspondence, "_CHUNK", chunk)
     scene = two_boxes
     R, t = looking((4.0, -2.5, 3.0))
     geo = scene.render_geometry(CAM, R, t)
@@ -138,7 +146,10 @@ def test_coords_are_the_pixel_rays_exact_hits_on_their_triangles(two_boxes):
     assert np.all(e_depth <= bound * 1.01) and e_depth.max() > 100 * err.max()
 
 
-def test_flow_lands_where_the_next_frame_sees_the_point_and_validity_is_the_exact_visibility(two_boxes):
+@BATCHES
+def test_flow_lands_where_the_next_frame_sees_the_point_and_validity_is_the_exact_visibility(two_boxes, chunk,
+                                                                                            monkeypatch):
+    monkeypatch.setattr(correspondence, "_CHUNK", chunk)
     scene = two_boxes
     R0, t0 = looking((4.0, -2.5, 3.0))
     # the next frame from above, nearer and aside: the small box hides part of the top face,
