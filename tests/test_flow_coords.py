@@ -252,8 +252,8 @@ def read_exr(path):
 def test_a_sequence_writes_coords_and_flow_that_agree_with_the_model_and_poses(tmp_path, capsys):
     seq = tmp_path / "seq"
     assert run_main("--target", "icesat", "--pattern", "spiral", "--frames", "5", "--width", "96", "--height", "72",
-                    "--focal-length-mm", "1.5",
-                    "--modalities", "mask,depth,coords,flow", "--quiet", "--workers", "1", "--out", seq) == 0
+                    "--focal-length-mm", "1.5", "--modalities", "mask,depth,coords,flow", "--quiet", "--workers", "1",
+                    "--out", seq) == 0
     labels = json.loads((seq / "labels.json").read_text())
     cam = json.loads((seq / "camera.json").read_text())
     camera = Camera(cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"], cam["cy"])
