@@ -18,7 +18,7 @@ coordinates, whatever the range.
 ``uv₁ = camera.project(R₁ p + t₁)``; the flow is ``uv₁ − (u, v)``. It is *valid* where uv₁ lies in
 the image (−0.5 ≤ u < W − 0.5, −0.5 ≤ v < H − 0.5) and the next frame's camera sees p: the
 segment from p to the next optical centre ``c₁ = −R₁ᵀ t₁`` crosses no triangle of the target —
-the next frame's primary ray through p meets nothing before p (but for
+the next frame's primary ray through p meets nothing before p (but for the last
 :attr:`raytrace.scene.Scene.ray_eps_m`), with no neighbouring pixel or depth interpolation
 involved (:func:`seen_from`); a point on a triangle seen exactly edge-on is not valid.
 """
@@ -202,19 +202,19 @@ def flow_image(scene, camera: Camera, hits: PixelHits, next_pose) -> np.ndarray:
 
 
 def seen_from(scene, p_body_m, face, centre_body_m, *, normal_body=None) -> np.ndarray:
-    """Whether an optical centre sees the points ``p_body_m`` on their triangles ``face``: the ray
-    from the centre through each point meets no triangle of ``scene`` before it, but for
-    :attr:`raytrace.scene.Scene.ray_eps_m` (the segment's end pulled back by that much); False
-    for a triangle seen exactly edge-on. ``normal_body``: the triangles' normals (any length), if
-    known. Shape (N,), bool.
+    """Whether an optical centre sees the points ``p_body_m`` on their triangles ``face``: the
+    segment from the centre to each point, its end pulled back along it by
+    :attr:`raytrace.scene.Scene.ray_eps_m`, meets no triangle of ``scene`` — the centre's own ray
+    through the point meets nothing before it; False for a triangle seen exactly edge-on.
+    ``normal_body``: the triangles' normals (any length), if known. Shape (N,), bool.
 
-    The ray is the next frame's primary ray through the point, cast the way the geometry pass
-    casts its own: from a start just outside the target (Embree holds float32 coordinates, which
-    at the camera would be range-sized) — the point's distance to the start is at most 1.01 × the
-    target's bounding-box diagonal, beyond which the line is outside the target's convex hull.
-    With the centre outside that hull, a point on a closed component wound outwards
-    (:attr:`raytrace.scene.Scene.two_sided` False) whose triangle faces away from the centre is
-    hidden by that component itself: no ray is cast for it (about half the points)."""
+    The segment is cast from its pulled-back end towards the centre (Embree holds float32
+    coordinates: there they are target-sized, at the centre range-sized), on the same line, so
+    that the test is the centre's primary ray's. With the centre outside the target's convex hull
+    the line beyond the centre is outside it too, and the ray need not stop there (Embree's
+    any-hit batch, :meth:`raytrace.scene.Scene.occluded`); and a point on a closed component wound
+    outwards (:attr:`raytrace.scene.Scene.two_sided` False) whose triangle faces away from the
+    centre is hidden by that component itself: no ray is cast for it (about half the points)."""
     face = np.asarray(face, dtype=np.int64)
     p = np.asarray(p_body_m, dtype=np.float64)
     if normal_body is None:
@@ -222,18 +222,21 @@ def seen_from(scene, p_body_m, face, centre_body_m, *, normal_body=None) -> np.n
         a = V[Fc[face, 0]]
         normal_body = np.cross(V[Fc[face, 1]] - a, V[Fc[face, 2]] - a)
     c = np.asarray(centre_body_m, dtype=np.float64)
-    u = p - c  # centre → point
-    side = -np.einsum("ij,ij->i", normal_body, u)  # > 0: the triangle's front faces the centre
-    cast = side != 0.0
+    u = c - p  # point → centre
+    side = np.einsum("ij,ij->i", normal_body, u)  # > 0: the triangle's front faces the centre
+    dist = np.sqrt(np.einsum("ij,ij->i", u, u))
+    cast = (side != 0.0) & (dist > scene.ray_eps_m)
     outside = bool(np.all(np.einsum("ij,j->i", scene.hull_vertices - c, _axis_away(scene.hull_vertices, c)) > 0.0))
     if outside:
         cast &= (side > 0.0) | scene.two_sided[scene.component_of_face[face]]
-    dist = np.sqrt(np.einsum("ij,ij->i", u[cast], u[cast]))
-    reach = np.minimum(dist, 1.01 * scene.scale_m + 2.0 * scene.ray_eps_m)  # start → point [m]
-    directions = u[cast] * (reach / dist)[:, None]
-    hit = scene.intersect(p[cast] - directions, directions, robust=True)["tfar"]  # in units of reach
+    towards = u[cast] / dist[cast, None]
+    origins = p[cast] + scene.ray_eps_m * towards
+    if outside:
+        blocked = scene.occluded(origins, towards, robust=True)
+    else:
+        blocked = scene.occluded(origins, c - origins, tfar=1.0, robust=True)
     seen = np.zeros(len(p), dtype=bool)
-    seen[cast] = hit >= 1.0 - scene.ray_eps_m / reach
+    seen[cast] = ~blocked
     return seen
 
 
