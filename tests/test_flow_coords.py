@@ -229,8 +229,8 @@ def test_visibility_from_a_centre_inside_the_targets_hull():
 
 def test_every_hit_is_seen_from_its_own_camera():
     # flow to the frame's own pose: zero motion, and every pixel valid — also where Cassini's thin
-    # booms and antennas pass within a fraction of a millimetre of a pixel's ray (a segment cast
-    # back from the hit, shifted sideways by its offset off the surface, called 7 of 16 k hidden)
+    # booms and antennas pass within a fraction of a millimetre of a pixel's ray (a segment from
+    # the hit offset sideways, by ray_eps_m off its triangle, would call ~7 of 16 k hidden)
     from raytrace.dataset import scenes
     cfg, given = cli.resolve_config(cli.build_parser().parse_args(["--target", "cassini", "--frames", "4"]))
     task = folder.tasks_for(cli.plan_sequence(cfg, given), "", None, write=False)[0][1]
