@@ -212,7 +212,8 @@ def _options() -> tuple:
           "each frame's blur from the target's own image motion during the exposure"),
         # [output]
         O("--modalities", "output", opt.subset(MODALITIES), None,
-          "files per frame, comma-separated (default: all but semantic and hdr; no rgb_degraded with --degrade none)",
+          f"files per frame, comma-separated (default: {','.join(DEFAULT_MODALITIES)}; no rgb_degraded with --degrade "
+          "none)",
           "LIST"),
         O("--only-visible", "output", opt.boolean, False,
           "drop frames whose flags say the target cannot be seen (default: render them, flags in labels)",
@@ -383,6 +384,7 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
     ``task["want_rgb"]``)."""
     from degrade.encode import quantise, srgb_encode
     from raytrace.camera import Camera
+    from raytrace.correspondence import FrameHits
     from raytrace.shade import render
     cfg = task["cfg"]
     mods = set(task["modalities"])
@@ -413,9 +415,10 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
         info["exposure_scale"] = float(scale)
     if "rgb_degraded" in mods:
         images["rgb_degraded"] = degrade_frame(cfg, task, images.get("rgb"), radiance, degrade_seq)
+    hits = FrameHits(scene, camera, R, t, geo, task.get("next_pose"))  # hit points made on first use
     for m in task["modalities"]:  # the rest from the geometry and radiance (raytrace.dataset.modalities)
         if MODALITY[m].produce is not None:
-            images[m] = MODALITY[m].produce(geo, radiance)
+            images[m] = MODALITY[m].produce(geo, radiance, *([hits] if MODALITY[m].hits else []))
     bbox = geo.bbox_xywh
     vf = geo.visible_fraction
     info.update({"bbox": None if bbox is None else [int(v) for v in bbox],

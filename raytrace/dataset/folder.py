@@ -367,9 +367,12 @@ def tasks_for(plan: dict, seq_dir: str, shard: tuple | None, *, write: bool = Tr
             skipped += 1
             continue
         label = plan["result"]["frames"][i]
+        nxt = plan["result"]["frames"][i + 1] if i + 1 < len(plan["result"]["frames"]) else None
         tasks.append({"frame": i, "out": seq_dir, "write": write, "cfg": cfg, "model_spec": plan["model_spec"],
                       "camera": (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy),
                       "R_cam_from_body": label["R_cam_from_body"], "t_cam_m": label["t_cam_m"],
+                      # the next planned frame's pose (written or not), for the flow
+                      "next_pose": None if nxt is None else (nxt["R_cam_from_body"], nxt["t_cam_m"]),
                       "light": plan["lights"][i], "label": label, "keypoints_body_m": kp_points,
                       "modalities": cfg["output"]["modalities"] if write else [], "want_rgb": not write})
     return tasks, skipped

@@ -43,6 +43,9 @@ class Modality:
     produce : callable or None
         ``produce(geometry, radiance) -> pixels`` from a :class:`raytrace.scene.GeometryFrame`
         and the linear radiance (None when not shaded); None: made by the pipeline.
+    hits : bool
+        ``produce`` takes a third argument, the frame's :class:`raytrace.correspondence.FrameHits`
+        (scene, camera, pose, next frame's pose; the hit points computed once for all such modalities).
     """
 
     name: str
@@ -53,6 +56,7 @@ class Modality:
     picture: bool = False
     default: bool = True
     produce: object = None
+    hits: bool = False
 
 
 MODALITIES = {m.name: m for m in (
@@ -69,6 +73,10 @@ MODALITIES = {m.name: m for m in (
              default=False, produce=lambda geo, radiance: geo.semantic),
     Modality("hdr", ".exr", "linear radiance, float32 W/(m²·sr)", shaded=True, default=False,
              produce=lambda geo, radiance: radiance.astype(np.float32)),
+    Modality("coords", ".exr", "body-frame point of the pixel's hit, float32 m (0 on background)", default=False,
+             hits=True, produce=lambda geo, radiance, hits: hits.coords()),
+    Modality("flow", ".exr", "du, dv to the next planned frame, float32 px, and validity 1/0 (0 on background and "
+             "in the last frame)", default=False, hits=True, produce=lambda geo, radiance, hits: hits.flow()),
 )}
 """Every modality by name, in the order they are listed and written."""
 
