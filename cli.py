@@ -394,7 +394,8 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
     if need_radiance:
         r = cfg["render"]
         lighting = scenes.lighting_of(task["light"], r, scenes.star_field(cfg))
-        frame = render(scene, camera, R, t, lighting, quality=r["quality"], samples=r["samples"], seed=render_seed)
+        frame = render(scene, camera, R, t, lighting, quality=r["quality"], samples=r["samples"], seed=render_seed,
+                       parts=any(MODALITY[m].light_parts for m in mods))
         geo, radiance = frame.geometry, frame.radiance
     else:  # geometry-only modalities: no shading at all
         geo, radiance = scene.render_geometry(camera, R, t), None
@@ -411,7 +412,7 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
         images["rgb_degraded"] = degrade_frame(cfg, task, images.get("rgb"), radiance, degrade_seq)
     for m in task["modalities"]:  # the rest from the geometry and radiance (raytrace.dataset.modalities)
         if MODALITY[m].produce is not None:
-            images[m] = MODALITY[m].produce(geo, radiance)
+            images[m] = MODALITY[m].produce(geo, frame.light_parts if MODALITY[m].light_parts else radiance)
     bbox = geo.bbox_xywh
     vf = geo.visible_fraction
     info.update({"bbox": None if bbox is None else [int(v) for v in bbox],
