@@ -15,7 +15,7 @@ _EARTH, _INTER, _SKY, _SUN = 0, 1, 2, 3
 @pjit_exact
 def centre_parts(D_earth, D_sky, has_earth, has_sky, valid, face_s, lat_start, lat_ids, face, B, SIDE, E_ind, L_sun,
                  L_total, out):
-    """Per pixel centre k: its radiance ``L_total[k]`` split into parts ``out[k]`` (4, 3): the
+    """Per pixel centre k: its radiance ``L_total[k]`` split into parts ``out[k]`` (4, 3; float32): the
     Sun's term ``L_sun[k]``, and the rest in the proportions of the cache's indirect irradiance
     at the point ``E_ind[k]``: Earth's and the sky's direct environment terms (per-row arrays
     ``D_earth``, ``D_sky`` interpolated at the point as the cache's irradiance is; 0 without
@@ -89,10 +89,10 @@ def assemble(P, row_of_pixel, mixed, parts, bg, has_bg, H, W, out):
                 a2 = np.float64(out[i, 6 + c])
                 a3 = np.float64(out[i, 9 + c])
             else:
-                a0 = parts[r, 0, c]
-                a1 = parts[r, 1, c]
-                a2 = parts[r, 2, c]
-                a3 = parts[r, 3, c]
+                a0 = np.float64(parts[r, 0, c])
+                a1 = np.float64(parts[r, 1, c])
+                a2 = np.float64(parts[r, 2, c])
+                a3 = np.float64(parts[r, 3, c])
             S = a0 + a1 + a2 + a3
             x = np.float64(P[i, c])
             if S > 0.0:

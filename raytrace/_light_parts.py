@@ -90,14 +90,14 @@ def environment_terms(ctx):
 
 
 def centre_parts(ctx, s, E_ind, L_sun, L_total, terms=None) -> np.ndarray:
-    """The parts (n, 4, 3) (:data:`PARTS`) of the pixel centres' radiance ``L_total`` (n, 3) at
+    """The parts (n, 4, 3) float32 (:data:`PARTS`) of the pixel centres' radiance ``L_total`` (n, 3) at
     the points ``s``, whose Sun term is ``L_sun`` (n, 3) and whose cache irradiance (indirect)
     is ``E_ind`` (n, 3): the rest split in the cache's proportions (module notes, step 2;
     :func:`raytrace._light_kernels.centre_parts`)."""
     from . import _light_kernels
     D_earth, D_sky, has_earth, has_sky = environment_terms(ctx) if terms is None else terms
     c = ctx.cache
-    out = np.empty((len(L_total), 4, 3))
+    out = np.empty((len(L_total), 4, 3), dtype=np.float32)  # proportions: float32 is plenty, and half the memory
     _light_kernels.centre_parts(D_earth, D_sky, has_earth, has_sky, c.valid, c.face_s, c.lat_start, c.lat_ids,
                                 s["face"], s["B"], s["SIDE"], E_ind, L_sun, L_total, out)
     return out

@@ -107,6 +107,8 @@ class RenderFrame:
         rays and sunlight): the context is built on a side thread meanwhile
         (:data:`raytrace.presets.CONTEXT_ON_SIDE_THREAD`), so its own time is inside the other stages.
         ``antialias`` includes the area means of the other pixels (``Quality.box_grid``).
+        ``light_parts`` (with ``parts``): the split by source, all its steps (the rest of the
+        frame's time is as without it).
     light_parts : ndarray, shape (H, W, 12), float32, or None
         With ``render(..., parts=True)``: :attr:`radiance` split by where the light comes from,
         ``earth``, ``inter``, ``sky``, ``sun`` (RGB each, :data:`raytrace._light_parts.CHANNELS`);
@@ -408,7 +410,9 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
                                      sunl.p_background, sunl.tex, _BACKGROUND_STEP, _BACKGROUND_TOL,
                                      _BACKGROUND_CHORD, earth_px, rad.reshape(H, W, 3))
         _check_finite("background", rad)
+    t_parts = time.perf_counter()
     background = rad.reshape(H, W, 3).copy() if parts and earth_drawn else None
+    t_parts = time.perf_counter() - t_parts
     epix = _antialias._aa_pixels(q, scene, camera, R, t, o_body, geo, lighting, sunl, s, vis, pix, lit_img, earth_px,
                                  earth_drawn)
     traced = None
@@ -478,7 +482,11 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         L += rows_S
     ctx.add_diffuse(s, E, L)
     _check_finite("indirect light", L)
-    centre_parts = _light_parts.centre_parts(ctx, s, E_cache, L_sun, L) if parts else None
+    centre_parts = None
+    if parts:
+        t_parts -= time.perf_counter()
+        centre_parts = _light_parts.centre_parts(ctx, s, E_cache, L_sun, L)
+        t_parts += time.perf_counter()
     # the specular corrections (lobe − mirror term) and the local-linear filter's planes may
     # overshoot below zero; radiance is never negative
     _rows.put_rows_nonnegative(pix, L, rad)
@@ -526,7 +534,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     if parts:
         t0 = time.perf_counter()
         light_parts = _light_parts.assemble(rad, pix, centre_parts, background, epix)
-        timings["light_parts"] = time.perf_counter() - t0
+        timings["light_parts"] = time.perf_counter() - t0 + t_parts
     _stars(rad, scene, camera, R, t, lighting, timings, light_parts)
     return RenderFrame(geo, rad, q, timings, light_parts)
 
