@@ -63,39 +63,48 @@ CHANNELS = tuple(f"{p}.{c}" for p in PARTS for c in "RGB")
 """The image's 12 channel names (OpenEXR layers ``earth``, ``inter``, ``sky``, ``sun``)."""
 
 
-def environment_terms(ctx):
-    """The direct environment terms of Earth alone and of the sky alone on the radiance
-    cache's rows (:meth:`raytrace.cache.RadianceCache.direct_environment`) under the frame's
-    lighting: (D_earth, D_sky, has_earth, has_sky); an absent light's term is a placeholder.
-    With both, the sky's comes from a coarser irradiance table (0.6 ms instead of 6) and
-    Earth's is the full environment's (the frame's own table) minus it: only their proportions
-    are used, and the two sum to the full environment's term exactly."""
-    from . import environment as env
+def environment_terms(ctx, s):
+    """The direct environment terms of Earth alone and of the sky alone
+    (:meth:`raytrace.cache.RadianceCache.direct_environment`) on the radiance cache's rows
+    that the points ``s`` read, under the frame's lighting: (D_earth, D_sky, has_earth,
+    has_sky); an absent light's term is a placeholder. With both, the sky's comes from a
+    coarser irradiance table (0.6 ms instead of 6) and Earth's is the full environment's (the
+    frame's own table) minus it: only their proportions are used, and the two sum to the full
+    environment's term exactly."""
+    from . import _light_kernels, environment as env
     light, cache = ctx.lighting, ctx.cache
     has_earth = light.earth is not None
     has_sky = light.ambient_radiance_W_m2_sr > 0.0
     none = np.zeros((1, 3))
     if not (has_earth or has_sky):
         return none, none, False, False
+    mark = np.zeros(len(cache.valid), dtype=bool)
+    _light_kernels.mark_rows(cache.valid, cache.face_s, cache.lat_start, cache.lat_ids, s["face"], s["B"], s["SIDE"],
+                             mark)
+    rows = np.flatnonzero(mark)
     p, tex = light.packed()
-    full = cache.direct_environment(p, tex, ctx.env_irradiance)
+    envs = [(p, tex, ctx.env_irradiance)]
+    if has_earth and has_sky:
+        ps = p.copy()
+        ps[env.P_ESUN] = 0.0  # the sky alone: Earth's disc unlit, still hiding the sky behind it
+        envs.append((ps, tex, env.irradiance_table(ps, tex, 25, 48, 32, 64)))
+    D = cache.direct_environment(envs, rows)
     if not has_sky:
-        return full, none, True, False
+        return D[0], none, True, False
     if not has_earth:
-        return none, full, False, True
-    ps = p.copy()
-    ps[env.P_ESUN] = 0.0  # the sky alone: Earth's disc unlit, still hiding the sky behind it
-    sky = cache.direct_environment(ps, tex, env.irradiance_table(ps, tex, 25, 48, 32, 64))
-    return full - sky, sky, True, True
+        return none, D[0], False, True
+    D_earth = D[0]
+    D_earth[rows] -= D[1][rows]
+    return D_earth, D[1], True, True
 
 
-def centre_parts(ctx, s, E_ind, L_sun, L_total, terms=None) -> np.ndarray:
+def centre_parts(ctx, s, E_ind, L_sun, L_total) -> np.ndarray:
     """The parts (n, 4, 3) float32 (:data:`PARTS`) of the pixel centres' radiance ``L_total`` (n, 3) at
     the points ``s``, whose Sun term is ``L_sun`` (n, 3) and whose cache irradiance (indirect)
     is ``E_ind`` (n, 3): the rest split in the cache's proportions (module notes, step 2;
     :func:`raytrace._light_kernels.centre_parts`)."""
     from . import _light_kernels
-    D_earth, D_sky, has_earth, has_sky = environment_terms(ctx) if terms is None else terms
+    D_earth, D_sky, has_earth, has_sky = environment_terms(ctx, s)
     c = ctx.cache
     out = np.empty((len(L_total), 4, 3), dtype=np.float32)  # proportions: float32 is plenty, and half the memory
     _light_kernels.centre_parts(D_earth, D_sky, has_earth, has_sky, c.valid, c.face_s, c.lat_start, c.lat_ids,
@@ -128,7 +137,7 @@ def assemble(rad: np.ndarray, pix: np.ndarray, parts: np.ndarray, background: np
     is_mixed = np.zeros(H * W, dtype=bool)
     is_mixed[mixed] = True
     bg = np.zeros((1, 3), np.float32) if background is None else background.reshape(H * W, 3)
-    out = np.empty((H * W, 12), dtype=np.float32)
+    out = np.zeros((H * W, 12), dtype=np.float32)  # black space is left as it is
     _light_kernels.assemble(rad.reshape(H * W, 3), row_of_pixel, is_mixed, np.ascontiguousarray(parts), bg,
                             background is not None, H, W, out)
     return out.reshape(H, W, 12)

@@ -754,43 +754,40 @@ class RadianceCache:
                      self._rho_over_pi, E_out, sun_out, indirect, L_out)
         return CacheFrame(E_out, sun_out, L_out, it, indirect)
 
-    def direct_environment(self, p, tex, table=None) -> np.ndarray:
-        """The environment's light that reaches each lookup row directly, for the environment
-        ``p``, ``tex`` (:meth:`raytrace.lighting.Lighting.packed`, or a part of it: Earth alone,
-        the sky alone): E_env(n) − π W_sb L_env, the open sky minus the sky the row's rays
-        block — the source term of :meth:`solve` without the Sun and without the light the
-        parts reflect (bounces, glossy reflections, glints). Rows (lookup rows, like
-        ``CacheFrame.indirect_W_m2``), RGB [W/m²]. The environment term is linear in the
-        environment's radiance, so the terms of Earth alone and of the sky alone sum to the
-        full environment's; what :meth:`solve`'s ``indirect_W_m2`` holds beyond them is
-        inter-reflected light. ``table``: ``p``'s unoccluded irradiance table, if at hand."""
-        L_env = env.env_cells(p, tex, self.n_cells, 4)
-        table = table if table is not None else env.irradiance_table(p, tex)
-        D_c = self._environment_term(self._c_nrm, self._c_solved, self._c, table, L_env)
-        _zero_rows(D_c, self._c_unsolved_rows)
-        f = self._f
-        D_f = np.empty((0, 3))
-        if f is not None:
-            D_f = self._environment_term(f["nrm"], f["solved"], f, table, L_env)
-            _zero_rows(D_f, f["unsolved_rows"])
-            D_f[f["passive"]] = f["P_passive"] @ D_c[self._c_alias]
-        n = len(self._alias)
-        out, sun_out, rest, L_out = np.empty((n, 3)), np.empty(n), np.empty((n, 3)), np.empty((n, 3))
-        _lookup_rows(self._alias, self.n_coarse_rows, D_c, D_f, np.zeros(len(D_c)), np.zeros(len(D_f)),
-                     self._rho_over_pi, out, sun_out, rest, L_out)
-        return out
-
-    @staticmethod
-    def _environment_term(nrm, solved, mats, table, L_env):
-        """E_env(n) − π W_sb L_env on the solved rows of ``nrm`` (0 elsewhere), as in :meth:`_sources`."""
-        n = len(solved)
-        rows = np.flatnonzero(solved).astype(np.int64)
-        E_open = np.zeros((n, 3))
-        _rows_irradiance(table, nrm, rows, E_open)
-        W_sb = mats["W_sb"]
-        out = np.empty((n, 3))
-        sky = -math.pi * L_env
-        _jacobi_step(W_sb.indptr, W_sb.indices, W_sb.data, sky, *_EMPTY_CSR3(n), sky, E_open, E_open, out)
+    def direct_environment(self, envs, rows) -> list:
+        """The environment's light that reaches the lookup rows ``rows`` directly, for each
+        environment (p, tex, table) of ``envs`` (:meth:`raytrace.lighting.Lighting.packed` or a
+        part of it — Earth alone, the sky alone — and its unoccluded irradiance table,
+        :func:`raytrace.environment.irradiance_table`): E_env(n) − π W_sb L_env, the open sky
+        minus the sky the row's rays block, the source term of :meth:`solve` without the Sun
+        and without the light the parts reflect (bounces, glossy reflections, glints); on
+        contact rows that interpolate the coarse ones, their interpolation, as there. Per
+        environment an array (lookup rows, 3) [W/m²] whose listed rows are set (the others
+        are not). Linear in the environment's radiance: the terms of Earth alone and of the
+        sky alone sum to the full environment's; what :meth:`solve`'s ``indirect_W_m2`` holds
+        beyond them is inter-reflected light. Computed for the listed rows only (those a
+        frame's pixels read), not the whole cache."""
+        from ._light_kernels import environment_rows
+        c, f = self._c, self._f
+        if f is None:
+            empty_i, empty_f = np.zeros(1, np.int32), np.zeros(0)
+            f_args = (np.zeros(0, bool), np.zeros((0, 3)), empty_i, empty_i, empty_f, np.zeros(0, np.int64),
+                      np.zeros(1, np.int32), empty_i, empty_f)
+        else:
+            if "passive_pos" not in f:
+                f["passive_pos"] = np.full(len(f["solved"]), -1, np.int64)
+                f["passive_pos"][f["passive"]] = np.arange(len(f["passive"]))
+            W, P = f["W_sb"], f["P_passive"]
+            f_args = (f["solved"], f["nrm"], W.indptr, W.indices, W.data, f["passive_pos"], P.indptr, P.indices,
+                      P.data)
+        W = c["W_sb"]
+        rows = np.asarray(rows, dtype=np.int64)
+        out = []
+        for p, tex, table in envs:
+            D = np.empty((len(self._alias), 3))
+            environment_rows(rows, self._alias, self.n_coarse_rows, self._c_solved, self._c_nrm, W.indptr, W.indices,
+                             W.data, *f_args, self._c_alias, env.env_cells(p, tex, self.n_cells, 4), table, D)
+            out.append(D)
         return out
 
     def _sources(self, pos, nrm, solved, mats, lighting, table, L_env, E_sun_hits, E_sun=None):

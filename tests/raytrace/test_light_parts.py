@@ -175,3 +175,32 @@ def test_light_modality_files_name_their_layers_and_sum_to_hdr(tmp_path, capsys)
     assert np.all(np.abs(total - hdr) <= 4 * np.finfo(np.float32).eps * hdr)
     mask = F.read_image(str(seq / label["files"]["mask"])) > 0
     assert mask.any() and light[mask].max() > 0
+
+
+def test_each_part_is_that_light_rendered_alone(plates):
+    """Superposition: the frame is linear in its lights, so each part of the frame lit by all
+    three must be the same part of the frame lit by that light alone (where the others are
+    0), and the inter-reflected part the sum of the three frames' (``fast``: no noise)."""
+    R, t = _pose([3.5, -2.5, 3.0])
+    sun, earth_dir = _unit([0.3, -0.5, 0.8]), tuple(_unit([-0.8, 0.55, -0.25]))
+    lit_earth = Earth(earth_dir, 6_778_137.0, albedo=0.3, texture="procedural")
+    dark_earth = Earth(earth_dir, 6_778_137.0, albedo=0.0)  # hides the same sky, sends nothing
+    lights = {"all": Lighting(sun_dir_body=sun, earth=lit_earth, ambient_radiance_W_m2_sr=2.0),
+              "sun": Lighting(sun_dir_body=sun),
+              "earth": Lighting(sun_dir_body=sun, shadow_fraction=0.0, earth=lit_earth),  # Earth's day side lit
+              "sky": Lighting(sun_dir_body=sun, shadow_fraction=0.0, earth=dark_earth, ambient_radiance_W_m2_sr=2.0)}
+    p = {k: _parts(render(plates, CAM, R, t, light, quality="fast", parts=True)) for k, light in lights.items()}
+    frame_mask = render(plates, CAM, R, t, lights["sun"], quality="fast").geometry.mask
+    m = binary_erosion(frame_mask, iterations=2)
+    for alone in ("sun", "earth", "sky"):
+        for other in ("sun", "earth", "sky"):
+            if other != alone:  # a light that is off contributes nothing (the coarse sky table: < 0.2 %)
+                assert p[alone][other][m].max() <= 2e-3 * p[alone][alone][m].mean(), (alone, other)
+        got, want = p["all"][alone][m].astype(float), p[alone][alone][m].astype(float)
+        rel = np.abs(got - want) / np.maximum(want, 1e-3 * want.mean())  # the Sun's is 0 in shadow
+        # (the worst pixels are anti-aliased ones, shared out by their neighbourhood)
+        assert np.median(rel) < 1e-3 and np.percentile(rel, 90) < 1e-2, (alone, np.median(rel))
+        assert got.mean() == pytest.approx(want.mean(), rel=5e-3), alone
+    inter = sum(p[k]["inter"][m].astype(float) for k in ("sun", "earth", "sky"))
+    rel = np.abs(p["all"]["inter"][m] - inter) / inter
+    assert np.median(rel) < 1e-3 and np.percentile(rel, 90) < 1e-2
