@@ -55,13 +55,15 @@ def assemble(P, row_of_pixel, mixed, parts, bg, has_bg, H, W, out):
     """The parts image ``out`` (H·W, 12) of the radiance ``P`` (H·W, 3): a pixel whose centre
     is on the target (row_of_pixel ≥ 0: the row of ``parts`` (n, 4, 3) holding its centre's
     parts) is shared out in those proportions, a ``mixed`` one in the proportions of the sum
-    of its 3 × 3 centres' parts (a background centre counting Earth's disc ``bg`` behind it as
-    Earth's), any other is background, Earth's disc: all ``earth``. Per channel; where the
+    of its 3 × 3 centres' parts (a background centre counting Earth's disc behind it as
+    Earth's, with ``has_bg``: its own value in ``P``, or for a mixed one, whose value in ``P``
+    is its sub-samples' mean, bg[−2 − row_of_pixel]), any other (row_of_pixel −1) is
+    background, Earth's disc: all ``earth``. Per channel; where the
     proportions are all 0, all to the Sun. ``out`` must come zeroed: black background pixels
     are not written."""
     for i in numba.prange(H * W):
         r = row_of_pixel[i]
-        if not mixed[i] and r < 0:
+        if r == -1 and not mixed[i]:
             if P[i, 0] == 0.0 and P[i, 1] == 0.0 and P[i, 2] == 0.0:
                 continue  # black space: ``out`` comes zeroed (untouched pages of np.zeros stay unmapped)
             for c in range(3):
@@ -84,7 +86,7 @@ def assemble(P, row_of_pixel, mixed, parts, bg, has_bg, H, W, out):
                                 out[i, 3 * p + c] += parts[rq, p, c]
                     elif has_bg:
                         for c in range(3):
-                            out[i, 3 * _EARTH + c] += bg[q, c]
+                            out[i, 3 * _EARTH + c] += bg[-2 - rq, c] if rq <= -2 else P[q, c]
         for c in range(3):
             if mixed[i]:
                 a0 = np.float64(out[i, c])

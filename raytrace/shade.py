@@ -410,11 +410,12 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
                                      sunl.p_background, sunl.tex, _BACKGROUND_STEP, _BACKGROUND_TOL,
                                      _BACKGROUND_CHORD, earth_px, rad.reshape(H, W, 3))
         _check_finite("background", rad)
-    t_parts = time.perf_counter()
-    background = rad.reshape(H, W, 3).copy() if parts and earth_drawn else None
-    t_parts = time.perf_counter() - t_parts
     epix = _antialias._aa_pixels(q, scene, camera, R, t, o_body, geo, lighting, sunl, s, vis, pix, lit_img, earth_px,
                                  earth_drawn)
+    # Earth's disc behind the pixels anti-aliasing will overwrite, for the light parts
+    t_parts = time.perf_counter()
+    background = rad[epix] if parts and earth_drawn else None
+    t_parts = time.perf_counter() - t_parts
     traced = None
     if len(epix) and len(epix) <= _antialias._aa_chunk_pixels(q.aa_grid):
         traced = _antialias._trace_chunk(sunl, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed),
