@@ -204,3 +204,10 @@ def test_each_part_is_that_light_rendered_alone(plates):
     inter = sum(p[k]["inter"][m].astype(float) for k in ("sun", "earth", "sky"))
     rel = np.abs(p["all"]["inter"][m] - inter) / inter
     assert np.median(rel) < 1e-3 and np.percentile(rel, 90) < 1e-2
+
+
+def test_channel_names_must_name_every_channel(tmp_path):
+    from raytrace import files as F
+    with pytest.raises(ValueError, match="channel_names must name the 12 channels, got 3 names"):
+        F.write_image(str(tmp_path / "x.exr"), np.zeros((2, 2, 12), np.float32), channel_names=("a", "b", "c"))
+    assert not (tmp_path / "x.exr").exists()
