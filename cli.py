@@ -400,7 +400,8 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
     if need_radiance:
         r = cfg["render"]
         lighting = scenes.lighting_of(task["light"], r, scenes.star_field(cfg))
-        frame = render(scene, camera, R, t, lighting, quality=r["quality"], samples=r["samples"], seed=render_seed)
+        frame = render(scene, camera, R, t, lighting, quality=r["quality"], samples=r["samples"], seed=render_seed,
+                       parts=any(MODALITY[m].light_parts for m in mods))
         geo, radiance = frame.geometry, frame.radiance
     else:  # geometry-only modalities: no shading at all
         geo, radiance = scene.render_geometry(camera, R, t), None
@@ -418,7 +419,8 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
     hits = FrameHits(scene, camera, R, t, geo, task.get("next_pose"))  # hit points made on first use
     for m in task["modalities"]:  # the rest from the geometry and radiance (raytrace.dataset.modalities)
         if MODALITY[m].produce is not None:
-            images[m] = MODALITY[m].produce(geo, radiance, *([hits] if MODALITY[m].hits else []))
+            source = frame.light_parts if MODALITY[m].light_parts else radiance
+            images[m] = MODALITY[m].produce(geo, source, *([hits] if MODALITY[m].hits else []))
     bbox = geo.bbox_xywh
     vf = geo.visible_fraction
     info.update({"bbox": None if bbox is None else [int(v) for v in bbox],

@@ -754,6 +754,42 @@ class RadianceCache:
                      self._rho_over_pi, E_out, sun_out, indirect, L_out)
         return CacheFrame(E_out, sun_out, L_out, it, indirect)
 
+    def direct_environment(self, envs, rows) -> list:
+        """The environment's light that reaches the lookup rows ``rows`` directly, for each
+        environment (p, tex, table) of ``envs`` (:meth:`raytrace.lighting.Lighting.packed` or a
+        part of it — Earth alone, the sky alone — and its unoccluded irradiance table,
+        :func:`raytrace.environment.irradiance_table`): E_env(n) − π W_sb L_env, the open sky
+        minus the sky the row's rays block, the source term of :meth:`solve` without the Sun
+        and without the light the parts reflect (bounces, glossy reflections, glints); on
+        contact rows that interpolate the coarse ones, their interpolation, as there. Per
+        environment an array (lookup rows, 3) [W/m²] whose listed rows are set (the others
+        are not). Linear in the environment's radiance: the terms of Earth alone and of the
+        sky alone sum to the full environment's; what :meth:`solve`'s ``indirect_W_m2`` holds
+        beyond them is inter-reflected light. Computed for the listed rows only (those a
+        frame's pixels read), not the whole cache."""
+        from ._light_kernels import environment_rows
+        c, f = self._c, self._f
+        if f is None:
+            empty_i, empty_f = np.zeros(1, np.int32), np.zeros(0)
+            f_args = (np.zeros(0, bool), np.zeros((0, 3)), empty_i, empty_i, empty_f, np.zeros(0, np.int64),
+                      np.zeros(1, np.int32), empty_i, empty_f)
+        else:
+            if "passive_pos" not in f:
+                f["passive_pos"] = np.full(len(f["solved"]), -1, np.int64)
+                f["passive_pos"][f["passive"]] = np.arange(len(f["passive"]))
+            W, P = f["W_sb"], f["P_passive"]
+            f_args = (f["solved"], f["nrm"], W.indptr, W.indices, W.data, f["passive_pos"], P.indptr, P.indices,
+                      P.data)
+        W = c["W_sb"]
+        rows = np.asarray(rows, dtype=np.int64)
+        out = []
+        for p, tex, table in envs:
+            D = np.empty((len(self._alias), 3))
+            environment_rows(rows, self._alias, self.n_coarse_rows, self._c_solved, self._c_nrm, W.indptr, W.indices,
+                             W.data, *f_args, self._c_alias, env.env_cells(p, tex, self.n_cells, 4), table, D)
+            out.append(D)
+        return out
+
     def _sources(self, pos, nrm, solved, mats, lighting, table, L_env, E_sun_hits, E_sun=None):
         """Direct sunlight (one shadow ray per solved row, unless given as ``E_sun``) and the
         source term E0 (sunlight, open sky minus the sky the row's rays block, glossy reflections

@@ -93,7 +93,7 @@ _PNG = {"png:filter": 8}
 _PNG_NOISY = {"png:filter": 64, "png:compressionLevel": 1}
 
 
-def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False) -> None:
+def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False, channel_names=None) -> None:
     """Write an image with OpenImageIO, format from the extension (PNG: 8/16 bit, EXR: float32
     with zip compression).
 
@@ -108,6 +108,9 @@ def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False) -> None:
         The image is mostly noise (a degraded camera frame): a PNG is filtered and deflated
         for speed (:data:`_PNG_NOISY`), not for the last bytes; otherwise :data:`_PNG`. The
         pixels are the same.
+    channel_names : sequence of str, optional, keyword-only
+        The channels' names (one per channel; OpenEXR layers as ``layer.R``); default
+        OpenImageIO's (R, G, B, A, …).
 
     Notes
     -----
@@ -135,6 +138,11 @@ def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False) -> None:
         raise OSError(f"cannot create {path}: {oiio.geterror()}")
     h, w, c = pixels.shape
     spec = oiio.ImageSpec(w, h, c, formats[pixels.dtype])
+    if channel_names is not None:
+        names = [str(n) for n in channel_names]
+        if len(names) != c:
+            raise ValueError(f"channel_names must name the {c} channels, got {len(names)} names")
+        spec.channelnames = names
     if path.endswith(".png"):
         for key, value in (_PNG_NOISY if noisy else _PNG).items():
             spec.attribute(key, value)
@@ -218,11 +226,11 @@ def _unlink(path: str) -> None:
         pass
 
 
-def atomic_write_image(path: str, pixels: np.ndarray, *, noisy: bool = False) -> None:
+def atomic_write_image(path: str, pixels: np.ndarray, *, noisy: bool = False, channel_names=None) -> None:
     """:func:`write_image` to a temporary name in the same folder, then rename into place."""
     tmp = _temporary(path)
     try:
-        write_image(tmp, pixels, noisy=noisy)
+        write_image(tmp, pixels, noisy=noisy, channel_names=channel_names)
     except BaseException:
         _unlink(tmp)
         raise

@@ -68,7 +68,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from . import _antialias, _background, _filter, _gather, _rows, presets
+from . import _antialias, _background, _filter, _gather, _light_parts, _rows, presets
 from ._context import _Context, _Sunlight, _surfaces
 from ._kernels import centre_rays
 from ._sampling import AA_SECOND_STREAM, BOX_STREAM, SECOND_PASS_STREAM
@@ -107,12 +107,19 @@ class RenderFrame:
         rays and sunlight): the context is built on a side thread meanwhile
         (:data:`raytrace.presets.CONTEXT_ON_SIDE_THREAD`), so its own time is inside the other stages.
         ``antialias`` includes the area means of the other pixels (``Quality.box_grid``).
+        ``light_parts`` (with ``parts``): the split by source, all its steps (the rest of the
+        frame's time is as without it).
+    light_parts : ndarray, shape (H, W, 12), float32, or None
+        With ``render(..., parts=True)``: :attr:`radiance` split by where the light comes from,
+        ``earth``, ``inter``, ``sky``, ``sun`` (RGB each, :data:`raytrace._light_parts.CHANNELS`);
+        the four sum to :attr:`radiance` (:mod:`raytrace._light_parts`). None otherwise.
     """
 
     geometry: GeometryFrame
     radiance: np.ndarray
     quality: Quality
     timings_s: dict = field(default_factory=dict)
+    light_parts: np.ndarray | None = None
 
 
 # the two-pass final gather (Quality.pilot_rays): the paths traced from the second pass's hits
@@ -276,7 +283,8 @@ _BACKGROUND_CHORD = 1e-3
 
 def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lighting, *,
            quality: str = "balanced", samples: int | None = None, seed: int = 0,
-           geometry: GeometryFrame | None = None, cache_options: dict | None = None) -> RenderFrame:
+           geometry: GeometryFrame | None = None, cache_options: dict | None = None,
+           parts: bool = False) -> RenderFrame:
     """Render one frame: geometric AOVs and linear radiance.
 
     Parameters
@@ -299,6 +307,10 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     cache_options : dict, optional, keyword-only
         Options of the radiance cache (:class:`raytrace.cache.RadianceCache`); without
         ``spacing_m``, the preset's lattice spacing (:func:`raytrace.presets.preset_cache_options`).
+    parts : bool, keyword-only
+        Also split the radiance into its Sun, Earth, sky and inter-reflected parts
+        (:attr:`RenderFrame.light_parts`, :mod:`raytrace._light_parts`). Without it nothing of
+        that is computed and the frame is the same, bit for bit.
 
     Returns
     -------
@@ -312,6 +324,8 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         raise ValueError(f"lighting must be a raytrace.lighting.Lighting, got {type(lighting).__name__}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**31:
         raise ValueError(f"seed must be an integer in [0, 2**31), got {seed!r}")
+    if not isinstance(parts, (bool, np.bool_)):
+        raise ValueError(f"parts must be True or False, got {parts!r}")
     q = quality_preset(quality, samples)
     R, t = _check_pose(R_cam_from_body, t_cam_m)
     cache_options = preset_cache_options(q, scene.scale_m, cache_options)
@@ -344,8 +358,19 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         timings["path_trace"] = time.perf_counter() - t0
         _check_finite("path tracing", rad)
         rad = rad.astype(np.float32)
-        _stars(rad, scene, camera, R, t, lighting, timings)
-        return RenderFrame(geo, rad, q, timings)
+        light_parts = None
+        if parts:
+            t0 = time.perf_counter()
+            fast_options = preset_cache_options(quality_preset("fast"), scene.scale_m, cache_options)
+            pix, centre, vis = _light_parts.fast_centre_parts(scene, camera, R, t, lighting, geo, fast_options,
+                                                              quality_preset("balanced").sun_rays, int(seed))
+            lit = np.zeros(geo.instance.size, dtype=bool)
+            lit[pix] = vis >= 0.5
+            mixed = _light_parts.mixed_pixels(geo.instance, lit.reshape(geo.instance.shape))
+            light_parts = _light_parts.assemble(rad, pix, centre, None, mixed)
+            timings["light_parts"] = time.perf_counter() - t0
+        _stars(rad, scene, camera, R, t, lighting, timings, light_parts)
+        return RenderFrame(geo, rad, q, timings, light_parts)
 
     H, W = camera.height, camera.width
     R_bc = np.ascontiguousarray(R.T)
@@ -387,6 +412,10 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         _check_finite("background", rad)
     epix = _antialias._aa_pixels(q, scene, camera, R, t, o_body, geo, lighting, sunl, s, vis, pix, lit_img, earth_px,
                                  earth_drawn)
+    # Earth's disc behind the pixels anti-aliasing will overwrite, for the light parts
+    t_parts = time.perf_counter()
+    background = rad[epix] if parts and earth_drawn else None
+    t_parts = time.perf_counter() - t_parts
     traced = None
     if len(epix) and len(epix) <= _antialias._aa_chunk_pixels(q.aa_grid):
         traced = _antialias._trace_chunk(sunl, scene, camera, R, t, o_body, geo, epix, q.aa_grid, int(seed),
@@ -398,11 +427,14 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     timings["cache"] = time.perf_counter() - t0
     t0 = time.perf_counter() - t_direct  # the Sun at the centres counts in "direct"
     lbar = np.zeros((len(pix), 3))
-    E = ctx.cache_E(s)
+    E = E_cache = ctx.cache_E(s)
+    L_sun = L.copy() if parts else None  # the Sun's term alone (its penumbra added below)
     ctx.add_mirror(s, E, L, mirror, lbar)
     if penumbra is not None:
         cand, dL = penumbra
         L[cand] += dL
+        if parts:
+            L_sun[cand] += dL
     timings["direct"] = time.perf_counter() - t0
     _check_finite("direct light", L)
     t0 = time.perf_counter()
@@ -451,6 +483,11 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         L += rows_S
     ctx.add_diffuse(s, E, L)
     _check_finite("indirect light", L)
+    centre_parts = None
+    if parts:
+        t_parts -= time.perf_counter()
+        centre_parts = _light_parts.centre_parts(ctx, s, E_cache, L_sun, L)
+        t_parts += time.perf_counter()
     # the specular corrections (lobe − mirror term) and the local-linear filter's planes may
     # overshoot below zero; radiance is never negative
     _rows.put_rows_nonnegative(pix, L, rad)
@@ -494,18 +531,30 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
             _rows.put_rows_nonnegative(rest, box, rad)
     timings["antialias"] = time.perf_counter() - t0
     rad = rad.reshape(H, W, 3)
-    _stars(rad, scene, camera, R, t, lighting, timings)
-    return RenderFrame(geo, rad, q, timings)
+    light_parts = None
+    if parts:
+        t0 = time.perf_counter()
+        light_parts = _light_parts.assemble(rad, pix, centre_parts, background, epix)
+        timings["light_parts"] = time.perf_counter() - t0 + t_parts
+    _stars(rad, scene, camera, R, t, lighting, timings, light_parts)
+    return RenderFrame(geo, rad, q, timings, light_parts)
 
 
-def _stars(rad, scene: Scene, camera: Camera, R, t, lighting: Lighting, timings: dict) -> None:
-    """The stars of ``lighting`` into the background of ``rad`` (H, W, 3), in place."""
+def _stars(rad, scene: Scene, camera: Camera, R, t, lighting: Lighting, timings: dict,
+           light_parts: np.ndarray | None = None) -> None:
+    """The stars of ``lighting`` into the background of ``rad`` (H, W, 3), in place, and
+    into the ``sky`` part of ``light_parts`` (H, W, 12), if given."""
     if lighting.stars is None:
         return
     from .stars import add_stars
     t0 = time.perf_counter()
+    before = rad.copy() if light_parts is not None else None
     add_stars(rad, lighting.stars, lighting.R_body_from_eci, scene, camera, R, t, lighting.earth)
     _check_finite("stars", rad)
+    if light_parts is not None:
+        changed = np.any(rad != before, axis=2)
+        sky = 3 * _light_parts.SKY
+        light_parts[changed, sky:sky + 3] += rad[changed] - before[changed]
     timings["stars"] = time.perf_counter() - t0
 
 

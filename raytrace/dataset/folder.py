@@ -456,7 +456,7 @@ def write_frame(task: dict, images: dict, info: dict) -> dict:
     digests = {}
     for m in task["modalities"]:
         path = os.path.join(seq_dir, rel[m])
-        F.atomic_write_image(path, images[m], noisy=MODALITIES[m].noisy)
+        F.atomic_write_image(path, images[m], noisy=MODALITIES[m].noisy, channel_names=MODALITIES[m].channels)
         digests[rel[m]] = F.sha256_file(path)
     label = dict(task["label"])
     label.update(info)

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import _light_parts
+
 __all__ = ["Modality", "MODALITIES", "NAMES", "DEFAULT", "PICTURES", "needs_radiance", "relpath"]
 
 
@@ -42,10 +44,17 @@ class Modality:
         Written when the user names no modalities (``--modalities`` unset).
     produce : callable or None
         ``produce(geometry, radiance) -> pixels`` from a :class:`raytrace.scene.GeometryFrame`
-        and the linear radiance (None when not shaded); None: made by the pipeline.
+        and the linear radiance (None when not shaded; with ``light_parts``, the render's
+        parts of the radiance in its place); None: made by the pipeline.
     hits : bool
         ``produce`` takes a third argument, the frame's :class:`raytrace.correspondence.FrameHits`
         (scene, camera, pose, next frame's pose; the hit points computed once for all such modalities).
+    light_parts : bool
+        Made from the render's split of the radiance by source
+        (:attr:`raytrace.shade.RenderFrame.light_parts`, ``render(..., parts=True)``): the
+        render computes it only when such a modality is asked for.
+    channels : tuple of str or None
+        The file's channel names (None: the writer's default).
     """
 
     name: str
@@ -57,6 +66,8 @@ class Modality:
     default: bool = True
     produce: object = None
     hits: bool = False
+    light_parts: bool = False
+    channels: tuple | None = None
 
 
 MODALITIES = {m.name: m for m in (
@@ -77,6 +88,9 @@ MODALITIES = {m.name: m for m in (
              hits=True, produce=lambda geo, radiance, hits: hits.coords()),
     Modality("flow", ".exr", "du, dv to the next planned frame, float32 px, and validity 1/0 (0 on background and "
              "in the last frame)", default=False, hits=True, produce=lambda geo, radiance, hits: hits.flow()),
+    Modality("light", ".exr", "hdr split by source, float32 W/(m²·sr), layers earth, inter, sky, sun (RGB); "
+             "their sum is hdr", shaded=True, default=False, light_parts=True, channels=_light_parts.CHANNELS,
+             produce=lambda geo, parts: parts.astype(np.float32)),
 )}
 """Every modality by name, in the order they are listed and written."""
 
