@@ -22,6 +22,7 @@ import trimesh
 from scipy import integrate, optimize
 
 from raytrace import _context, _filter, _gather, _sampling, shade
+from raytrace.camera import Camera
 from raytrace.lighting import Lighting
 from raytrace.model import Component, TargetModel
 from raytrace.scene import Scene
@@ -259,7 +260,8 @@ def test_filter_variance_closed_forms_and_the_spread_of_filtered_noise():
     ones = np.ones((H, W))
     for i in range(n):
         img = rng.standard_normal((H, W, 1))
-        _filter.atrous(img, ones, ones, ones, inst, normal, depth, 800.0, 800.0, W / 2, H / 2, 1, 0.0, res, res_var)
+        _filter.atrous(img, ones, ones, ones, inst, normal, depth, 800.0, 800.0, W / 2, H / 2, *Camera().lens_arrays(), 1, 0.0,
+                       res, res_var)
         samples[i] = res[..., 0]
     emp = samples.var(axis=0)
     on = inst > 0
