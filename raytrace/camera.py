@@ -302,14 +302,15 @@ class Camera:
     @classmethod
     def from_focal(cls, focal_length_m: float = DEFAULT_FOCAL_LENGTH_M,
                    pixel_pitch_m: float = DEFAULT_PIXEL_PITCH_M, width: int = DEFAULT_WIDTH,
-                   height: int = DEFAULT_HEIGHT) -> Camera:
+                   height: int = DEFAULT_HEIGHT, dist_coeffs=(0.0, 0.0, 0.0, 0.0, 0.0)) -> Camera:
         """Camera from a focal length and a square pixel pitch, principal point centred.
 
         f_x = f_y = focal_length_m / pixel_pitch_m; c = ((W − 1)/2, (H − 1)/2).
         """
         f = _positive_finite("focal_length_m", focal_length_m)
         p = _positive_finite("pixel_pitch_m", pixel_pitch_m)
-        return cls(width=width, height=height, fx=f / p, fy=f / p, cx=(width - 1) / 2.0, cy=(height - 1) / 2.0)
+        return cls(width=width, height=height, fx=f / p, fy=f / p, cx=(width - 1) / 2.0, cy=(height - 1) / 2.0,
+                   dist_coeffs=dist_coeffs)
 
     @property
     def K(self) -> np.ndarray:
@@ -340,8 +341,9 @@ class Camera:
         u1 = self.width if u1 is None else u1
         v1 = self.height if v1 is None else v1
         uu, vv = np.meshgrid(np.arange(u0, u1, dtype=np.float64), np.arange(v0, v1, dtype=np.float64))
-        if self.distorted:
-            xy = self.undistort(np.column_stack([uu.ravel(), vv.ravel()]))
+        if self.distorted:  # the renderer's rays: the cached table's
+            b = TABLE_BORDER
+            xy = self.lens_arrays()[1][v0 + b:v1 + b, u0 + b:u1 + b].reshape(-1, 2)
             return np.column_stack([xy, np.ones(uu.size)])
         return np.column_stack([((uu - self.cx) / self.fx).ravel(), ((vv - self.cy) / self.fy).ravel(),
                                 np.ones(uu.size)])
