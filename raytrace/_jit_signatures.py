@@ -4,364 +4,364 @@
 ``python benchmarks/record_kernel_signatures.py`` (see raytrace._precompile)."""
 
 SIGNATURES = {
-    'degrade.convolve._convolve_interleaved': (0.93, [
+    'degrade.convolve._convolve_interleaved': (1.72, [
         "(Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'degrade.encode._encode': (0.74, [
+    'degrade.encode._encode': (0.96, [
         "(Array(float32, 3, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
     ]),
-    'degrade.encode._encode8': (0.7, [
+    'degrade.encode._encode8': (0.79, [
         "(Array(float32, 3, 'C', False, aligned=True), Array(int16, 1, 'C', True, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
     ]),
-    'degrade.sensor._adc': (0.56, [
+    'degrade.sensor._adc': (0.16, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, bool, Array(float32, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._background._earth_albedo_along': (0.43, [
+    'raytrace._background._earth_albedo_along': (0.49, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64, float64, float64, float64)",
     ]),
-    'raytrace._background.earth_background': (4.18, [
-        "(Array(uint16, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, float64, float64, Array(bool, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
+    'raytrace._background.earth_background': (20.79, [
+        "(Array(uint16, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', True, aligned=True), Array(float64, 3, 'C', True, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, float64, float64, Array(bool, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace._background.env_along': (1.4, [
+    'raytrace._background.env_along': (2.04, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._cache_kernels._bin_hits': (0.62, [
+    'raytrace._cache_kernels._bin_hits': (0.7, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
         "(int64, Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._cache_kernels._cache_rays': (0.56, [
+    'raytrace._cache_kernels._cache_rays': (0.57, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, int64, int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._cache_kernels._csr_sum': (1.43, [
+    'raytrace._cache_kernels._csr_sum': (1.46, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), int64, int64)",
     ]),
-    'raytrace._cache_kernels._gauss_seidel_sweep': (0.92, [
+    'raytrace._cache_kernels._gauss_seidel_sweep': (0.5, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64)",
     ]),
-    'raytrace._cache_kernels._glints': (1.31, [
+    'raytrace._cache_kernels._glints': (1.86, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._cache_kernels._glossy_bounce': (1.92, [
+    'raytrace._cache_kernels._glossy_bounce': (1.75, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
     'raytrace._cache_kernels._interp_rows': (0.25, [
         "(Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._cache_kernels._jacobi_step': (1.32, [
+    'raytrace._cache_kernels._jacobi_step': (1.03, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
     'raytrace._cache_kernels._lattice_local': (0.05, [
         '(int64, int64, int64)',
     ]),
-    'raytrace._cache_kernels._lattice_points': (0.32, [
+    'raytrace._cache_kernels._lattice_points': (0.34, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._cache_kernels._lookup_rows': (0.88, [
+    'raytrace._cache_kernels._lookup_rows': (0.74, [
         "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._cache_kernels._oct_cells': (0.4, [
+    'raytrace._cache_kernels._oct_cells': (0.43, [
         "(Array(float64, 2, 'C', False, aligned=True), int64)",
     ]),
-    'raytrace._cache_kernels._ray_cells': (0.59, [
+    'raytrace._cache_kernels._ray_cells': (0.64, [
         "(Array(float32, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, Array(int64, 1, 'C', False, aligned=True))",
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._cache_kernels._rows_irradiance': (0.92, [
+    'raytrace._cache_kernels._rows_irradiance': (1.35, [
         "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._cache_kernels._sun_rays': (0.44, [
+    'raytrace._cache_kernels._sun_rays': (0.5, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._cache_kernels._zero_rows': (0.42, [
+    'raytrace._cache_kernels._zero_rows': (0.33, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._cache_kernels.glossy_draw': (0.18, [
+    'raytrace._cache_kernels.glossy_draw': (0.13, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
     'raytrace._cache_kernels.lattice_weights': (0.17, [
         '(int64, float64, float64)',
     ]),
-    'raytrace._edges.coverage_combine': (0.62, [
+    'raytrace._edges.coverage_combine': (0.74, [
         "(Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._edges.coverage_unshaded_first': (0.27, [
+    'raytrace._edges.coverage_unshaded_first': (0.37, [
         "(Array(int64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._edges.edge_pixels': (5.36, [
+    'raytrace._edges.edge_pixels': (6.89, [
         "(Array(uint16, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._edges.ray_groups': (0.35, [
+    'raytrace._edges.ray_groups': (0.39, [
         "(Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._edges.sliver_pixels': (2.76, [
-        "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
+    'raytrace._edges.sliver_pixels': (3.96, [
+        "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', True, aligned=True), float64, float64, Array(float32, 2, 'C', False, aligned=True), Array(bool, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._edges.subpixel_rays': (1.15, [
-        "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
+    'raytrace._edges.subpixel_rays': (5.78, [
+        "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', True, aligned=True), Array(float64, 3, 'C', True, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._embree.intersect_batch': (1.52, [
+    'raytrace._embree.intersect_batch': (1.34, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._embree.occluded_batch': (0.85, [
+    'raytrace._embree.occluded_batch': (0.68, [
         "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.cast_and_refine': (3.51, [
-        "(int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(int32, 2, 'C', False, aligned=True), bool, bool, Array(uint8, 2, 'C', False, aligned=True))",
+    'raytrace._kernels.cast_and_refine': (7.25, [
+        "(int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', True, aligned=True), Array(float64, 3, 'C', True, aligned=True), int64, int64, int64, int64, float64, Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(int32, 2, 'C', False, aligned=True), bool, bool, Array(uint8, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.centre_rays': (0.56, [
-        "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
+    'raytrace._kernels.centre_rays': (3.65, [
+        "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', True, aligned=True), Array(float64, 3, 'C', True, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.corner_normals': (0.87, [
+    'raytrace._kernels.corner_normals': (0.5, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.cull_mask': (1.44, [
+    'raytrace._kernels.cull_mask': (1.6, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(uint8, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._kernels.ray_origins32': (0.48, [
+    'raytrace._kernels.ray_origins32': (0.35, [
         "(Array(float64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._paths.sun_visibility': (2.37, [
+    'raytrace._paths.sun_visibility': (1.56, [
         "(int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, Array(float64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._rows.group_means': (0.5, [
+    'raytrace._rows.group_means': (0.53, [
         "(Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._rows.put_rows': (0.28, [
+    'raytrace._rows.put_rows': (0.36, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._rows.put_rows_nonnegative': (0.74, [
+    'raytrace._rows.put_rows_nonnegative': (0.36, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._rows.subsample_hits': (0.6, [
+    'raytrace._rows.subsample_hits': (0.51, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace._sampling._hash01': (0.19, [
+    'raytrace._sampling._hash01': (0.17, [
         '(int64, int64)',
     ]),
-    'raytrace._sampling._hash32': (0.26, [
+    'raytrace._sampling._hash32': (0.22, [
         '(int64, int64)',
     ]),
-    'raytrace._sampling._strata': (0.09, [
+    'raytrace._sampling._strata': (0.1, [
         '(int64,)',
     ]),
-    'raytrace._sampling.permute': (0.15, [
+    'raytrace._sampling.permute': (0.13, [
         '(int64, int64, int64)',
     ]),
-    'raytrace._surface.add_diffuse': (0.38, [
+    'raytrace._surface.add_diffuse': (0.45, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._surface.add_mirror': (5.25, [
+    'raytrace._surface.add_mirror': (7.14, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), bool, Array(float64, 3, 'C', False, aligned=True), Array(float64, 4, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._surface.cache_irradiance': (1.25, [
+    'raytrace._surface.cache_irradiance': (0.97, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._surface.incoming': (1.89, [
+    'raytrace._surface.incoming': (1.33, [
         "(int32, int32, float64, float64, float64, float64, float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64)",
     ]),
-    'raytrace._surface.mirror_rays': (0.49, [
+    'raytrace._surface.mirror_rays': (0.61, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._surface.shade_sun': (0.6, [
+    'raytrace._surface.shade_sun': (0.67, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._surface.sun_disc_dirs': (0.59, [
+    'raytrace._surface.sun_disc_dirs': (0.65, [
         "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, Array(float64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._surface.sun_rays': (0.51, [
+    'raytrace._surface.sun_rays': (0.81, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, Array(bool, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace._surface.surfaces': (1.94, [
+    'raytrace._surface.surfaces': (2.07, [
         "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
     ]),
-    'raytrace.brdf._ggx_d': (0.06, [
+    'raytrace.brdf._ggx_d': (0.05, [
         '(float64, float64)',
     ]),
-    'raytrace.brdf._lambda': (0.12, [
+    'raytrace.brdf._lambda': (0.15, [
         '(float64, float64)',
         '(float32, float64)',
     ]),
-    'raytrace.brdf._radical_inverse2': (0.06, [
+    'raytrace.brdf._radical_inverse2': (0.05, [
         '(int64,)',
     ]),
-    'raytrace.brdf._spec_prob': (0.07, [
+    'raytrace.brdf._spec_prob': (0.09, [
         '(float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf._split_sum': (0.42, [
+    'raytrace.brdf._split_sum': (0.38, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.brdf.brdf_cos': (0.74, [
+    'raytrace.brdf.brdf_cos': (0.48, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
         '(float32, float32, float32, float32, float32, float32, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.cosine_direction': (0.1, [
+    'raytrace.brdf.cosine_direction': (0.08, [
         '(float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.onb': (0.1, [
+    'raytrace.brdf.onb': (0.09, [
         '(float64, float64, float64)',
     ]),
     'raytrace.brdf.pdf_brdf': (0.16, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.sample_brdf': (0.37, [
+    'raytrace.brdf.sample_brdf': (0.34, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',
     ]),
-    'raytrace.brdf.specular_albedo': (0.34, [
+    'raytrace.brdf.specular_albedo': (0.36, [
         "(Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64, float64)",
     ]),
-    'raytrace.environment._direction_cells': (2.19, [
+    'raytrace.environment._direction_cells': (2.39, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._glossy_nodes': (0.64, [
+    'raytrace.environment._glossy_nodes': (0.61, [
         "(int64, int64, float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True))",
     ]),
     'raytrace.environment._hash3': (0.08, [
         '(int64, int64, int64)',
     ]),
-    'raytrace.environment._irradiance_nodes': (0.63, [
+    'raytrace.environment._irradiance_nodes': (0.7, [
         "(int64, int64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True))",
     ]),
-    'raytrace.environment._lobe_kernel': (0.08, [
+    'raytrace.environment._lobe_kernel': (0.06, [
         '(float64, float64)',
     ]),
-    'raytrace.environment._node_direction': (0.14, [
+    'raytrace.environment._node_direction': (0.18, [
         '(int64, int64, int64)',
         '(uint64, int64, int64)',
     ]),
-    'raytrace.environment._smoothstep': (0.06, [
+    'raytrace.environment._smoothstep': (0.07, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.environment._value_noise': (0.3, [
+    'raytrace.environment._value_noise': (0.25, [
         '(float64, float64, float64)',
     ]),
-    'raytrace.environment.env_cells': (2.31, [
+    'raytrace.environment.env_cells': (1.63, [
         "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), int64, int64)",
     ]),
-    'raytrace.environment.oct_cell': (0.21, [
+    'raytrace.environment.oct_cell': (0.23, [
         '(float64, float64, float64, int64)',
         '(float32, float32, float32, int64)',
     ]),
-    'raytrace.environment.oct_direction': (0.08, [
+    'raytrace.environment.oct_direction': (0.09, [
         '(float64, float64)',
     ]),
-    'raytrace.environment.procedural_albedo': (0.17, [
+    'raytrace.environment.procedural_albedo': (0.16, [
         '(float64, float64, float64)',
     ]),
 }
 
 EXTRA_SIGNATURES = {
     'balanced': {
-        'raytrace._edges._edge_top': (0.07, [
+        'raytrace._edges._edge_top': (0.08, [
             '(float64, float64, float64, float64, float64, float64)',
         ]),
-        'raytrace._edges.donor_rows': (1.14, [
+        'raytrace._edges.donor_rows': (1.13, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(uint16, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), bool, Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._edges.interpolate_rows_into': (2.19, [
-            "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(uint16, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
+        'raytrace._edges.interpolate_rows_into': (2.3, [
+            "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', True, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(uint16, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._edges.near_shadow_slivers': (1.32, [
+        'raytrace._edges.near_shadow_slivers': (1.07, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._edges.shadow_map_of_slivers': (0.69, [
+        'raytrace._edges.shadow_map_of_slivers': (0.88, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._filter.atrous': (1.73, [
-            "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, float64, Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
+        'raytrace._filter.atrous': (9.64, [
+            "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', True, aligned=True), Array(float64, 3, 'C', True, aligned=True), int64, float64, Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._filter.filter_variance': (2.39, [
+        'raytrace._filter.filter_variance': (3.77, [
             "(Array(uint16, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._filter.guide_images': (0.93, [
+        'raytrace._filter.guide_images': (0.95, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._filter.residual_image': (0.61, [
+        'raytrace._filter.residual_image': (0.58, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._filter.residual_rows': (0.5, [
+        'raytrace._filter.residual_rows': (0.59, [
             "(Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), float64, float64, float64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._filter.same_part_mean': (0.79, [
+        'raytrace._filter.same_part_mean': (1.01, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._gather._allotted': (0.11, [
+        'raytrace._gather._allotted': (0.16, [
             "(float64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64)",
         ]),
-        'raytrace._gather.allocate_rays': (0.22, [
+        'raytrace._gather.allocate_rays': (0.31, [
             "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64, float64, Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._gather.bounce_sun_rays': (0.55, [
+        'raytrace._gather.bounce_sun_rays': (1.48, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._gather.gather_start': (0.05, [
+        'raytrace._gather.gather_start': (0.07, [
             '(int64, int64, int64, int64, int64)',
         ]),
-        'raytrace._kernels.make_rays': (0.14, [
-            "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
+        'raytrace._kernels.make_rays': (2.31, [
+            "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', True, aligned=True), Array(float64, 3, 'C', True, aligned=True), int64, int64, int64, int64, float64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._paths.gather_traced': (21.92, [
+        'raytrace._paths.gather_traced': (25.55, [
             "(int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(int64, 1, 'C', False, aligned=True), int64, int64, float64, int64, float32, float32, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._paths.lobe_traced': (18.0, [
+        'raytrace._paths.lobe_traced': (22.57, [
             "(int64, Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, int64, float32, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._rows.subsample_contrast': (0.36, [
+        'raytrace._rows.subsample_contrast': (0.69, [
             "(Array(float64, 2, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._rows.take_add_rows': (0.39, [
+        'raytrace._rows.take_add_rows': (0.5, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._sampling._laine_karras32': (0.04, [
+        'raytrace._sampling._laine_karras32': (0.06, [
             '(int64, int64)',
         ]),
-        'raytrace._sampling._owen_scramble32': (0.05, [
+        'raytrace._sampling._owen_scramble32': (0.08, [
             '(int64, int64)',
         ]),
-        'raytrace._sampling._owen_sobol2_keyed': (0.06, [
+        'raytrace._sampling._owen_sobol2_keyed': (0.08, [
             '(int64, int64, int64, int64)',
         ]),
-        'raytrace._sampling._reverse_bits32': (0.05, [
+        'raytrace._sampling._reverse_bits32': (0.06, [
             '(int64,)',
         ]),
-        'raytrace._sampling._sobol2_y': (0.45, [
+        'raytrace._sampling._sobol2_y': (0.1, [
             '(int64,)',
         ]),
-        'raytrace._surface.incoming': (0.79, [
+        'raytrace._surface.incoming': (1.78, [
             "(int64, int64, float64, float64, float64, float64, float64, float64, float64, float64, Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, float64, float64, float64)",
         ]),
     },
     'batched': {
-        'raytrace._embree.occluded_batch': (0.64, [
+        'raytrace._embree.occluded_batch': (0.67, [
             "(int64, Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', True, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._gather.bounce2_rays': (2.14, [
+        'raytrace._gather.bounce2_rays': (1.43, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, float64, Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._gather.gather_rays': (0.63, [
+        'raytrace._gather.gather_rays': (0.75, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), int64, int64, float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._gather.gather_sum': (7.37, [
+        'raytrace._gather.gather_sum': (8.19, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._gather.incoming_rays': (2.96, [
+        'raytrace._gather.incoming_rays': (4.13, [
             "(Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._gather.lobe_rays': (1.58, [
+        'raytrace._gather.lobe_rays': (2.41, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), int64, int64, Array(int64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._gather.lobe_sum': (3.63, [
+        'raytrace._gather.lobe_sum': (4.71, [
             "(int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._kernels.refine_hits': (0.94, [
-            "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, int64, int64, int64, float64, Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(int32, 2, 'C', False, aligned=True), bool, bool)",
+        'raytrace._kernels.refine_hits': (4.86, [
+            "(Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', True, aligned=True), Array(float64, 3, 'C', True, aligned=True), int64, int64, int64, int64, float64, Array(int32, 1, 'C', False, aligned=True), Array(int32, 1, 'C', False, aligned=True), Array(float32, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(float32, 3, 'C', False, aligned=True), Array(uint16, 2, 'C', False, aligned=True), Array(int32, 2, 'C', False, aligned=True), bool, bool)",
         ]),
-        'raytrace._rows.hit_or_miss': (0.27, [
+        'raytrace._rows.hit_or_miss': (0.33, [
             "(Array(int32, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))",
         ]),
-        'raytrace._rows.hit_or_miss_rows': (0.28, [
+        'raytrace._rows.hit_or_miss_rows': (0.3, [
             "(Array(int32, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace._rows.put_weighted_rows': (0.36, [
+        'raytrace._rows.put_weighted_rows': (0.42, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
         'raytrace._rows.take_rows': (0.29, [
@@ -369,22 +369,22 @@ EXTRA_SIGNATURES = {
         ]),
     },
     'reference': {
-        'raytrace._background.background': (1.61, [
-            "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
+        'raytrace._background.background': (6.59, [
+            "(Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', True, aligned=True), Array(float64, 3, 'C', True, aligned=True), int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._add_shadowed': (0.32, [
+        'raytrace.pathtrace._add_shadowed': (0.33, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._escape': (1.36, [
+        'raytrace.pathtrace._escape': (2.3, [
             "(Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._primary': (0.5, [
-            "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, float64, Array(float32, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
+        'raytrace.pathtrace._primary': (4.91, [
+            "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), float64, float64, float64, float64, Array(float64, 1, 'C', True, aligned=True), Array(float64, 3, 'C', True, aligned=True), float64, Array(float32, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float32, 2, 'C', False, aligned=True))",
         ]),
-        'raytrace.pathtrace._rand': (1.0, [
+        'raytrace.pathtrace._rand': (0.19, [
             '(int64, int64, int64, int64)',
         ]),
-        'raytrace.pathtrace._vertex': (1.6, [
+        'raytrace.pathtrace._vertex': (1.71, [
             "(Array(int64, 1, 'C', False, aligned=True), int64, int64, int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), float64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(bool, 1, 'C', False, aligned=True))",
         ]),
     },
