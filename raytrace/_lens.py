@@ -19,7 +19,7 @@ import math
 
 import numba
 
-from ._jit import inline, pjit_exact
+from ._jit import inline, jit_exact, pjit_exact
 
 # lens = (f_x, f_y, c_x, c_y, k1, k2, p1, p2, k3): indices
 L_FX, L_FY, L_CX, L_CY, L_K1, L_K2, L_P1, L_P2, L_K3 = range(9)
@@ -45,16 +45,13 @@ def distort_xy(lens, x, y):
             y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y)
 
 
-@inline
-def undistort_newton(lens, xd, yd, x, y):
+@jit_exact
+def undistort_newton(k1, k2, p1, p2, k3, xd, yd, x, y):
     """Newton's method for the (x, y) whose distortion is (x_d, y_d), from (x, y), as
     :func:`raytrace.camera.undistort_normalised` (the same steps and stopping rule); NaN
-    where its residual stays above 1e-12."""
-    k1 = lens[L_K1]
-    k2 = lens[L_K2]
-    p1 = lens[L_P1]
-    p2 = lens[L_P2]
-    k3 = lens[L_K3]
+    where its residual stays above 1e-12. Scalars only, and not inlined: one compiled copy
+    that the kernels call (inlined into each of them it tripled their compile times), with
+    no array whose reference count a call would touch."""
     for _ in range(50):
         r2 = x * x + y * y
         rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
@@ -71,8 +68,11 @@ def undistort_newton(lens, xd, yd, x, y):
         y -= sy
         if not (abs(sx) > 1e-15 or abs(sy) > 1e-15):
             break
-    ex, ey = distort_xy(lens, x, y)
-    if not (abs(ex - xd) <= 1e-12 and abs(ey - yd) <= 1e-12):
+    r2 = x * x + y * y
+    rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    ex = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd
+    ey = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd
+    if not (abs(ex) <= 1e-12 and abs(ey) <= 1e-12):
         return math.nan, math.nan
     return x, y
 
@@ -86,17 +86,19 @@ def ray_xy(lens, table, xd, yd):
         return xd, yd
     pu = xd * lens[L_FX] + lens[L_CX] + BORDER  # table indices
     pv = yd * lens[L_FY] + lens[L_CY] + BORDER
-    if not (abs(pu) < 1e15 and abs(pv) < 1e15):
-        return undistort_newton(lens, xd, yd, xd, yd)
-    iu = min(max(math.floor(pu + 0.5), 0.0), table.shape[1] - 1.0)
-    iv = min(max(math.floor(pv + 0.5), 0.0), table.shape[0] - 1.0)
-    x0 = table[int(iv), int(iu), 0]
-    y0 = table[int(iv), int(iu), 1]
-    if x0 != x0 or y0 != y0:
-        return undistort_newton(lens, xd, yd, xd, yd)
-    if abs(pu - iu) <= _CENTRE_TOL and abs(pv - iv) <= _CENTRE_TOL:
-        return x0, y0
-    return undistort_newton(lens, xd, yd, x0, y0)
+    x0 = xd
+    y0 = yd
+    if abs(pu) < 1e15 and abs(pv) < 1e15:
+        iu = min(max(math.floor(pu + 0.5), 0.0), table.shape[1] - 1.0)
+        iv = min(max(math.floor(pv + 0.5), 0.0), table.shape[0] - 1.0)
+        tx = table[int(iv), int(iu), 0]
+        ty = table[int(iv), int(iu), 1]
+        if tx == tx and ty == ty:  # (NaN beyond the invertible region)
+            if abs(pu - iu) <= _CENTRE_TOL and abs(pv - iv) <= _CENTRE_TOL:
+                return tx, ty
+            x0 = tx
+            y0 = ty
+    return undistort_newton(lens[L_K1], lens[L_K2], lens[L_P1], lens[L_P2], lens[L_K3], xd, yd, x0, y0)
 
 
 @inline
@@ -117,6 +119,6 @@ def undistort_table(lens, out):
         yd = (i - BORDER - lens[L_CY]) / lens[L_FY]
         for j in range(out.shape[1]):
             xd = (j - BORDER - lens[L_CX]) / lens[L_FX]
-            x, y = undistort_newton(lens, xd, yd, xd, yd)
+            x, y = undistort_newton(lens[L_K1], lens[L_K2], lens[L_P1], lens[L_P2], lens[L_K3], xd, yd, xd, yd)
             out[i, j, 0] = x
             out[i, j, 1] = y
