@@ -187,7 +187,7 @@ class Camera:
 
     def _checked_dist_coeffs(self, value) -> tuple:
         try:
-            c = tuple(float(v) for v in value)
+            c = () if isinstance(value, (str, bytes)) else tuple(float(v) for v in value)
         except (TypeError, ValueError):
             c = ()
         if len(c) != 5 or not all(math.isfinite(v) and abs(v) <= _MAX_PX for v in c):
