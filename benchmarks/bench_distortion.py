@@ -22,8 +22,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.bench_time_error import scene_frames  # noqa: E402
-from raytrace.shade import render  # noqa: E402
+from benchmarks.bench_time_error import scene_frames
+from raytrace.shade import render
 
 DIST = (-0.2, 0.05, 1e-3, -1e-3, 0.0)
 

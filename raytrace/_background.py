@@ -141,7 +141,7 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
         for i in numba.prange(nv):
             for j in range(nu):
                 dx, dy, dz = _pixel_ray(R_body_from_cam, fx, fy, cx, cy, lens, table, float(j * s), float(i * s))
-                if dx != dx:  # beyond the lens's invertible region: no cell here
+                if math.isnan(dx):  # beyond the lens's invertible region: no cell here
                     ok[i, j] = False
                     continue
                 hit, A[i, j, 0], A[i, j, 1], A[i, j, 2], M[i, j, 0], M[i, j, 1], M[i, j, 2] = \

@@ -152,7 +152,7 @@ def cast_and_refine(scene, o_body, R_body_from_cam, R_cam_from_body, fx, fy, cx,
                 continue
             u = u0 + c
             x, y = ray_xy(lens, table, (u - cx) / fx, yd)
-            if x != x:  # no ray lands there (beyond the distortion's invertible region)
+            if math.isnan(x):  # no ray lands there (beyond the distortion's invertible region)
                 continue
             dx = R_body_from_cam[0, 0] * x + R_body_from_cam[0, 1] * y + R_body_from_cam[0, 2]
             dy = R_body_from_cam[1, 0] * x + R_body_from_cam[1, 1] * y + R_body_from_cam[1, 2]

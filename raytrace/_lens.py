@@ -93,7 +93,7 @@ def ray_xy(lens, table, xd, yd):
         iv = min(max(math.floor(pv + 0.5), 0.0), table.shape[0] - 1.0)
         tx = table[int(iv), int(iu), 0]
         ty = table[int(iv), int(iu), 1]
-        if tx == tx and ty == ty:  # (NaN beyond the invertible region)
+        if not (math.isnan(tx) or math.isnan(ty)):  # (NaN beyond the invertible region)
             if abs(pu - iu) <= _CENTRE_TOL and abs(pv - iv) <= _CENTRE_TOL:
                 return tx, ty
             x0 = tx

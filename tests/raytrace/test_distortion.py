@@ -210,20 +210,27 @@ def test_a_lens_that_moves_nothing_renders_the_pinholes_geometry_bytes(tiangong)
             assert b.visible_fraction == pytest.approx(a.visible_fraction, abs=0.01)
 
 
-def test_fast_rgb_is_the_pinhole_image_seen_through_the_lens():
+@pytest.fixture(scope="module")
+def ball():
+    sphere = trimesh.creation.icosphere(subdivisions=5, radius=1.0)
+    return Scene(TargetModel("ball", (Component("ball", sphere, "white_paint", "bus", 1.0),)))
+
+
+@pytest.mark.parametrize("quality, samples, tol", [("fast", None, 1e-3), ("balanced", 8, 1e-3),
+                                                    ("reference", 16, 5e-3)])
+def test_each_preset_renders_the_pinhole_image_seen_through_the_lens(ball, quality, samples, tol):
     """Shading through the lens against OpenCV's remap of the pinhole frame: every distorted
     pixel centre looks up the pinhole image where cv2.undistortPoints sends it. A smooth sphere
     near the image corner, where the distortion moves pixels by 3–20 px: inside its silhouette
-    (away from the edge, where the lookup blends in the background) the two agree."""
-    sphere = trimesh.creation.icosphere(subdivisions=5, radius=1.0)
-    scene = Scene(TargetModel("ball", (Component("ball", sphere, "white_paint", "bus", 1.0),)))
+    (away from the edge, where the lookup blends in the background) the two agree (measured
+    median relative difference 2e-5 for ``fast`` and ``balanced``, 9e-4 for ``reference``'s
+    noise; the unwarped pinhole frame: 1.4 %)."""
     cam = _cam()
     pin = dataclasses.replace(cam, dist_coeffs=(0.0,) * 5)
-    p_cam = np.array([-1.25, -0.85, 3.2])  # centre towards the top-left corner
-    R, t = np.eye(3), p_cam
+    R, t = np.eye(3), np.array([-1.25, -0.85, 3.2])  # centre towards the top-left corner
     light = Lighting(sun_dir_body=tuple(np.array([0.5, -0.6, -0.62]) / np.linalg.norm([0.5, -0.6, -0.62])))
-    a = render(scene, pin, R, t, light, quality="fast", seed=1)
-    b = render(scene, cam, R, t, light, quality="fast", seed=1)
+    a = render(ball, pin, R, t, light, quality=quality, samples=samples, seed=1)
+    b = render(ball, cam, R, t, light, quality=quality, samples=samples, seed=1)
     ideal = _cv2_undistort_px(cam, _grid_uv(cam)[:-4]).reshape(H, W, 2).astype(np.float32)
     core = cv2.erode((b.geometry.instance > 0).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
     # (where the lens sees what lies outside the pinhole's image there is nothing to compare)
@@ -234,7 +241,7 @@ def test_fast_rgb_is_the_pinhole_image_seen_through_the_lens():
     errs = []
     for img in (cv2.remap(a.radiance, ideal[..., 0], ideal[..., 1], cv2.INTER_LINEAR), a.radiance):
         errs.append(float(np.median(np.abs(lum_b - img[core].sum(axis=1))) / np.median(lum_b)))
-    assert errs[0] < 0.01 < errs[1], errs  # the lens's image, not the pinhole's
+    assert errs[0] < tol and errs[1] > 0.01, errs  # the lens's image, not the pinhole's
     # depth the same way
     dz = cv2.remap(a.geometry.depth_m, ideal[..., 0], ideal[..., 1], cv2.INTER_LINEAR)[core]
     np.testing.assert_allclose(dz, b.geometry.depth_m[core], rtol=2e-3)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.ndimage import binary_erosion
 
-from raytrace.lighting import Lighting
 from raytrace.camera import Camera
+from raytrace.lighting import Lighting
 from raytrace.shade import _atrous_passes, _Context, _filter_residual, _surfaces, render
 
 from .test_shading import CAM, _form_factor_to_floor, _plates, _pose

@@ -229,7 +229,7 @@ def test_filter_variance_is_the_propagated_variance_of_the_id_only_passes(passes
     normal[..., 2] = 1.0
     depth = np.full((H, W), 5.0)
     _, var = shade._atrous_passes(np.zeros((H, W, 1)), (inst > 0).astype(float), inst,
-                                  (normal, depth, 800.0, 800.0, W / 2, H / 2), passes, 0.0)
+                                  (normal, depth, 800.0, 800.0, W / 2, H / 2, *Camera().lens_arrays()), passes, 0.0)
     np.testing.assert_allclose(out[inst > 0], var[inst > 0], rtol=1e-12)
 
 
