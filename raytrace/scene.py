@@ -556,6 +556,7 @@ class Scene:
                                w, h, z0, o32, d32)  # (a pinhole: distorted cameras take _distorted_fraction)
             hits += int(np.count_nonzero(self.embree.run(o32, d32) >= 0))
         return float(hits) * stride * stride
+
     def _distorted_fraction(self, camera: Camera, R, t, p_hull_cam: np.ndarray, max_rays: int) -> float:
         """Visible fraction of the target through a distorted camera: its silhouette is
         measured in the undistorted image plane, on the pinhole pixel grid of the same K over
