@@ -245,3 +245,28 @@ def test_each_preset_renders_the_pinhole_image_seen_through_the_lens(ball, quali
     # depth the same way
     dz = cv2.remap(a.geometry.depth_m, ideal[..., 0], ideal[..., 1], cv2.INTER_LINEAR)[core]
     np.testing.assert_allclose(dz, b.geometry.depth_m[core], rtol=2e-3)
+
+
+def test_visible_fraction_through_the_lens_against_opencv(tiangong):
+    """The fraction of the silhouette in view, measured on the undistorted image plane: the
+    target's triangles filled (cv2.fillPoly) on the pinhole grid of the same K over a canvas
+    that holds all of it, each filled point's ray sent through cv2.projectPoints with the
+    lens, in view where it lands in the image."""
+    cam = _cam()
+    R, t = _pose(tiangong, 1.6, yaw_deg=14.0)
+    g = tiangong.render_geometry(cam, R, t)
+    p = tiangong.vertices @ R.T + t
+    uv = p[:, :2] / p[:, 2:] * [cam.fx, cam.fy] + [cam.cx, cam.cy]  # pinhole pixel coordinates
+    lo = np.floor(uv.min(axis=0)).astype(int) - 2
+    hi = np.ceil(uv.max(axis=0)).astype(int) + 2
+    canvas = np.zeros((hi[1] - lo[1], hi[0] - lo[0]), np.uint8)
+    for q in np.round((uv[tiangong.faces] - lo) * 16).astype(np.int32):
+        cv2.fillPoly(canvas, [q], 1, shift=4)
+    rows, cols = np.nonzero(canvas)
+    xy = (np.column_stack([cols, rows]) + lo - [cam.cx, cam.cy]) / [cam.fx, cam.fy]
+    d, _ = cv2.projectPoints(np.column_stack([xy, np.ones(len(xy))]), np.zeros(3), np.zeros(3), cam.K,
+                             np.array(cam.dist_coeffs))
+    d = d.reshape(-1, 2)
+    inside = (d[:, 0] >= -0.5) & (d[:, 0] < W - 0.5) & (d[:, 1] >= -0.5) & (d[:, 1] < H - 0.5)
+    assert 0.3 < inside.mean() < 0.95
+    assert g.visible_fraction == pytest.approx(inside.mean(), abs=0.02)
