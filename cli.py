@@ -158,6 +158,9 @@ def _options() -> tuple:
         O("--height", "camera", opt.int_in(1, 65535), 960, "image height [px]"),
         O("--focal-length-mm", "camera", opt.float_in(1e-3, 1e4, unit="mm"), 4.0, "focal length [mm]"),
         O("--pixel-pitch-um", "camera", opt.float_in(0.1, 1e3, unit="um"), 3.45, "pixel pitch [um]"),
+        O("--distortion", "camera", opt.floats(5, -1e3, 1e3), [0.0, 0.0, 0.0, 0.0, 0.0],
+          "Brown-Conrady lens distortion, OpenCV order (zeros: a pinhole); every modality is cast through it",
+          "K1,K2,P1,P2,K3"),
         O("--roll-deg", "camera", opt.float_in(-360.0, 360.0, unit="deg"), 0.0,
           "camera roll about its boresight, applied after the look-at pointing [deg]"),
         # [render]
@@ -340,7 +343,11 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
         note = scenes.mesh_unit_warning(0.5 * float(np.linalg.norm(hi - lo)), seq["mesh"])
         if note:
             sys.stderr.write(f"{PROG}: warning: {note}\n")
-    camera = Camera.from_focal(cam["focal_length_mm"] * 1e-3, cam["pixel_pitch_um"] * 1e-6, cam["width"], cam["height"])
+    try:
+        camera = Camera.from_focal(cam["focal_length_mm"] * 1e-3, cam["pixel_pitch_um"] * 1e-6, cam["width"],
+                                   cam["height"], dist_coeffs=cam["distortion"])
+    except ValueError as exc:
+        raise CLIError(f"argument --distortion: {exc}") from None
     points = None
     if cfg["degrade"].get("motion_blur") == "auto":
         points = np.concatenate([np.asarray(c.mesh.vertices, dtype=np.float64) for c in model.components])

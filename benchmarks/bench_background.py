@@ -65,7 +65,8 @@ def main() -> None:
                 earth = np.zeros((cam.height, cam.width), dtype=bool)
                 rad = np.zeros((cam.height, cam.width, 3), dtype=np.float32)
                 t0 = time.perf_counter()
-                _background.earth_background(geo.instance, o_body, R_bc, cam.fx, cam.fy, cam.cx, cam.cy, p, tex, step,
+                _background.earth_background(geo.instance, o_body, R_bc, cam.fx, cam.fy, cam.cx, cam.cy,
+                                             *cam.lens_arrays(), p, tex, step,
                                              shade._BACKGROUND_TOL, shade._BACKGROUND_CHORD, earth, rad)
                 dt = time.perf_counter() - t0
                 out[step] = (rad, earth, min(dt, out.get(step, (None, None, np.inf))[2]))

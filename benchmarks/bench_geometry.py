@@ -49,7 +49,8 @@ def same_rays(scene: Scene, cam: Camera, R, t):
     o = np.empty((w * h, 3), np.float32)
     d = np.empty((w * h, 3), np.float32)
     z0 = scene._near_plane(scene.hull_vertices @ R.T + t)  # rays start where the pass starts them
-    _kernels.make_rays(-R.T @ t, np.ascontiguousarray(R.T), cam.fx, cam.fy, cam.cx, cam.cy, u0, v0, w, h, z0, o, d)
+    _kernels.make_rays(-R.T @ t, np.ascontiguousarray(R.T), cam.fx, cam.fy, cam.cx, cam.cy, *cam.lens_arrays(), u0, v0,
+                       w, h, z0, o, d)
     return o, d, w
 
 

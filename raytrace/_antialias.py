@@ -59,6 +59,7 @@ def _aa_pixels(q: Quality, scene: Scene, camera: Camera, R, t, o_body, geo, ligh
                                sunl.sun, sunl.eps)
     if q.slivers:
         _edges.sliver_pixels(scene.vertices, scene.faces, R, t, camera.fx, camera.fy, camera.cx, camera.cy,
+                             camera.lens_arrays()[0],
                              1e-6 * scene.scale_m, 1.0, geo.depth_m, edges)
     return np.flatnonzero(edges.ravel())
 
@@ -106,8 +107,8 @@ def _corner_rays(scene: Scene, camera: Camera, R, t, o_body, geo):
     z0 = 0.0 if geo.camera_inside_hull else scene._near_plane(scene.hull_vertices @ R.T + t)
     o32 = np.empty((h * w, 3), dtype=np.float32)
     d32 = np.empty((h * w, 3), dtype=np.float32)
-    make_rays(o_body, np.ascontiguousarray(R.T), camera.fx, camera.fy, camera.cx + 0.5, camera.cy + 0.5, u0, v0, w,
-              h, z0, o32, d32)
+    make_rays(o_body, np.ascontiguousarray(R.T), camera.fx, camera.fy, camera.cx + 0.5, camera.cy + 0.5,
+              *camera.lens_arrays(), u0, v0, w, h, z0, o32, d32)
     return o32, d32, scene.intersect(o32, d32, robust=z0 <= 0.0)
 
 
@@ -228,7 +229,8 @@ def _trace_chunk(sunl: _Sunlight, scene: Scene, camera: Camera, R, t, o_body, ge
     R_bc = np.ascontiguousarray(R.T)
     z0 = 0.0 if geo.camera_inside_hull else scene._near_plane(scene.hull_vertices @ R.T + t)
     D = np.empty((len(epix) * S, 3))
-    _edges.subpixel_rays(epix.astype(np.int64), W, n_grid, seed, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, D)
+    _edges.subpixel_rays(epix.astype(np.int64), W, n_grid, seed, R_bc, camera.fx, camera.fy, camera.cx, camera.cy,
+                         *camera.lens_arrays(), D)
     h = _intersect_from(scene, o_body, z0, D)
     centre = np.repeat(epix, S)
     number = np.tile(np.arange(S), len(epix))
@@ -252,7 +254,7 @@ def _trace_chunk(sunl: _Sunlight, scene: Scene, camera: Camera, R, t, o_body, ge
     C = cov_grid * cov_grid
     Dc = np.empty((len(mpix) * C, 3))
     _edges.subpixel_rays(mpix.astype(np.int64), W, cov_grid, (seed + COVERAGE_STREAM) & 0x7FFFFFFF, R_bc, camera.fx,
-                         camera.fy, camera.cx, camera.cy, Dc)
+                         camera.fy, camera.cx, camera.cy, *camera.lens_arrays(), Dc)
     hc = _intersect_from(scene, o_body, z0, Dc)
     g_c = groups(hc).reshape(len(mpix), C)
     g_m = np.ascontiguousarray(g_s[mixed])
@@ -365,7 +367,8 @@ def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, se
             # within the pixel)
             own = np.flatnonzero((k >= 0) & (k == row_of_pixel[c_idx]))
             added = np.empty(len(own), dtype=np.bool_)
-            _edges.interpolate_rows_into(own, Dh, R_cam, camera.fx, camera.fy, camera.cx, camera.cy, W, H, s["comp"],
+            _edges.interpolate_rows_into(own, Dh, R_cam, camera.fx, camera.fy, camera.cx, camera.cy,
+                                         camera.lens_arrays()[0], W, H, s["comp"],
                                          s["P"], s["NS"], row_of_pixel, geo.instance.ravel(), P_c, N_c, foot,
                                          centre_light[0], centre_light[1], 4 if own_at_boundary else 1, E, Ls, added)
             k[own] = -2  # done; −1: none

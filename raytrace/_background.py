@@ -11,12 +11,14 @@ import numpy as np
 
 from . import environment as env
 from ._jit import inline, jit, pjit
+from ._lens import ray_xy
 
 
 @pjit
-def background(pix, W, o_body, R_body_from_cam, fx, fy, cx, cy, n_grid, p, tex, out):
+def background(pix, W, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table, n_grid, p, tex, out):
     """Earth (no ambient sky) seen through each listed pixel, box-filtered over n_grid²
-    sub-pixel rays; returns nothing, writes out[k]."""
+    sub-pixel rays (through the lens, :func:`raytrace._lens.ray_xy`); returns nothing, writes
+    out[k]."""
     S = n_grid * n_grid
     for k in numba.prange(pix.shape[0]):
         v = pix[k] // W
@@ -27,8 +29,7 @@ def background(pix, W, o_body, R_body_from_cam, fx, fy, cx, cy, n_grid, p, tex, 
         for j in range(S):
             du = ((j % n_grid) + 0.5) / n_grid - 0.5
             dv = ((j // n_grid) + 0.5) / n_grid - 0.5
-            x = (u + du - cx) / fx
-            y = (v + dv - cy) / fy
+            x, y = ray_xy(lens, table, (u + du - cx) / fx, (v + dv - cy) / fy)
             dx = R_body_from_cam[0, 0] * x + R_body_from_cam[0, 1] * y + R_body_from_cam[0, 2]
             dy = R_body_from_cam[1, 0] * x + R_body_from_cam[1, 1] * y + R_body_from_cam[1, 2]
             dz = R_body_from_cam[2, 0] * x + R_body_from_cam[2, 1] * y + R_body_from_cam[2, 2]
@@ -82,10 +83,10 @@ def _cell_trusted(A, M, C, ok, ok_c, i, j, chord2, tol):
 
 
 @inline
-def _pixel_ray(R, fx, fy, cx, cy, u, v):
-    """Unit body-frame direction of the ray through image point (u, v)."""
-    x = (u - cx) / fx
-    y = (v - cy) / fy
+def _pixel_ray(R, fx, fy, cx, cy, lens, table, u, v):
+    """Unit body-frame direction of the ray through image point (u, v) (NaN where the lens
+    has none)."""
+    x, y = ray_xy(lens, table, (u - cx) / fx, (v - cy) / fy)
     dx = R[0, 0] * x + R[0, 1] * y + R[0, 2]
     dy = R[1, 0] * x + R[1, 1] * y + R[1, 2]
     dz = R[2, 0] * x + R[2, 1] * y + R[2, 2]
@@ -94,7 +95,8 @@ def _pixel_ray(R, fx, fy, cx, cy, u, v):
 
 
 @pjit
-def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, p, tex, step, tol, max_chord, earth_px, rad):
+def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table, p, tex, step, tol, max_chord, earth_px,
+                     rad):
     """Earth behind the target in one pass over the image: ``earth_px[v, u]`` is set where the
     pixel's centre ray meets Earth, and there, off the target (``inst`` 0), ``rad[v, u]``
     (H, W, 3) receives Earth's radiance along it (``p`` without the ambient sky: the sky
@@ -138,12 +140,16 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, p, tex, step
     if interp:
         for i in numba.prange(nv):
             for j in range(nu):
-                dx, dy, dz = _pixel_ray(R_body_from_cam, fx, fy, cx, cy, float(j * s), float(i * s))
+                dx, dy, dz = _pixel_ray(R_body_from_cam, fx, fy, cx, cy, lens, table, float(j * s), float(i * s))
+                if math.isnan(dx):  # beyond the lens's invertible region: no cell here
+                    ok[i, j] = False
+                    continue
                 hit, A[i, j, 0], A[i, j, 1], A[i, j, 2], M[i, j, 0], M[i, j, 1], M[i, j, 2] = \
                     _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -max_chord)
                 ok[i, j] = hit
                 if hit:
-                    dx, dy, dz = _pixel_ray(R_body_from_cam, fx, fy, cx, cy, (j + 0.5) * s, (i + 0.5) * s)
+                    dx, dy, dz = _pixel_ray(R_body_from_cam, fx, fy, cx, cy, lens, table, (j + 0.5) * s,
+                                            (i + 0.5) * s)
                     hit, C[i, j, 0], C[i, j, 1], C[i, j, 2], _, _, _ = \
                         _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -2.0)
                     ok_c[i, j] = hit
@@ -172,6 +178,7 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, p, tex, step
     ccz = p[env.P_DIST] * p[env.P_EZ] - oz
     sx, sy, sz = p[env.P_SX], p[env.P_SY], p[env.P_SZ]
     ifx = 1.0 / fx
+    distorted = lens.shape[0] > 0
     for v in numba.prange(H):
         i = v // s
         fv = (v - i * s) * inv
@@ -184,10 +191,16 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, p, tex, step
         gy = R_body_from_cam[1, 0]
         gz = R_body_from_cam[2, 0]
         for u in range(W):
-            x = (u - cx) * ifx
-            dx = d0x + x * gx
-            dy = d0y + x * gy
-            dz = d0z + x * gz
+            if distorted:  # the pixel's own undistorted ray
+                x, yu = ray_xy(lens, table, (u - cx) / fx, y)
+                dx = R_body_from_cam[0, 0] * x + R_body_from_cam[0, 1] * yu + R_body_from_cam[0, 2]
+                dy = R_body_from_cam[1, 0] * x + R_body_from_cam[1, 1] * yu + R_body_from_cam[1, 2]
+                dz = R_body_from_cam[2, 0] * x + R_body_from_cam[2, 1] * yu + R_body_from_cam[2, 2]
+            else:
+                x = (u - cx) * ifx
+                dx = d0x + x * gx
+                dy = d0y + x * gy
+                dz = d0z + x * gz
             b = dx * ccx + dy * ccy + dz * ccz
             qx = ccy * dz - ccz * dy
             qy = ccz * dx - ccx * dz

@@ -12,6 +12,7 @@ import numba
 import numpy as np
 
 from ._jit import inline, jit, jit_exact, pjit, pjit_exact
+from ._lens import project_px, ray_xy
 from ._sampling import _cmj_perms, _cmj_point, _hash01
 
 
@@ -184,7 +185,7 @@ def donor_rows(centre, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c, foot, bo
 
 
 @pjit_exact
-def interpolate_rows_into(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c,
+def interpolate_rows_into(sel, D, R_cam_from_body, fx, fy, cx, cy, lens, W, H, comp, P, NS, row_of_pixel, inst, P_c, N_c,
                           foot, A, B, min_found, outA, outB, added):
     """For the listed sub-samples i (ray direction D[i], body frame; part ``comp``, point P,
     shading normal NS): outA[i] = Σ_j w_j A[k_j] (in place of what it held: the centres' filtered
@@ -199,8 +200,7 @@ def interpolate_rows_into(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P
         xc = R_cam_from_body[0, 0] * D[m, 0] + R_cam_from_body[0, 1] * D[m, 1] + R_cam_from_body[0, 2] * D[m, 2]
         yc = R_cam_from_body[1, 0] * D[m, 0] + R_cam_from_body[1, 1] * D[m, 1] + R_cam_from_body[1, 2] * D[m, 2]
         zc = R_cam_from_body[2, 0] * D[m, 0] + R_cam_from_body[2, 1] * D[m, 1] + R_cam_from_body[2, 2] * D[m, 2]
-        uf = fx * xc / zc + cx
-        vf = fy * yc / zc + cy
+        uf, vf = project_px(lens, fx, fy, cx, cy, xc, yc, zc)  # (distorted where ``lens`` is not empty)
         u0 = int(math.floor(uf))
         v0 = int(math.floor(vf))
         fu = uf - u0
@@ -236,18 +236,20 @@ def interpolate_rows_into(sel, D, R_cam_from_body, fx, fy, cx, cy, W, H, comp, P
 
 
 @inline
-def _project(V, i, R, t, fx, fy, cx, cy):
-    """Pixel coordinates and z-depth of vertex i (p_cam = R p + t); (0, 0, z) when z ≤ 0."""
+def _project(V, i, R, t, fx, fy, cx, cy, lens):
+    """Pixel coordinates (distorted by ``lens`` if not empty) and z-depth of vertex i
+    (p_cam = R p + t); (0, 0, z) when z ≤ 0."""
     xc = R[0, 0] * V[i, 0] + R[0, 1] * V[i, 1] + R[0, 2] * V[i, 2] + t[0]
     yc = R[1, 0] * V[i, 0] + R[1, 1] * V[i, 1] + R[1, 2] * V[i, 2] + t[1]
     zc = R[2, 0] * V[i, 0] + R[2, 1] * V[i, 1] + R[2, 2] * V[i, 2] + t[2]
     if zc <= 0.0:
         return 0.0, 0.0, zc
-    return fx * xc / zc + cx, fy * yc / zc + cy, zc
+    u, v = project_px(lens, fx, fy, cx, cy, xc, yc, zc)
+    return u, v, zc
 
 
 @pjit
-def sliver_pixels(V, F, R, t, fx, fy, cx, cy, z_min, max_width, depth, out):
+def sliver_pixels(V, F, R, t, fx, fy, cx, cy, lens, z_min, max_width, depth, out):
     """Pixels touched by triangles whose projection is a sliver: narrower than ``max_width``
     pixels (twice its area over its longest edge) — a rod, wire or panel seen edge-on that
     can fall between pixel centres and corners, or a part smaller than a pixel (a triangle
@@ -259,13 +261,16 @@ def sliver_pixels(V, F, R, t, fx, fy, cx, cy, z_min, max_width, depth, out):
     nearest point is nearer than the pixel centre's surface (``depth``, z-depth, inf on
     space) by more than 0.1 %: a sliver hidden behind that surface, or lying in it (the
     tessellation of a surface seen at a grazing angle), needs no extra samples. Triangles
-    with a vertex nearer than ``z_min`` are skipped (the target is in front of the camera)."""
+    with a vertex nearer than ``z_min`` are skipped (the target is in front of the camera).
+    Under lens distortion (``lens`` not empty) the vertices are projected with it and the
+    triangle's image taken as straight-edged: a sliver's edges bend by far less than a pixel
+    over its width."""
     H, W = out.shape
     for f in numba.prange(F.shape[0]):  # threads may mark a pixel at once: all write True
         # the three projected vertices as tuples (no array allocated per triangle)
-        u_0, v_0, z_0 = _project(V, F[f, 0], R, t, fx, fy, cx, cy)
-        u_1, v_1, z_1 = _project(V, F[f, 1], R, t, fx, fy, cx, cy)
-        u_2, v_2, z_2 = _project(V, F[f, 2], R, t, fx, fy, cx, cy)
+        u_0, v_0, z_0 = _project(V, F[f, 0], R, t, fx, fy, cx, cy, lens)
+        u_1, v_1, z_1 = _project(V, F[f, 1], R, t, fx, fy, cx, cy, lens)
+        u_2, v_2, z_2 = _project(V, F[f, 2], R, t, fx, fy, cx, cy, lens)
         if z_0 <= z_min or z_1 <= z_min or z_2 <= z_min:
             continue
         z_near = min(z_0, z_1, z_2)
@@ -457,7 +462,7 @@ def near_shadow_slivers(P, NS, WO, lit, foot, e1, e2, s, a0, b0, cell, grid, out
 
 
 @pjit
-def subpixel_rays(pix, W, n_grid, seed, R_body_from_cam, fx, fy, cx, cy, out_d):
+def subpixel_rays(pix, W, n_grid, seed, R_body_from_cam, fx, fy, cx, cy, lens, table, out_d):
     """n_grid² sub-pixel ray directions (body frame, z_cam = 1) per edge pixel, correlated
     multi-jittered (Kensler 2013, "Correlated Multi-Jittered Sampling", Pixar TM 13-01): one
     point in each cell of the n_grid × n_grid grid over the pixel *and* one in each of the
@@ -476,8 +481,7 @@ def subpixel_rays(pix, W, n_grid, seed, R_body_from_cam, fx, fy, cx, cy, out_d):
                                 _hash01(key, 2 * seed + 12))
             du = fu - 0.5
             dv = fv - 0.5
-            x = (u + du - cx) / fx
-            y = (v + dv - cy) / fy
+            x, y = ray_xy(lens, table, (u + du - cx) / fx, (v + dv - cy) / fy)
             m = k * S + j
             for a in range(3):
                 out_d[m, a] = R_body_from_cam[a, 0] * x + R_body_from_cam[a, 1] * y + R_body_from_cam[a, 2]

@@ -11,6 +11,7 @@ import numba
 import numpy as np
 
 from ._jit import inline, pjit_exact
+from ._lens import ray_xy
 
 
 @pjit_exact
@@ -124,13 +125,14 @@ def guide_images(img, var, inst, lum, vblur):
 
 
 @pjit_exact
-def atrous(img, var, vblur, lum, inst, normal, depth, fx, fy, cx, cy, step, sigma_l, out, out_var):
+def atrous(img, var, vblur, lum, inst, normal, depth, fx, fy, cx, cy, lens, table, step, sigma_l, out, out_var):
     """One pass of the edge-avoiding à-trous wavelet filter (Dammertz et al. 2010,
     doi:10.2312/EGGH/HPG10/067-075): a 5×5 B3-spline kernel with holes of ``step`` pixels,
     weighted by same instance id, normal agreement (n·n')^64 and distance from the centre
     pixel's tangent plane (in units of the pixel footprint). ``img`` has any number of
     channels, all filtered with the same weights; (cx, cy) is the principal point in the
-    coordinates of the (cropped) image.
+    coordinates of the (cropped) image, ``lens``/``table`` the camera's lens
+    (:mod:`raytrace._lens`: pixels back-projected along their undistorted rays).
 
     With σ_l > 0 it also stops at edges of the residual itself, after SVGF (Schied et al. 2017,
     doi:10.1145/3105762.3105770, eq. 5) but symmetric: a neighbour's weight is further
@@ -150,6 +152,7 @@ def atrous(img, var, vblur, lum, inst, normal, depth, fx, fy, cx, cy, step, sigm
     guided = sigma_l > 0.0
     ifx = 1.0 / fx
     ify = 1.0 / fy
+    distorted = lens.shape[0] > 0
     for v in numba.prange(H):
         acc = np.zeros(C)
         for u in range(W):
@@ -165,6 +168,7 @@ def atrous(img, var, vblur, lum, inst, normal, depth, fx, fy, cx, cy, step, sigm
             # 1 / (pixel footprint · (1 + step)): tangent-plane distances in footprints (a camera
             # touching a surface sees it at depth 0: a huge but finite 1/footprint, no 0·∞)
             ik = fx / (max(z0, 1e-12) * (1.0 + step))
+            x0, y0 = ray_xy(lens, table, (u - cx) / fx, (v - cy) / fy)
             for c in range(C):
                 acc[c] = 0.0
             sw = 0.0
@@ -189,8 +193,13 @@ def atrous(img, var, vblur, lum, inst, normal, depth, fx, fy, cx, cy, step, sigm
                     wn *= wn
                     z1 = depth[vv, uu]
                     dz = z1 - z0
-                    dxp = ((uu - u) * z1 + (u - cx) * dz) * ifx
-                    dyp = ((vv - v) * z1 + (v - cy) * dz) * ify
+                    if distorted:  # the two points along their rays, (x, y, 1)·z
+                        x1, y1 = ray_xy(lens, table, (uu - cx) / fx, (vv - cy) / fy)
+                        dxp = x1 * z1 - x0 * z0
+                        dyp = y1 * z1 - y0 * z0
+                    else:
+                        dxp = ((uu - u) * z1 + (u - cx) * dz) * ifx
+                        dyp = ((vv - v) * z1 + (v - cy) * dz) * ify
                     dist = abs(n0x * dxp + n0y * dyp + n0z * dz) * ik
                     if guided:
                         dist += abs(lum[vv, uu] - l0) / math.sqrt(s2 * (vb0 + vblur[vv, uu]) + 1e-60)

@@ -167,7 +167,7 @@ def fast_centre_parts(scene, camera, R, t, lighting, geo, cache_options: dict, s
     pix = np.flatnonzero(geo.instance.ravel() > 0)
     O = np.empty((len(pix), 3))
     D = np.empty((len(pix), 3))
-    centre_rays(pix, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, O, D)
+    centre_rays(pix, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, *camera.lens_arrays(), O, D)
     s = _surfaces(scene, O, D, geo.face_index.ravel()[pix].astype(np.int64))
     ctx = _Context(scene, lighting, cache_options, prefiltered_glossy=True)
     soft = sun_rays > 1 and lighting.sun_angular_diameter_rad > 0.0

@@ -28,6 +28,7 @@ import numpy as np
 from . import environment as env
 from ._background import background
 from ._jit import jit, pjit
+from ._lens import ray_xy
 from ._lights import SUN_COS_HALF, SUN_E, SUN_X, SUN_Y, SUN_Z
 from ._surface import surfaces
 from .brdf import brdf_cos, onb, sample_brdf
@@ -59,14 +60,13 @@ def _r2(seed, pix, s, pair):
 
 
 @pjit
-def _primary(pix, W, s, seed, o_body, R_bc, fx, fy, cx, cy, z0, out_o32, out_d, out_d32):
+def _primary(pix, W, s, seed, o_body, R_bc, fx, fy, cx, cy, lens, table, z0, out_o32, out_d, out_d32):
     for k in numba.prange(pix.shape[0]):
         p = pix[k]
         v = p // W
         u = p % W
         ju, jv = _r2(seed, p, s, 0)
-        x = (u + ju - 0.5 - cx) / fx
-        y = (v + jv - 0.5 - cy) / fy
+        x, y = ray_xy(lens, table, (u + ju - 0.5 - cx) / fx, (v + jv - 0.5 - cy) / fy)
         for a in range(3):
             d = R_bc[a, 0] * x + R_bc[a, 1] * y + R_bc[a, 2]
             out_d[k, a] = d
@@ -194,7 +194,8 @@ def render_reference(scene, camera, R, t, lighting, geo, *, spp: int, seed: int)
     if lighting.earth is not None:
         rest = np.flatnonzero(~rect.ravel())
         bg = np.empty((len(rest), 3))
-        background(rest, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, 4, p_bg, tex, bg)
+        background(rest, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, *camera.lens_arrays(), 4, p_bg, tex,
+                   bg)
         out[rest] = bg
     pix = np.flatnonzero(rect.ravel()).astype(np.int64)
     if len(pix) == 0:
@@ -208,7 +209,8 @@ def render_reference(scene, camera, R, t, lighting, geo, *, spp: int, seed: int)
         o32 = np.empty((n, 3), np.float32)
         d = np.empty((n, 3))
         d32 = np.empty((n, 3), np.float32)
-        _primary(pix, W, s, seed, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, z0, o32, d, d32)
+        _primary(pix, W, s, seed, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, *camera.lens_arrays(), z0,
+                 o32, d, d32)
         # the yardstick traces every ray through Embree's robust scene (Scene.direct), as the
         # labels do, not the faster one the presets' shading rays take
         h = scene.intersect(o32, d32, robust=True)

@@ -25,7 +25,7 @@ import numpy as np
 
 from . import _kernels, presets
 from ._threads import available_cores, parallel_chunksize
-from .camera import Camera
+from .camera import Camera, distort_normalised, radial_limit
 from .model import TargetModel
 
 __all__ = ["GeometryFrame", "Scene", "default_threads"]
@@ -495,6 +495,11 @@ class Scene:
             return (0, 0, 0, 0)  # nothing in front of the camera: nothing to see
         if np.any(behind):
             return None
+        if camera.distorted:
+            # the target's rays lie in the box of its hull's normalised points; a pixel sees it
+            # only if its undistorted ray does
+            x, y = p[:, 0] / p[:, 2], p[:, 1] / p[:, 2]
+            return camera.pixel_rect_of_box(float(x.min()), float(x.max()), float(y.min()), float(y.max()))
         u = camera.fx * p[:, 0] / p[:, 2] + camera.cx
         v = camera.fy * p[:, 1] / p[:, 2] + camera.cy
         return (math.floor(u.min()) - 1, math.floor(v.min()) - 1, math.ceil(u.max()) + 2, math.ceil(v.max()) + 2)
@@ -547,9 +552,38 @@ class Scene:
             o32 = np.empty((w * h, 3), dtype=np.float32)
             d32 = np.empty((w * h, 3), dtype=np.float32)
             _kernels.make_rays(o_body, R_body_from_cam, camera.fx / stride, camera.fy / stride,
-                               (camera.cx - u0) / stride, (camera.cy - v0) / stride, 0, 0, w, h, z0, o32, d32)
+                               (camera.cx - u0) / stride, (camera.cy - v0) / stride, *camera.lens_arrays(), 0, 0,
+                               w, h, z0, o32, d32)  # (a pinhole: distorted cameras take _distorted_fraction)
             hits += int(np.count_nonzero(self.embree.run(o32, d32) >= 0))
         return float(hits) * stride * stride
+
+    def _distorted_fraction(self, camera: Camera, R, t, p_hull_cam: np.ndarray, max_rays: int) -> float:
+        """Visible fraction of the target through a distorted camera: its silhouette is
+        measured in the undistorted image plane, on the pinhole pixel grid of the same K over
+        the box of the hull's normalised points (subsampled by an integer stride when it
+        holds more than ``max_rays`` points); a hit counts as in view where its distorted
+        point lies in the image (−0.5 ≤ u < W − 0.5, −0.5 ≤ v < H − 0.5) within the distortion's
+        invertible radius. An estimate when strided."""
+        x = p_hull_cam[:, 0] / p_hull_cam[:, 2]
+        y = p_hull_cam[:, 1] / p_hull_cam[:, 2]
+        U0, U1 = math.floor(camera.fx * x.min() + camera.cx) - 1, math.ceil(camera.fx * x.max() + camera.cx) + 2
+        V0, V1 = math.floor(camera.fy * y.min() + camera.cy) - 1, math.ceil(camera.fy * y.max() + camera.cy) + 2
+        stride = max(1, math.ceil(math.sqrt((U1 - U0) * (V1 - V0) / max_rays)))
+        uu, vv = np.meshgrid(np.arange(U0, U1, stride, dtype=np.float64), np.arange(V0, V1, stride, dtype=np.float64))
+        xs, ys = (uu.ravel() - camera.cx) / camera.fx, (vv.ravel() - camera.cy) / camera.fy
+        d = np.column_stack([xs, ys, np.ones(len(xs))]) @ R  # R_body_from_cam (x, y, 1), per row
+        o_body = -R.T @ t
+        z0 = self._near_plane(p_hull_cam)
+        hit = self.embree.run((o_body + z0 * d).astype(np.float32), d.astype(np.float32)) >= 0
+        if not hit.any():
+            return 0.0
+        xs, ys = xs[hit], ys[hit]
+        xd, yd = distort_normalised(xs, ys, camera.dist_coeffs)
+        u, v = camera.fx * xd + camera.cx, camera.fy * yd + camera.cy
+        seen = (u >= -0.5) & (u < camera.width - 0.5) & (v >= -0.5) & (v < camera.height - 0.5) & \
+            (np.hypot(xs, ys) <= radial_limit(camera.dist_coeffs))
+        return float(np.count_nonzero(seen)) / len(xs)
+
     # ------------------------------------------------------------------ render
     def render_geometry(self, camera: Camera, R_cam_from_body, t_cam_m, *, cull: bool = True,
                         ray_distance: bool = False, geometric_normal: bool = False,
@@ -613,13 +647,16 @@ class Scene:
             # start rays just in front of the target (its nearest hull vertex) unless inside it
             z0 = 0.0 if inside else self._near_plane(p_hull)
             fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
+            lens, table = camera.lens_arrays()
             direct = self.direct if presets.CAST_IN_ONE_KERNEL and threads is None else None
             if direct is not None:
                 # rays, Embree and refinement in one kernel on numba's threads (the calling
                 # thread's count), rows handed out a few at a time: the hits crowd into part of
                 # the rectangle. The same AOVs as the chunks below, bit for bit.
                 cast = np.empty((0, 0), np.uint8)
-                if cull and not inside and _CULL_PARTS:
+                # (the parts' polytopes cull a pinhole's rays: under distortion the image of a
+                # convex polytope is no convex polygon, and the whole rectangle is cast)
+                if cull and not inside and _CULL_PARTS and not camera.distorted:
                     # within the rectangle only the pixels in the image of some part's bounding
                     # polytope: the same hits, 0.11–0.60 of the rays on the benchmark scenes
                     P, ptr = self.part_hulls
@@ -627,7 +664,8 @@ class Scene:
                     _kernels.cull_mask(P @ R.T + t, ptr, fx, fy, cx, cy, u0, v0, w, v1 - v0,
                                        1e-9 * max(self.scale_m, 1.0), cast)
                 with parallel_chunksize(_ROWS_PER_TASK):
-                    _kernels.cast_and_refine(direct.handle, o_body, R_body_from_cam, R, fx, fy, cx, cy, u0, v0, w,
+                    _kernels.cast_and_refine(direct.handle, o_body, R_body_from_cam, R, fx, fy, cx, cy, lens, table,
+                                             u0, v0, w,
                                              v1 - v0, z0, self.vertices, self.faces, self.face_offset,
                                              self.face_normal, self.corner_normal, depth, dist, n_shade, n_geom,
                                              inst, face, ray_distance, geometric_normal, cast)
@@ -637,9 +675,9 @@ class Scene:
                 def chunk(va: int, h: int) -> None:  # rows [va, va + h): disjoint outputs per chunk
                     o32 = np.empty((h * w, 3), dtype=np.float32)
                     d32 = np.empty((h * w, 3), dtype=np.float32)
-                    _kernels.make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, u0, va, w, h, z0, o32, d32)
+                    _kernels.make_rays(o_body, R_body_from_cam, fx, fy, cx, cy, lens, table, u0, va, w, h, z0, o32, d32)
                     hits = scene.run(o32, d32, query="INTERSECT", output=1)
-                    _kernels.refine_hits(o_body, R_body_from_cam, R, fx, fy, cx, cy, u0, va, w, h, z0,
+                    _kernels.refine_hits(o_body, R_body_from_cam, R, fx, fy, cx, cy, lens, table, u0, va, w, h, z0,
                                          hits["geomID"], hits["primID"], hits["tfar"], self.vertices, self.faces,
                                          self.face_offset, self.face_normal, self.corner_normal,
                                          depth, dist, n_shade, n_geom, inst, face, ray_distance, geometric_normal)
@@ -664,6 +702,8 @@ class Scene:
                 fraction = 0.0  # the projection misses the image
             elif full[0] >= 0 and full[1] >= 0 and full[2] <= W and full[3] <= H:
                 fraction = 1.0 if seen else 0.0  # wholly inside the image (or hidden: nothing to see)
+            elif camera.distorted:
+                fraction = self._distorted_fraction(camera, R, t, p_hull, max(1024, W * H // 4)) if seen else 0.0
             else:
                 total = seen + self._pixels_outside_image(camera, R, t, full, max_rays=max(1024, W * H // 4),
                                                           z0=self._near_plane(p_hull))

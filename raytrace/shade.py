@@ -216,7 +216,7 @@ def _filter_residual(rows, var, inst, at, guide, passes: int, sigma_l: float, li
     or its lobe's difference from the mirror term), with their luminance variances
     ``var`` (n,), filtered by ``passes`` à-trous passes (:func:`raytrace._filter.atrous`) on
     the image of ids ``inst`` (pixel k at (at[0][k], at[1][k]); pixels whose id is 0 neither
-    take nor give), ``guide`` = (normals, depths, fx, fy, cx, cy) of that image: rows (n, 3).
+    take nor give), ``guide`` = (normals, depths, fx, fy, cx, cy, lens, table) of that image: rows (n, 3).
 
     With ``linear`` = β > 0 each pixel takes, instead of the filter's weighted mean, the value
     at its own position of the weighted least-squares plane (in image coordinates) through its
@@ -245,18 +245,19 @@ def _filter_residual(rows, var, inst, at, guide, passes: int, sigma_l: float, li
 def _atrous_passes(img, var, inst, guide, passes: int, sigma_l: float, overwrite: bool = False):
     """``passes`` à-trous passes (:func:`raytrace._filter.atrous`, pass k with holes of 2^k
     pixels) over the image ``img`` (H, W, C) with per-pixel variances ``var`` (H, W), ids
-    ``inst`` and ``guide`` = (normals, depths, fx, fy, cx, cy): the filtered image and its
+    ``inst`` and ``guide`` = (normals, depths, fx, fy, cx, cy, lens, table): the filtered image and its
     variances (σ_l = 0: geometry only). They are new arrays, or, with ``overwrite``, may be
     ``img`` and ``var`` themselves (one image less in memory)."""
     if not overwrite:
         img, var = img.copy(), var.copy()
     tmp, var_tmp = np.zeros_like(img), np.zeros_like(var)
     var_blur, lum = np.zeros_like(var), np.zeros_like(var)
-    normal, depth, fx, fy, cx, cy = guide
+    normal, depth, fx, fy, cx, cy, lens, table = guide
     for k in range(passes):
         if sigma_l > 0.0:
             _filter.guide_images(img, var, inst, lum, var_blur)
-        _filter.atrous(img, var, var_blur, lum, inst, normal, depth, fx, fy, cx, cy, 1 << k, sigma_l, tmp, var_tmp)
+        _filter.atrous(img, var, var_blur, lum, inst, normal, depth, fx, fy, cx, cy, lens, table, 1 << k, sigma_l, tmp,
+                       var_tmp)
         img, tmp = tmp, img
         var, var_tmp = var_tmp, var
     return img, var
@@ -387,7 +388,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     pix = np.flatnonzero(geo.instance.ravel() > 0)
     O = np.empty((len(pix), 3))
     D = np.empty((len(pix), 3))
-    centre_rays(pix, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, O, D)
+    centre_rays(pix, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, *camera.lens_arrays(), O, D)
     face = geo.face_index.ravel()[pix].astype(np.int64)
     s = _surfaces(scene, O, D, face)
     soft = q.sun_rays > 1 and lighting.sun_angular_diameter_rad > 0.0
@@ -407,6 +408,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     earth_drawn = lighting.earth is not None and _earth_may_be_in_view(camera, R, lighting)
     if earth_drawn:
         _background.earth_background(geo.instance, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy,
+                                     *camera.lens_arrays(),
                                      sunl.p_background, sunl.tex, _BACKGROUND_STEP, _BACKGROUND_TOL,
                                      _BACKGROUND_CHORD, earth_px, rad.reshape(H, W, 3))
         _check_finite("background", rad)
@@ -467,7 +469,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
         # pixels only (its steps are reflected edges and shadows, not the diffuse light's)
         guide = (geo.normal_cam[box].astype(np.float64),
                  np.where(np.isfinite(geo.depth_m[box]), geo.depth_m[box], 0.0).astype(np.float64),
-                 camera.fx, camera.fy, camera.cx - u0, camera.cy - v0)
+                 camera.fx, camera.fy, camera.cx - u0, camera.cy - v0, *camera.lens_arrays())
         rows_E = _filter_residual(G, var, inst, at, guide, q.filter_passes, q.filter_sigma_l, q.filter_linear)
         spec_px = ctx.lobe_sampled[s["comp"]]
         if spec_px.any():
@@ -561,8 +563,17 @@ def _stars(rad, scene: Scene, camera: Camera, R, t, lighting: Lighting, timings:
 def _earth_may_be_in_view(camera: Camera, R, lighting: Lighting) -> bool:
     """Earth's disc can overlap the field of view (cone test, conservative)."""
     e_cam = R @ np.asarray(lighting.earth.earth_dir_body)
-    half_diag = math.atan(math.hypot(max(camera.cx + 0.5, camera.width - 0.5 - camera.cx) / camera.fx,
-                                     max(camera.cy + 0.5, camera.height - 0.5 - camera.cy) / camera.fy))
+    if camera.distorted:  # the widest undistorted ray through the image's border
+        W, H = camera.width, camera.height
+        s = np.linspace(0.0, 1.0, 65)
+        xy = camera.undistort(np.column_stack([np.concatenate([W * s - 0.5, W * s - 0.5, np.full(65, -0.5),
+                                                               np.full(65, W - 0.5)]),
+                                               np.concatenate([np.full(65, -0.5), np.full(65, H - 0.5),
+                                                               H * s - 0.5, H * s - 0.5])]))
+        half_diag = math.atan(float(np.hypot(xy[:, 0], xy[:, 1]).max())) + 1e-3
+    else:
+        half_diag = math.atan(math.hypot(max(camera.cx + 0.5, camera.width - 0.5 - camera.cx) / camera.fx,
+                                         max(camera.cy + 0.5, camera.height - 0.5 - camera.cy) / camera.fy))
     angle = math.acos(max(-1.0, min(1.0, float(e_cam[2]))))
     return angle <= half_diag + lighting.earth.angular_radius_rad + 1e-6
 

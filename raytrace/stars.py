@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._kernels import rows_times_matrix
+from .camera import distort_normalised
 from .constants import SOLAR_CONSTANT_W_M2
 
 __all__ = ["MAG_BRIGHTEST", "MAG_FAINTEST", "SUN_V_MAG", "StarField", "irradiance_of_magnitude"]
@@ -160,7 +161,8 @@ def add_stars(radiance: np.ndarray, stars: StarField, R_body_from_eci, scene, ca
 
     Ω_pixel = cos³θ / (f_x f_y) is the solid angle of a pixel whose centre is θ off the
     optical axis of a pinhole camera (the image-plane area 1 px² seen at distance f / cos θ,
-    tilted by θ)."""
+    tilted by θ); under lens distortion Ω is that of the undistorted image-plane area, the
+    pixel's area divided by the distortion's Jacobian determinant."""
     R_body_from_eci = np.asarray(R_body_from_eci, dtype=np.float64).reshape(3, 3)
     R = np.asarray(R_cam_from_body, dtype=np.float64).reshape(3, 3)
     t = np.asarray(t_cam_m, dtype=np.float64).ravel()
@@ -168,8 +170,12 @@ def add_stars(radiance: np.ndarray, stars: StarField, R_body_from_eci, scene, ca
     d_cam = rows_times_matrix(stars.dirs_eci, (R @ R_body_from_eci).T)  # (no BLAS on the hot path)
     front = d_cam[:, 2] > 1e-9
     z = np.where(front, d_cam[:, 2], 1.0)
-    u = camera.fx * d_cam[:, 0] / z + camera.cx
-    v = camera.fy * d_cam[:, 1] / z + camera.cy
+    if camera.distorted:
+        uv = camera.project(d_cam / z[:, None])
+        u, v = uv[:, 0], uv[:, 1]
+    else:
+        u = camera.fx * d_cam[:, 0] / z + camera.cx
+        v = camera.fy * d_cam[:, 1] / z + camera.cy
     iu, iv = np.floor(u + 0.5), np.floor(v + 0.5)  # integer coordinates are pixel centres
     k = np.flatnonzero(front & (iu >= 0) & (iu < W) & (iv >= 0) & (iv < H))
     if not len(k):
@@ -187,8 +193,22 @@ def add_stars(radiance: np.ndarray, stars: StarField, R_body_from_eci, scene, ca
         k = k[~scene.occluded(np.broadcast_to(o_body, (len(k), 3)), d_body)]
     # Ω of the pixel, at its centre (its spread over the pixel is second order, ~1e-5 here)
     x, y = (iu[k] - camera.cx) / camera.fx, (iv[k] - camera.cy) / camera.fy
+    if camera.distorted:
+        # the pixel's ray, and its area in the undistorted image plane: 1/det of the
+        # distortion's Jacobian (central differences, step 1e-6)
+        x, y = camera.undistort(np.column_stack([iu[k], iv[k]])).T
+        h = 1e-6
+        xa, ya = distort_normalised(x + h, y, camera.dist_coeffs)
+        xb, yb = distort_normalised(x - h, y, camera.dist_coeffs)
+        xc, yc = distort_normalised(x, y + h, camera.dist_coeffs)
+        xe, ye = distort_normalised(x, y - h, camera.dist_coeffs)
+        det = ((xa - xb) * (yc - ye) - (xc - xe) * (ya - yb)) / (4.0 * h * h)
+    else:
+        det = 1.0
     cos_t = 1.0 / np.sqrt(1.0 + x * x + y * y)
     L = stars.irradiance_W_m2[k] * camera.fx * camera.fy / cos_t ** 3
+    if camera.distorted:
+        L = L * det
     flat = radiance.reshape(H * W, radiance.shape[2])
     np.add.at(flat, (iv[k] * W + iu[k]).astype(np.int64), L[:, None].astype(flat.dtype))
     return len(k)

@@ -46,7 +46,7 @@ def camerajson_text(camera, cfg: dict) -> dict:
             "focal_length_m": cam["focal_length_mm"] * 1e-3, "pixel_pitch_m": cam["pixel_pitch_um"] * 1e-6,
             "convention": "OpenCV: x right, y down, z forward; integer pixel coordinates are pixel centres",
             # SPEED+-style keys
-            "cameraMatrix": K, "distCoeffs": [0.0, 0.0, 0.0, 0.0, 0.0], "Nu": camera.width, "Nv": camera.height,
+            "cameraMatrix": K, "distCoeffs": list(camera.dist_coeffs), "Nu": camera.width, "Nv": camera.height,
             "ppx": cam["pixel_pitch_um"] * 1e-6, "ppy": cam["pixel_pitch_um"] * 1e-6}
 
 
@@ -369,7 +369,7 @@ def tasks_for(plan: dict, seq_dir: str, shard: tuple | None, *, write: bool = Tr
         label = plan["result"]["frames"][i]
         nxt = plan["result"]["frames"][i + 1] if i + 1 < len(plan["result"]["frames"]) else None
         tasks.append({"frame": i, "out": seq_dir, "write": write, "cfg": cfg, "model_spec": plan["model_spec"],
-                      "camera": (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy),
+                      "camera": (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy, cam.dist_coeffs),
                       "R_cam_from_body": label["R_cam_from_body"], "t_cam_m": label["t_cam_m"],
                       # the next planned frame's pose (written or not), for the flow
                       "next_pose": None if nxt is None else (nxt["R_cam_from_body"], nxt["t_cam_m"]),

@@ -278,7 +278,8 @@ def fit_workers(cameras: list, workers: int) -> int:
     if total is None or not cameras:
         return workers
     cam = max(cameras, key=lambda c: c.width * c.height)
-    need = WORKER_BASE_BYTES + FRAME_BYTES_PER_PIXEL * cam.width * cam.height
+    # (a distorted camera's table of pixel rays: 16 bytes a pixel more, raytrace.camera.Camera.lens_arrays)
+    need = WORKER_BASE_BYTES + (FRAME_BYTES_PER_PIXEL + 16 * cam.distorted) * cam.width * cam.height
     if need > total:
         raise UsageError(f"argument --width/--height: a {cam.width}x{cam.height} frame needs about "
                        f"{need / 2**30:.1f} GiB "

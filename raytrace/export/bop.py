@@ -562,6 +562,10 @@ def export_bop(sequence_dir, out_dir, *, obj_id: int = 1, scene_id: int = 0, spl
       covers.
     """
     seq = _read_sequence(sequence_dir)
+    dist = seq.camera.get("distCoeffs")
+    if isinstance(dist, list) and any(v != 0 for v in dist):
+        raise ValueError(f"BOP has no lens distortion: camera.json distCoeffs is {dist!r} (export a sequence "
+                         "rendered without --distortion)")
     obj_id = _id_in_range("obj_id", obj_id, 1)
     scene_id = _id_in_range("scene_id", scene_id, 0)
     if not isinstance(split, str) or not split or any(c in split for c in "/\\") or split.startswith("."):

@@ -38,7 +38,8 @@ def _background(texture: str, tilt_rad: float, step: int, inst=None):
     inst = np.zeros((H, W), np.uint16) if inst is None else inst
     earth_px = np.zeros((H, W), bool)
     rad = np.zeros((H, W, 3), np.float32)
-    earth_background(inst, np.zeros(3), np.ascontiguousarray(R_body_from_cam), CAM.fx, CAM.fy, CAM.cx, CAM.cy, p, tex,
+    earth_background(inst, np.zeros(3), np.ascontiguousarray(R_body_from_cam), CAM.fx, CAM.fy, CAM.cx, CAM.cy,
+                     *CAM.lens_arrays(), p, tex,
                      step, shade._BACKGROUND_TOL, shade._BACKGROUND_CHORD, earth_px, rad)
     return rad, earth_px
 

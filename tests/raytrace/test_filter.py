@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import binary_erosion
 
+from raytrace.camera import Camera
 from raytrace.lighting import Lighting
 from raytrace.shade import _atrous_passes, _Context, _filter_residual, _surfaces, render
 
@@ -31,7 +32,7 @@ def _flat_plane():
 
 def _guided(img, var, passes, sigma_l=4.0):
     inst, normal, depth = _flat_plane()
-    return _atrous_passes(img, var, inst, (normal, depth, FX, FY, CX, CY), passes, sigma_l)
+    return _atrous_passes(img, var, inst, (normal, depth, FX, FY, CX, CY, *Camera().lens_arrays()), passes, sigma_l)
 
 
 def _geometric(img, passes):
@@ -103,7 +104,7 @@ def test_local_linear_filter_keeps_a_ramp_at_a_part_edge_where_the_weighted_mean
     truth = np.where(inst == 1, 0.3 * uu + 0.1 * vv, 2.0 - 0.05 * uu)[..., None] * np.array([1.0, 0.5, 0.25])
     at = np.nonzero(inst > 0)
     var = np.full(len(at[0]), 0.01)
-    guide = (normal, depth, FX, FY, CX, CY)
+    guide = (normal, depth, FX, FY, CX, CY, *Camera().lens_arrays())
     rows = truth[at]
     edge = (at[1] == W // 2 - 1) & (at[0] >= 4) & (at[0] < H - 4)  # the last column of part 1, inner rows
     mean_only = _filter_residual(rows, var, inst, at, guide, passes, 0.0)
@@ -126,7 +127,7 @@ def test_local_linear_filter_of_pure_noise_is_unbiased_and_still_smooths():
     inst, normal, depth = _two_parts()
     at = np.nonzero(inst > 0)
     sd = 1.0
-    guide = (normal, depth, FX, FY, CX, CY)
+    guide = (normal, depth, FX, FY, CX, CY, *Camera().lens_arrays())
     outs = []
     for _ in range(40):
         rows = rng.normal(0.0, sd, (len(at[0]), 3))
@@ -206,6 +207,7 @@ _FILTER_RUN = """
 import sys
 import numpy as np
 from raytrace import _filter
+from raytrace.camera import Camera
 from raytrace.shade import _atrous_passes
 rng = np.random.default_rng(0)
 H, W = 96, 128
@@ -219,7 +221,8 @@ normal[..., 2] = -1.0
 normal[..., 0] = rng.normal(scale=0.05, size=(H, W))
 normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
 depth = rng.uniform(9.0, 11.0, (H, W))
-out, out_var = _atrous_passes(img, var, inst, (normal, depth, 500.0, 500.0, 64.0, 48.0), 2, 4.0)
+out, out_var = _atrous_passes(img, var, inst, (normal, depth, 500.0, 500.0, 64.0, 48.0, *Camera().lens_arrays()), 2,
+                              4.0)
 np.save(sys.argv[1], np.concatenate([out.ravel(), out_var.ravel()]))
 """
 

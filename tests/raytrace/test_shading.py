@@ -669,20 +669,20 @@ def test_sliver_pixels_marks_exactly_the_pixels_a_thin_triangle_overlaps():
     F = np.array([[0, 1, 2]])
     R, t = np.eye(3), np.zeros(3)
     out = np.zeros((H, W), dtype=bool)
-    sliver_pixels(V, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), np.inf, dtype=np.float32), out)
+    sliver_pixels(V, F, R, t, f, f, c, c, Camera().lens_arrays()[0], 1e-6, 1.0, np.full((H, W), np.inf, dtype=np.float32), out)
     want = _dense_cover(px, py, W, H, n=2000)
     assert want.sum() > 50
     assert np.array_equal(out, want)
     out[:] = False
-    sliver_pixels(V, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), 5.0, dtype=np.float32), out)  # a surface in front
+    sliver_pixels(V, F, R, t, f, f, c, c, Camera().lens_arrays()[0], 1e-6, 1.0, np.full((H, W), 5.0, dtype=np.float32), out)  # a surface in front
     assert not out.any()
     out[:] = False
-    sliver_pixels(V, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), 20.0, dtype=np.float32), out)  # a surface behind it
+    sliver_pixels(V, F, R, t, f, f, c, c, Camera().lens_arrays()[0], 1e-6, 1.0, np.full((H, W), 20.0, dtype=np.float32), out)  # a surface behind it
     assert np.array_equal(out, want)
     wide = np.column_stack([(np.array([30.3, 70.1, 50.0]) - c) * z / f, (np.array([40.2, 52.7, 80.0]) - c) * z / f,
                             np.full(3, z)])
     out[:] = False
-    sliver_pixels(wide, F, R, t, f, f, c, c, 1e-6, 1.0, np.full((H, W), np.inf, dtype=np.float32), out)
+    sliver_pixels(wide, F, R, t, f, f, c, c, Camera().lens_arrays()[0], 1e-6, 1.0, np.full((H, W), np.inf, dtype=np.float32), out)
     assert not out.any()
 
 
@@ -719,7 +719,7 @@ def test_sliver_pixels_row_spans_mark_what_the_whole_box_test_marks(angle_deg):
         px, py = pts[:, 0], pts[:, 1]
         V = np.column_stack([(px - c) * z / f, (py - c) * z / f, np.full(3, z)])
         out[:] = False
-        sliver_pixels(V, np.array([[0, 1, 2]]), np.eye(3), np.zeros(3), f, f, c, c, 1e-6, 1.0,
+        sliver_pixels(V, np.array([[0, 1, 2]]), np.eye(3), np.zeros(3), f, f, c, c, Camera().lens_arrays()[0], 1e-6, 1.0,
                       np.full((H, W), np.inf, dtype=np.float32), out)
         P = V[:, :2] * f / z + c  # the projection as the kernel computes it
         want = _sat_cover(P[:, 0], P[:, 1], W, H)

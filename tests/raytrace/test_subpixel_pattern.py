@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from raytrace import _edges, _gather, _lights, _sampling, _surface, brdf
+from raytrace.camera import Camera
 
 FX, FY, CX, CY, W = 800.0, 700.0, 40.0, 30.0, 80
 
@@ -15,7 +16,7 @@ def _offsets(pix, n, seed):
     their directions through the pinhole (identity pose)."""
     pix = np.asarray(pix, dtype=np.int64)
     d = np.empty((len(pix) * n * n, 3))
-    _edges.subpixel_rays(pix, W, n, seed, np.eye(3), FX, FY, CX, CY, d)
+    _edges.subpixel_rays(pix, W, n, seed, np.eye(3), FX, FY, CX, CY, *Camera().lens_arrays(), d)
     u = d[:, 0] / d[:, 2] * FX + CX
     v = d[:, 1] / d[:, 2] * FY + CY
     pu = np.repeat(pix % W, n * n)

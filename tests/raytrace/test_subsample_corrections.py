@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from raytrace import _edges
+from raytrace.camera import Camera
 
 H, W = 4, 6
 
@@ -34,7 +35,8 @@ def _interp(uf, vf, comp, parts, A, B, min_found=1):
     outA = np.zeros((len(uf), 3))
     outB = np.zeros((len(uf), 3))
     added = np.empty(len(uf), dtype=np.bool_)
-    _edges.interpolate_rows_into(np.arange(len(uf), dtype=np.int64), D, np.eye(3), FX, FY, CX, CY, W, H, comp, P, NS,
+    _edges.interpolate_rows_into(np.arange(len(uf), dtype=np.int64), D, np.eye(3), FX, FY, CX, CY,
+                                 Camera().lens_arrays()[0], W, H, comp, P, NS,
                                  row_of_pixel, inst, P_c, N_c, foot, A, B, min_found, outA, outB, added)
     return outA, outB, added
 

@@ -22,6 +22,7 @@ import trimesh
 from scipy import integrate, optimize
 
 from raytrace import _context, _filter, _gather, _sampling, shade
+from raytrace.camera import Camera
 from raytrace.lighting import Lighting
 from raytrace.model import Component, TargetModel
 from raytrace.scene import Scene
@@ -228,7 +229,7 @@ def test_filter_variance_is_the_propagated_variance_of_the_id_only_passes(passes
     normal[..., 2] = 1.0
     depth = np.full((H, W), 5.0)
     _, var = shade._atrous_passes(np.zeros((H, W, 1)), (inst > 0).astype(float), inst,
-                                  (normal, depth, 800.0, 800.0, W / 2, H / 2), passes, 0.0)
+                                  (normal, depth, 800.0, 800.0, W / 2, H / 2, *Camera().lens_arrays()), passes, 0.0)
     np.testing.assert_allclose(out[inst > 0], var[inst > 0], rtol=1e-12)
 
 
@@ -259,7 +260,8 @@ def test_filter_variance_closed_forms_and_the_spread_of_filtered_noise():
     ones = np.ones((H, W))
     for i in range(n):
         img = rng.standard_normal((H, W, 1))
-        _filter.atrous(img, ones, ones, ones, inst, normal, depth, 800.0, 800.0, W / 2, H / 2, 1, 0.0, res, res_var)
+        _filter.atrous(img, ones, ones, ones, inst, normal, depth, 800.0, 800.0, W / 2, H / 2, *Camera().lens_arrays(), 1, 0.0,
+                       res, res_var)
         samples[i] = res[..., 0]
     emp = samples.var(axis=0)
     on = inst > 0
