@@ -10,7 +10,7 @@ exports it with ``--workers`` processes (default: the usable cores) and prints, 
 median wall time of the repeats, the frames per second and the CPU time per frame (this
 process and its workers; on a busy machine the wall time says little, the CPU time divided by
 the cores is what an idle machine's wall time approaches). Each export goes into a new folder
-under a temporary directory (removed at the end). The target of the brief: 2000 frames at
+under a temporary directory (removed at the end). The goal: 2000 frames at
 1280×960 in ≤ 60 s on 2 cores.
 """
 

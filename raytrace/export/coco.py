@@ -26,7 +26,7 @@ from ._read import (
     _rendered,
     _staging,
 )
-from ._splits import _check_splits, _frame_files, _image_stems
+from ._items import _check_splits, _frame_files, _image_stems
 
 __all__ = ["COCO_KEYPOINT_VISIBILITY", "export_coco", "write_coco"]
 

@@ -25,7 +25,7 @@ from ._read import (
     _staging,
     _write_json,
 )
-from ._splits import _check_splits, _frame_files, _image_stems
+from ._items import _check_splits, _frame_files, _image_stems
 
 __all__ = ["SPEEDPLUS_SPLIT_NAMES", "export_speedplus", "write_speedplus"]
 

@@ -1,5 +1,6 @@
-"""What the split-based writers (:mod:`.speedplus`, :mod:`.coco`) share: checking the splits
-mapping and naming each frame's image uniquely across sequences."""
+"""What the split-based writers (:mod:`.speedplus`, :mod:`.coco`) share: checking the
+{split: [(sequence, frame), ...]} items they are given, and naming each frame's image uniquely
+across sequences. (:mod:`.splits` assigns frames to splits.)"""
 
 from __future__ import annotations
 
