@@ -325,3 +325,29 @@ def test_a_sequence_writes_coords_and_flow_that_agree_with_the_model_and_poses(t
         seen, hidden = t_hit > 1.0 - 1e-6, t_hit < 1.0 - 1e-4
         assert np.all(valid[pick][inside & seen]) and not np.any(valid[pick][~inside | hidden])
         assert np.count_nonzero(seen | hidden) >= 55
+
+
+def test_coords_through_a_lens_land_on_their_pixel_centres_by_opencvs_projection(two_boxes):
+    """With lens distortion, each pixel's body point is where that pixel's distorted ray meets the
+    target: OpenCV's own projection (cv2.projectPoints, Brown–Conrady in its order) of the points
+    lands on the pixel centres, and the same points lie on the hit triangles' planes."""
+    import cv2
+    dist = (-0.25, 0.08, 1.5e-3, -1e-3, 0.0)
+    cam = Camera(width=120, height=90, fx=95.0, fy=95.0, cx=59.5, cy=44.5, dist_coeffs=dist)
+    scene = two_boxes
+    R, t = looking((4.0, -2.5, 3.0))
+    geo = scene.render_geometry(cam, R, t)
+    hits = pixel_hits(scene.vertices, scene.faces, cam, R, t, geo.face_index)
+    assert hits.face.size > 1500
+    rvec, _ = cv2.Rodrigues(R)
+    uv, _ = cv2.projectPoints(hits.p_body_m, rvec, np.asarray(t, float), cam.K, np.asarray(dist))
+    assert np.abs(uv.reshape(-1, 2) - np.column_stack([hits.cols, hits.rows])).max() < 1e-6
+    # on the plane of the triangle hit
+    V, F = scene.vertices.astype(np.float64), scene.faces
+    a, b, c = V[F[hits.face, 0]], V[F[hits.face, 1]], V[F[hits.face, 2]]
+    n = np.cross(b - a, c - a)
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    assert np.abs(np.einsum("ij,ij->i", hits.p_body_m - a, n)).max() < 1e-9
+    # the distortion moved them: a pinhole camera's points differ
+    pin = pixel_hits(scene.vertices, scene.faces, CAM, R, t, scene.render_geometry(CAM, R, t).face_index)
+    assert pin.face.size != hits.face.size or not np.allclose(pin.p_body_m, hits.p_body_m)
