@@ -498,7 +498,8 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
     -------
     model : TargetModel
         Components in the body frame [m]; ``metadata`` holds ``source_path``,
-        ``unit_scale_m``, ``recentre`` and ``origin_offset_m``.
+        ``unit_scale_m``, ``recentre``, ``origin_offset_m``, ``crease_angle_deg`` and
+        ``authored_normal_parts`` (how many components shade with the file's normals).
     report : MeshReport
         Per-part counts of removed faces and mesh-quality flags.
 
