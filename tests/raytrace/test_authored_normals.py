@@ -225,3 +225,23 @@ def test_mesh_crease_deg_needs_mesh_and_reaches_the_model(flat_cylinder, tmp_pat
     plan = cli.plan_sequence(cfg, given)
     assert plan["model_spec"][3] == 0.0
     assert plan["model"].components[0].crease_angle_rad == 0.0
+
+
+def test_flat_authored_normals_keep_a_box_faceted_whatever_the_crease(tmp_path):
+    box = trimesh.creation.box(extents=(1.0, 1.4, 0.8))
+    box.unmerge_vertices()  # three vertices per face, each with its face's normal (a flat-shaded export)
+    F = box.faces
+    flat = np.cross(box.vertices[F[:, 1]] - box.vertices[F[:, 0]], box.vertices[F[:, 2]] - box.vertices[F[:, 0]])
+    n = np.zeros_like(box.vertices)
+    n[F.ravel()] = np.repeat(flat / np.linalg.norm(flat, axis=1)[:, None], 3, axis=0)
+    mesh = trimesh.Trimesh(box.vertices, F, vertex_normals=n, process=False)
+    path = tmp_path / "box.obj"
+    mesh.export(path, include_normals=True)
+    model, _ = load_mesh(path, unit_scale_m=1.0, crease_angle_deg=180)  # would round every edge
+    g, cam, R, t = _render(model)
+    n_body = g.normal_cam[g.mask] @ R
+    axes = np.vstack([np.eye(3), -np.eye(3)])
+    assert _angle_deg(n_body[:, None, :], axes[None]).min(axis=1).max() < 1e-3
+    rounded, _ = load_mesh(path, unit_scale_m=1.0, crease_angle_deg=180, authored_normals=False)
+    gr, *_ = _render(rounded)
+    assert _angle_deg((gr.normal_cam[gr.mask] @ R)[:, None, :], axes[None]).min(axis=1).max() > 20
