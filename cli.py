@@ -107,6 +107,8 @@ def _options() -> tuple:
           "body frame = the file's frame (raytrace.meshio.load_mesh)", "FILE"),
         O("--mesh-unit-m", "sequence", opt.float_in(0.0, 1e3, lo_open=True, unit="m"), 1.0,
           "metres per mesh-file unit (0.001 for millimetres)"),
+        O("--mesh-crease-deg", "sequence", opt.float_in(0.0, 180.0, unit=deg), 30.0, "--mesh shading: smooth across edges "
+          "below this angle (0 flat, 180 all) where the file has no normals of its own (raytrace.meshio.load_mesh)"),
         O("--keypoints", "sequence", opt.path, None, "the target's keypoints: JSON, model/keypoints.json's schema or a list "
           "of [x, y, z] [m] in the body frame (default: 11 by farthest-point sampling of its convex hull)", "FILE.json"),
         O("--pattern", "sequence", opt.choice(PATTERNS), "spiral", "relative-motion pattern"),
@@ -280,7 +282,7 @@ def resolve_config(args: argparse.Namespace, defaults: dict | None = None) -> tu
     if getattr(args, "target", None) is not None or getattr(args, "mesh", None) is not None:
         # the flag chooses the model: a file's mesh (or target) gives way to it, as flags override the file
         file_cfg = {**file_cfg, "sequence": {k: v for k, v in file_cfg.get("sequence", {}).items()
-                                             if k not in ("target", "mesh", "mesh_unit_m", "keypoints")}}
+                                             if k not in ("target", "mesh", "mesh_unit_m", "mesh_crease_deg", "keypoints")}}
     for o in OPTIONS:
         value = getattr(args, o.key, None)
         if value is None and o.key in file_cfg.get(o.section, {}):
@@ -303,6 +305,8 @@ def resolve_config(args: argparse.Namespace, defaults: dict | None = None) -> tu
             raise CLIError(f"argument --offset-dn: must be at most half the ADC's full scale, {full_scale / 2:g} DN at "
                            f"--bit-depth {d['bit_depth']} (a black level above it leaves the signal no room), got "
                            f"{d['offset_dn']:g}")
+    if getattr(args, "mesh_crease_deg", None) is not None and cfg["sequence"]["mesh"] is None:
+        raise CLIError("argument --mesh-crease-deg: only with --mesh (built-in targets have their own shading normals)")
     for key in ("mesh", "keypoints"):
         if cfg["sequence"][key] is not None:
             cfg["sequence"][key] = os.path.abspath(cfg["sequence"][key])
@@ -323,7 +327,7 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
 
     seq, cam = cfg["sequence"], cfg["camera"]
     if seq["mesh"] is not None:
-        spec = ("mesh", seq["mesh"], seq["mesh_unit_m"])
+        spec = ("mesh", seq["mesh"], seq["mesh_unit_m"], seq["mesh_crease_deg"])
         try:
             model = scenes.load_model(spec, warn_repair=True)
         except ValueError as exc:
@@ -530,10 +534,10 @@ def dataset_main(argv: list) -> int:
                    help="built-in targets, comma-separated, in the order of the table (default: all)")
     p.add_argument("--patterns", action="store_true", help="all four patterns per target (default: --pattern only)")
     defaults = {"frames": DATASET_FRAMES, "degrade": "none", "modalities": list(DATASET_MODALITIES)}
-    opt.add_options(p, OPTIONS, defaults, skip=("target", "mesh", "mesh_unit_m", "keypoints"))
+    opt.add_options(p, OPTIONS, defaults, skip=("target", "mesh", "mesh_unit_m", "mesh_crease_deg", "keypoints"))
     _add_exec(p, out_help="dataset folder; one sub-folder TARGET_PATTERN per sequence (default: output/dataset)")
     args = p.parse_args(argv)
-    for key in ("target", "mesh", "mesh_unit_m", "keypoints"):
+    for key in ("target", "mesh", "mesh_unit_m", "mesh_crease_deg", "keypoints"):
         setattr(args, key, None)
     t0 = time.perf_counter()
 
@@ -729,16 +733,6 @@ PREVIEW_SIZE = (1600, 1000)
 PREVIEW_SIZE_ALL = (2800, 1100)
 
 
-def _size(text: str) -> tuple:
-    try:
-        w, h = (int(v) for v in str(text).lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT in pixels (e.g. 1600x1000), got {text!r}") from None
-    if not (64 <= w <= 16384 and 64 <= h <= 16384):
-        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT with 64..16384 px per side, got {text!r}")
-    return w, h
-
-
 def preview_track(plan: dict):
     """The :class:`raytrace.preview.PreviewTrack` of a planned sequence
     (:func:`raytrace.preview.model_track`): the camera axes from the renderer's pose and the
@@ -768,7 +762,7 @@ def preview_main(argv: list) -> int:
                    help="PNG to write (default: output/TARGET_PATTERN_preview.png, "
                         "output/TARGET_all-patterns_preview.png)")
     g.add_argument("--all-patterns", action="store_true", help="the four patterns side by side for one target")
-    g.add_argument("--size", type=_size, default=None, metavar="WxH",
+    g.add_argument("--size", type=opt.size_wxh, default=None, metavar="WxH",
                    help=f"PNG size [px] (default: {PREVIEW_SIZE[0]}x{PREVIEW_SIZE[1]}, "
                         f"{PREVIEW_SIZE_ALL[0]}x{PREVIEW_SIZE_ALL[1]} with --all-patterns)")
     g.add_argument("--frusta-every", type=opt.int_in(1, 1_000_000), default=None, metavar="K",

@@ -41,6 +41,13 @@ falls in)
     5. Unreferenced vertices are dropped. A part left without faces is dropped.
     Winding is never changed (the renderer turns normals towards the camera); parts whose
     winding is inconsistent are counted. Holes are not filled.
+Shading normals
+    Where a part has the file's own vertex normals (glTF ``NORMAL``, OBJ ``vn``) they are the
+    shading normals at its face corners (``authored_normals=True``, the default), rotated with
+    the node, normalised, and turned to the side of each face's winding; zero, non-finite or
+    inconsistent ones, and parts without normals, get the crease rule: the angle-weighted mean
+    of the normals of the faces around the vertex within ``crease_angle_deg`` (default 30°;
+    0 = flat facets, 180 = smooth everywhere) of the face's own.
 Errors
     A missing, unreadable, unsupported or corrupt file, or one with nothing renderable left
     after repair, raises :class:`ValueError` with one line that names the file.
@@ -62,8 +69,10 @@ import trimesh
 from .model import MATERIALS, SEMANTIC_CLASSES, Component, TargetModel
 
 __all__ = [
+    "DEFAULT_CREASE_ANGLE_DEG",
     "DEGENERATE_AREA_M2",
     "RECENTRE_MODES",
+    "check_crease_angle_deg",
     "MeshReport",
     "PartReport",
     "component_summary",
@@ -72,6 +81,18 @@ __all__ = [
 
 DEGENERATE_AREA_M2 = 1e-12
 """Faces with an area at or below this, after scaling to metres, are degenerate [m²]."""
+
+DEFAULT_CREASE_ANGLE_DEG = 30.0
+"""Default crease angle of user meshes [deg] (as :data:`raytrace.model.DEFAULT_CREASE_ANGLE_RAD`)."""
+
+
+def check_crease_angle_deg(value, what: str = "crease_angle_deg") -> float:
+    """``value`` as a float in [0, 180] [deg], else ValueError with one line naming ``what``."""
+    if (not isinstance(value, numbers.Real) or isinstance(value, bool) or not math.isfinite(value)
+            or not 0.0 <= value <= 180.0):
+        raise ValueError(f"{what} must be a number of degrees in [0, 180] (0 flat, 180 smooth), got {value!r}")
+    return float(value)
+
 
 RECENTRE_MODES = ("none", "bbox", "centroid")
 """Allowed values of ``recentre``: keep the authored origin, bounding-box centre, surface centroid."""
@@ -342,34 +363,78 @@ def _scene_parts(scene: trimesh.Scene, p: Path) -> tuple[list, list]:
                              f"or malformed arrays (vertices {v.shape}, faces {f.shape})")
         material = getattr(getattr(geom.visual, "material", None), "name", None)
         parts.append((str(node), str(geom_name), material, v, f.astype(np.int64),
-                      np.asarray(transform, dtype=np.float64)))
+                      np.asarray(transform, dtype=np.float64), _file_normals(geom, len(v))))
     return parts, skipped
 
 
-def _clean(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, int, int]:
-    """Steps 1–5 in float64: returns vertices, faces, removed (non-finite, degenerate, duplicate)."""
+def _file_normals(geom: trimesh.Trimesh, n_vertices: int) -> np.ndarray | None:
+    """The vertex normals the file itself gave (glTF ``NORMAL``, OBJ ``vn``), else None.
+
+    With ``process=False`` trimesh's loaders pass the file's normals to the ``Trimesh``
+    constructor, which puts them in its cache; normals trimesh would compute are never there
+    before someone asks for them."""
+    cache = getattr(getattr(geom, "_cache", None), "cache", {})
+    n = cache.get("vertex_normals") if isinstance(cache, dict) else None
+    if n is None:
+        return None
+    n = np.asarray(n, dtype=np.float64)
+    return n if n.shape == (n_vertices, 3) else None
+
+
+def _corner_normals(n_file: np.ndarray, f_file: np.ndarray, transform: np.ndarray, v: np.ndarray,
+                    f: np.ndarray) -> np.ndarray:
+    """Authored normals at the corners of the kept faces ``f`` (vertices ``v`` [m]), from the
+    file's vertex normals ``n_file`` at the corners ``f_file`` of the same faces in the file.
+
+    Normals transform with the inverse transpose of the node's linear part (a normal is a
+    covector; e.g. Akenine-Möller et al., *Real-Time Rendering*, 4th ed., sec. 4.1.7), then are
+    normalised. A face whose usable normals all point against its geometric normal
+    (``(v1 - v0) x (v2 - v0)``) has them turned over: the file winds that face the other way
+    round, and winding is kept as authored. Corners still against the geometric normal, zero,
+    or non-finite are NaN: the crease rule fills them in."""
+    with np.errstate(all="ignore"):
+        M = np.linalg.inv(transform[:3, :3]).T
+        n = n_file[f_file] @ M.T  # (n_faces, 3, 3)
+        length = np.linalg.norm(n, axis=2, keepdims=True)
+        n = n / length
+        tri = v[f]
+        g = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        good = np.isfinite(n).all(axis=2) & (length[..., 0] > 1e-12)
+        dot = np.einsum("fkj,fj->fk", n, g)
+        against = np.where(good, dot < 0, True).all(axis=1) & good.any(axis=1)
+        n[against] *= -1.0
+        dot[against] *= -1.0
+        good &= dot > 0
+    n[~good] = np.nan
+    return n
+
+
+def _clean(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, int, int, np.ndarray]:
+    """Steps 1–5 in float64: returns vertices, faces, removed (non-finite, degenerate, duplicate),
+    and the index in ``f`` of each kept face."""
+    idx = np.arange(len(f))
     ok_vertex = np.all(np.isfinite(v), axis=1)
     with np.errstate(invalid="ignore"):
         ok_vertex &= np.all(np.abs(v) <= _F32_MAX, axis=1)
     keep = ok_vertex[f].all(axis=1)
     n_nan = int(len(f) - keep.sum())
-    f = f[keep]
+    f, idx = f[keep], idx[keep]
     if len(f) == 0:
-        return v[:0], f, n_nan, 0, 0
+        return v[:0], f, n_nan, 0, 0, idx
     v, f = _compact(v, f)
     welded, inverse = np.unique(v + 0.0, axis=0, return_inverse=True)  # + 0.0: -0 equals +0
     v, f = welded, inverse.reshape(-1)[f]
     degenerate = ((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
                   | (_areas(v, f) <= DEGENERATE_AREA_M2))
     n_degenerate = int(degenerate.sum())
-    f = f[~degenerate]
+    f, idx = f[~degenerate], idx[~degenerate]
     if len(f) == 0:
-        return v[:0], f, n_nan, n_degenerate, 0
+        return v[:0], f, n_nan, n_degenerate, 0, idx
     _, first = np.unique(np.sort(f, axis=1), axis=0, return_index=True)
     n_duplicate = int(len(f) - len(first))
-    f = f[np.sort(first)]
+    f, idx = f[np.sort(first)], idx[np.sort(first)]
     v, f = _compact(v, f)
-    return v, f, n_nan, n_degenerate, n_duplicate
+    return v, f, n_nan, n_degenerate, n_duplicate, idx
 
 
 def _origin_offset(cleaned: list, recentre: str) -> np.ndarray:
@@ -398,7 +463,8 @@ def _pick(mapping: dict, keys) -> str | None:
 def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
               material_map: dict | None = None, semantic_map: dict | None = None,
               default_material: str = "aluminium",
-              recentre: str = "none") -> tuple[TargetModel, MeshReport]:
+              recentre: str = "none", crease_angle_deg: float = DEFAULT_CREASE_ANGLE_DEG,
+              authored_normals: bool = True) -> tuple[TargetModel, MeshReport]:
     """Load a mesh file as a target model, one component per part, validated and repaired.
 
     Parameters
@@ -420,12 +486,20 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
     recentre : {"none", "bbox", "centroid"}, keyword-only
         Body-frame origin: as authored (default), the centre of the axis-aligned bounding
         box, or the area-weighted surface centroid of all kept faces.
+    crease_angle_deg : float, keyword-only
+        Shading normals (where the file gives none, or ``authored_normals`` is False) average
+        the faces around a vertex whose normals are within this angle of the face's own: 0
+        shades every face flat, 180 smooths across every edge; default 30 [deg].
+    authored_normals : bool, keyword-only
+        Use the file's own vertex normals (glTF ``NORMAL``, OBJ ``vn``) as the shading normals
+        of the parts that have them (default True); False applies the crease rule everywhere.
 
     Returns
     -------
     model : TargetModel
         Components in the body frame [m]; ``metadata`` holds ``source_path``,
-        ``unit_scale_m``, ``recentre`` and ``origin_offset_m``.
+        ``unit_scale_m``, ``recentre``, ``origin_offset_m``, ``crease_angle_deg`` and
+        ``authored_normal_parts`` (how many components shade with the file's normals).
     report : MeshReport
         Per-part counts of removed faces and mesh-quality flags.
 
@@ -455,6 +529,9 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
         raise ValueError(f"default_material must be one of {', '.join(MATERIALS)}; got {default_material!r}")
     if name is not None and (not isinstance(name, str) or not name.strip()):
         raise ValueError(f"name must be a non-empty string or None, got {name!r}")
+    crease = check_crease_angle_deg(crease_angle_deg)
+    if not isinstance(authored_normals, (bool, np.bool_)):
+        raise ValueError(f"authored_normals must be true or false, got {authored_normals!r}")
     materials = _check_map(material_map, MATERIALS, "material_map")
     semantics = _check_map(semantic_map, SEMANTIC_CLASSES, "semantic_map")
 
@@ -485,25 +562,27 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
             raise ValueError(f"{what} keys {unknown} name no part or material of {p.name}; "
                              f"parts: {', '.join(names)}")
 
-    cleaned, counts = [], []
-    for node, geom_name, material, v, f, transform in raw:
+    cleaned, counts, kept = [], [], []
+    for node, geom_name, material, v, f, transform, _ in raw:
         with np.errstate(all="ignore"):
             v = (v @ transform[:3, :3].T + transform[:3, 3]) * scale
-        v, f, n_nan, n_deg, n_dup = _clean(v, f)
+        v, f, n_nan, n_deg, n_dup, idx = _clean(v, f)
         cleaned.append((v, f))
         counts.append([n_nan, n_deg, n_dup])
+        kept.append(idx)
     live = [(v, f) for v, f in cleaned if len(f)]
     offset = _origin_offset(live, recentre) if live else np.zeros(3)
 
     components, parts = [], []
-    for (node, geom_name, material, _, f_in, _), part_name, (v, f), (n_nan, n_deg, n_dup) in zip(
-            raw, names, cleaned, counts):
+    n_authored = 0
+    for (node, geom_name, material, _, f_in, transform, n_file), part_name, (v, f), (n_nan, n_deg, n_dup), idx in zip(
+            raw, names, cleaned, counts, kept):
         watertight = winding = False
         if len(f):
             v = v - offset
             flat32 = _areas(v.astype(np.float32).astype(np.float64), f) <= DEGENERATE_AREA_M2
             n_deg += int(flat32.sum())
-            f = f[~flat32]
+            f, idx = f[~flat32], idx[~flat32]
         if len(f):
             v, f = _compact(v, f)
             mesh = trimesh.Trimesh(vertices=v, faces=f, process=False, validate=False,
@@ -513,7 +592,12 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
             mat = (_pick(materials, keys) or _match(_MATERIAL_RULES, material, part_name)
                    or default_material)
             sem = _pick(semantics, keys) or _match(_SEMANTIC_RULES, part_name, material) or "other"
-            components.append(Component(name=part_name, mesh=mesh, material=mat, semantic=sem))
+            normals = None
+            if authored_normals and n_file is not None:
+                normals = _corner_normals(n_file, f_in[idx], transform, v, f)
+                n_authored += 1
+            components.append(Component(name=part_name, mesh=mesh, material=mat, semantic=sem,
+                                        crease_angle_rad=math.radians(crease), corner_normals=normals))
         parts.append(PartReport(name=part_name, source_node=node, source_material=material,
                                 faces_in=len(f_in), removed_nan=n_nan, removed_degenerate=n_deg,
                                 removed_duplicate=n_dup, faces_out=len(f), watertight=watertight,
@@ -534,7 +618,8 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
         description=(f"user mesh {p.name}: {len(components)} parts, {n_tri} triangles, "
                      f"unit_scale_m={scale:g}, origin {recentre if recentre != 'none' else 'as authored'}"),
         metadata={"source_path": str(p), "unit_scale_m": scale, "recentre": recentre,
-                  "origin_offset_m": report.origin_offset_m})
+                  "origin_offset_m": report.origin_offset_m, "crease_angle_deg": crease,
+                  "authored_normal_parts": n_authored})
     return model, report
 
 

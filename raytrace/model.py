@@ -73,6 +73,10 @@ class Component:
         When set, the component is shaded as a pure Lambertian surface with this linear RGB
         albedo in [0, 1] instead of its material's BRDF preset (``material`` still names
         what it is) [-].
+    corner_normals : numpy.ndarray or None
+        Authored shading normals, shape (n_faces, 3, 3): the unit normal at each corner of
+        each face (on the side of the face's geometric normal), NaN where the file gave none
+        usable; those corners, and every corner when None, get the crease-angle normal [-].
     """
 
     name: str
@@ -82,6 +86,7 @@ class Component:
     mass_kg: float = 0.0
     crease_angle_rad: float = DEFAULT_CREASE_ANGLE_RAD
     albedo: tuple | None = None
+    corner_normals: np.ndarray | None = None
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
@@ -109,6 +114,12 @@ class Component:
                 raise ValueError(f"component {self.name}: albedo must be 3 numbers in [0, 1] (linear RGB), "
                                  f"got {self.albedo!r}")
             object.__setattr__(self, "albedo", a)
+        if self.corner_normals is not None:
+            n = np.asarray(self.corner_normals, dtype=np.float64)
+            if n.shape != (len(self.mesh.faces), 3, 3):
+                raise ValueError(f"component {self.name}: corner_normals must have shape (n_faces, 3, 3) = "
+                                 f"({len(self.mesh.faces)}, 3, 3), got {n.shape}")
+            object.__setattr__(self, "corner_normals", n)
 
     @property
     def semantic_id(self) -> int:
@@ -195,5 +206,6 @@ def centre_on_mass(components) -> tuple:
         mesh = c.mesh.copy()
         mesh.apply_translation(-com)
         out.append(Component(name=c.name, mesh=mesh, material=c.material, semantic=c.semantic,
-                             mass_kg=c.mass_kg, crease_angle_rad=c.crease_angle_rad, albedo=c.albedo))
+                             mass_kg=c.mass_kg, crease_angle_rad=c.crease_angle_rad, albedo=c.albedo,
+                             corner_normals=c.corner_normals))
     return tuple(out)

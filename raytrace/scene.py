@@ -285,6 +285,11 @@ class Scene:
         ptr = np.cumsum(ptr)
         cos_crease = np.cos(creases)[comp_of_face]  # each face smooths with its component's angle
         corner = _kernels.corner_normals(V, F, face_normal, angles, ptr, order.astype(np.int64), weld, cos_crease)
+        for k, comp in enumerate(self.model.components):  # authored normals replace the crease rule's
+            if comp.corner_normals is not None:
+                lo, hi = self.face_offset[k], self.face_offset[k + 1]
+                ok = np.all(np.isfinite(comp.corner_normals), axis=2)
+                corner[lo:hi][ok] = comp.corner_normals[ok]
         # float32 normals: 1e-7 rad is plenty, and half the memory traffic per hit
         return (np.ascontiguousarray(face_normal, dtype=np.float32), np.ascontiguousarray(corner, dtype=np.float32))
 

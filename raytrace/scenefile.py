@@ -5,7 +5,8 @@ Schema (version 1; lengths in metres, directions unit vectors in the target's bo
     {
       "meshes": [                                   # or "target": "cassini" (a built-in)
         {"path": "parts/bus.ply", "unit_scale_m": 1.0, "albedo": [0.6, 0.6, 0.6]},
-        {"path": "parts/panel.obj", "unit_scale_m": 0.001, "material": "solar_cell"}
+        {"path": "parts/panel.obj", "unit_scale_m": 0.001, "material": "solar_cell",
+         "crease_angle_deg": 30.0, "authored_normals": true}          # optional, as here
       ],
       "camera": {"K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], "width": 1280, "height": 960,
                  "R_cam_from_body": [9 numbers, row-major] or 3×3, "t_cam_m": [x, y, z]},
@@ -22,7 +23,9 @@ Schema (version 1; lengths in metres, directions unit vectors in the target's bo
 Mesh paths are relative to the JSON file's folder. Each mesh file becomes one or more
 components (one per part, :func:`raytrace.meshio.load_mesh`), all shaded with the entry's
 ``material`` (a preset of :data:`raytrace.materials.MATERIAL_PRESETS`) or its Lambertian
-``albedo`` (linear RGB, or one number for grey). Camera pixel coordinates follow OpenCV: x
+``albedo`` (linear RGB, or one number for grey). Shading normals: the file's own vertex
+normals where it has them, unless ``authored_normals`` is false; elsewhere the crease rule
+with ``crease_angle_deg`` in [0, 180] (0 flat, 180 smooth everywhere; default 30). Camera pixel coordinates follow OpenCV: x
 right, y down, z forward, integer coordinates at pixel centres.
 
 ``stars`` draws stars in the background (:mod:`raytrace.stars`): the body's attitude in the
@@ -180,7 +183,7 @@ def _section(data: dict, key: str, required: bool = True) -> dict | None:
 
 
 def _model(data: dict, folder: str, notes: list | None = None) -> TargetModel:
-    from .meshio import load_mesh
+    from .meshio import DEFAULT_CREASE_ANGLE_DEG, check_crease_angle_deg, load_mesh
     from .targets import BUILTIN_TARGETS, load_target
     if ("meshes" in data) == ("target" in data):
         raise _err("give exactly one of 'meshes' (a list of mesh files) or 'target' "
@@ -196,10 +199,19 @@ def _model(data: dict, folder: str, notes: list | None = None) -> TargetModel:
     for i, m in enumerate(meshes):
         if not isinstance(m, dict) or "path" not in m:
             raise _err(f"meshes[{i}] must be an object with a 'path'")
-        unknown = set(m) - {"path", "unit_scale_m", "material", "albedo", "name"}
+        unknown = set(m) - {"path", "unit_scale_m", "material", "albedo", "name", "crease_angle_deg",
+                            "authored_normals"}
         if unknown:
             raise _err(f"meshes[{i}]: unknown keys {sorted(unknown)} (allowed: path, unit_scale_m, material, "
-                       "albedo, name)")
+                       "albedo, name, crease_angle_deg, authored_normals)")
+        crease = m.get("crease_angle_deg", DEFAULT_CREASE_ANGLE_DEG)
+        try:
+            crease = check_crease_angle_deg(crease, f"meshes[{i}].crease_angle_deg")
+        except ValueError as exc:
+            raise _err(str(exc)) from None
+        authored = m.get("authored_normals", True)
+        if not isinstance(authored, bool):
+            raise _err(f"meshes[{i}].authored_normals must be true or false, got {authored!r}")
         if ("material" in m) == ("albedo" in m):
             raise _err(f"meshes[{i}] needs exactly one of 'material' (one of {', '.join(MATERIALS)}) or "
                        "'albedo' (linear RGB in [0, 1])")
@@ -225,7 +237,7 @@ def _model(data: dict, folder: str, notes: list | None = None) -> TargetModel:
         path = path if os.path.isabs(path) else os.path.join(folder, path)
         try:
             part, report = load_mesh(path, unit_scale_m=m.get("unit_scale_m", 1.0), default_material=material,
-                                     name=m.get("name"))
+                                     name=m.get("name"), crease_angle_deg=crease, authored_normals=authored)
         except ValueError as exc:
             raise _err(f"meshes[{i}]: {exc}") from None
         if notes is not None and report.non_finite_note():

@@ -143,6 +143,17 @@ def shard(text: str) -> tuple:
     return k, n
 
 
+def size_wxh(text: str) -> tuple:
+    """``WIDTHxHEIGHT`` in pixels, 64..16384 per side (the preview's ``--size``)."""
+    try:
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT in pixels (e.g. 1600x1000), got {text!r}") from None
+    if not (64 <= w <= 16384 and 64 <= h <= 16384):
+        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT with 64..16384 px per side, got {text!r}")
+    return w, h
+
+
 @dataclass(frozen=True, slots=True)
 class Option:
     """One scenario option: a flag, a key of a TOML table, a parser and a default."""

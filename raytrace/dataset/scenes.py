@@ -1,7 +1,7 @@
 """Each process's scenes and star fields, and the scenes a pool's parent builds for its workers.
 
 A frame task names its target by a *model spec* — ``("builtin", name)`` or ``("mesh", path,
-unit_scale_m)`` — and :func:`scene` builds the :class:`raytrace.scene.Scene` (Embree BVH,
+unit_scale_m, crease_angle_deg)`` — and :func:`scene` builds the :class:`raytrace.scene.Scene` (Embree BVH,
 radiance cache) once per process. :func:`prebuild_scenes` builds each target's scene and
 radiance cache once in the pool's parent, on every core, and pickles them for the workers,
 which load them (:func:`load_prebuilt`) instead of each building its own on its share of the
@@ -24,13 +24,13 @@ _SCENE_LOCK = None
 
 
 def load_model(spec: tuple, warn_repair: bool = False):
-    """The target model of a model spec: ("builtin", name) or ("mesh", path, unit_scale_m);
+    """The target model of a model spec: ("builtin", name) or ("mesh", path, unit_scale_m, crease_angle_deg);
     ``warn_repair``: one line on stderr when the mesh file needed more than routine repair."""
     if spec[0] == "builtin":
         from ..targets import load_target
         return load_target(spec[1])
     from ..meshio import load_mesh
-    model, report = load_mesh(spec[1], unit_scale_m=spec[2])
+    model, report = load_mesh(spec[1], unit_scale_m=spec[2], crease_angle_deg=spec[3] if len(spec) > 3 else 30.0)
     if warn_repair and report.non_finite_note():
         warn(f"--mesh {report.non_finite_note()}")
     return model
