@@ -1,4 +1,4 @@
-"""Export a rendered sequence folder to the BOP and SPEED+ dataset formats.
+"""Export rendered sequence folders to the BOP, SPEED+ and COCO dataset formats.
 
 Input: a sequence folder as the pipeline writes it — ``camera.json`` (``K``, ``width``,
 ``height``; SPEED+ fields ``cameraMatrix``, ``distCoeffs``, ``Nu``, ``Nv``), ``labels.json``
@@ -6,7 +6,8 @@ Input: a sequence folder as the pipeline writes it — ``camera.json`` (``K``, `
 ``R_cam_from_body`` (9 numbers, row-major), ``t_cam_m``, ``q_cam_from_body``, ``files``:
 modality → path relative to the folder), the images ``rgb/``, ``rgb_degraded/``, ``mask/``
 (uint16 component ids, 0 background), ``depth/`` (float32 z-depth [m], inf on background)
-and ``model/`` holding the rendered mesh as one PLY in metres. Pose convention
+and ``model/`` holding the rendered mesh as one PLY in metres (and ``keypoints.json``, whose
+per-frame ``keypoints_px``/``keypoints_state`` the labels carry). Pose convention
 (docs/conventions.md): ``p_cam = R_cam_from_body @ p_body + t_cam_m``, OpenCV camera axes,
 integer pixel coordinates at pixel centres.
 
@@ -16,7 +17,7 @@ are left out; a file that is listed but missing or unreadable is an error.
 The command ``cli.py export`` (:mod:`raytrace.export.command`) exports many sequences at once,
 split into train/val/test, resumably; the functions below export one sequence.
 
-Both exports are all or nothing: everything is written into a hidden temporary folder next
+Every export is all or nothing: everything is written into a hidden temporary folder next
 to ``out_dir`` (same file system) and renamed to ``out_dir`` at the end; on any failure the
 temporary folder (and any parent folder the call created) is removed. ``out_dir`` must not
 exist yet, or be an empty folder. Errors about the input are ``ValueError`` naming the file
@@ -38,6 +39,8 @@ doi:10.1109/AERO53065.2022.9843439; label convention as used by the authors' bas
 from __future__ import annotations
 
 from .bop import BOP_DEPTH_MAX_CODE, BOP_PIXEL_CENTRE_SHIFT, export_bop, write_bop
-from .speedplus import export_speedplus
+from .coco import export_coco, write_coco
+from .speedplus import export_speedplus, write_speedplus
 
-__all__ = ["BOP_DEPTH_MAX_CODE", "BOP_PIXEL_CENTRE_SHIFT", "export_bop", "export_speedplus", "write_bop"]
+__all__ = ["BOP_DEPTH_MAX_CODE", "BOP_PIXEL_CENTRE_SHIFT", "export_bop", "export_coco", "export_speedplus",
+           "write_bop", "write_coco", "write_speedplus"]
