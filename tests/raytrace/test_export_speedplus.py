@@ -21,24 +21,16 @@ from scipy.io import loadmat
 
 from raytrace.export._read import _read_sequence, _staging
 from raytrace.export.speedplus import export_speedplus, write_speedplus
-from tests.raytrace.keypoint_sequence import CAMERA, N_SURFACE, PITCH_M, H, W, keypoint_labels, make_sequence
-
-
-def quat2dcm(q):
-    """speedplusbaseline src/utils/utils.py ``quat2dcm``, transcribed."""
-    q = q / np.linalg.norm(q)
-    q0, q1, q2, q3 = q
-    dcm = np.zeros((3, 3))
-    dcm[0, 0] = 2 * q0 ** 2 - 1 + 2 * q1 ** 2
-    dcm[1, 1] = 2 * q0 ** 2 - 1 + 2 * q2 ** 2
-    dcm[2, 2] = 2 * q0 ** 2 - 1 + 2 * q3 ** 2
-    dcm[0, 1] = 2 * q1 * q2 + 2 * q0 * q3
-    dcm[0, 2] = 2 * q1 * q3 - 2 * q0 * q2
-    dcm[1, 0] = 2 * q1 * q2 - 2 * q0 * q3
-    dcm[1, 2] = 2 * q2 * q3 + 2 * q0 * q1
-    dcm[2, 0] = 2 * q1 * q3 + 2 * q0 * q2
-    dcm[2, 1] = 2 * q2 * q3 - 2 * q0 * q1
-    return dcm
+from tests.raytrace.keypoint_sequence import (
+    CAMERA,
+    N_SURFACE,
+    PITCH_M,
+    H,
+    W,
+    keypoint_labels,
+    make_sequence,
+)
+from tests.raytrace.test_export import speedplus_quat2dcm as quat2dcm
 
 
 def project_keypoints(q_vbs2tango, r_Vo2To_vbs, cameraMatrix, distCoeffs, keypoints):
