@@ -112,7 +112,9 @@ def test_the_checker_sees_imports_and_cycles():
     assert "degrade.chain" in graph["degrade.presets"]  # a lazy import inside a function
     assert "raytrace.cache" in graph["raytrace.scene"]  # inside a method
     assert "raytrace.model" in graph["raytrace.targets.cassini"]  # from ..model
-    assert {"raytrace._context", "raytrace._antialias", "raytrace.presets"} <= graph["raytrace.shade"]
+    assert {"raytrace._context", "raytrace._antialias", "raytrace._gather", "raytrace.presets",
+            "raytrace.scene"} <= graph["raytrace.shade"]
+    assert {"raytrace._cache_kernels", "raytrace.presets", "raytrace.environment"} <= graph["raytrace.cache"]
 
 
 def test_no_module_is_larger_than_a_reader_holds():
