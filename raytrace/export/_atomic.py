@@ -4,7 +4,6 @@ interruption relies on)."""
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -18,15 +17,6 @@ _DATA_PNG = {"png:filter": 8, "png:compressionLevel": 1, "oiio:ColorSpace": "Raw
 """One-channel data PNGs (depth codes, masks): no row filter, zlib level 1 — 3–4× faster than
 level 6 on a 1280×960 16-bit depth image (about 12 ms), a few % more bytes on these mostly
 empty images; no colour-space chunks (as bop_toolkit's ``inout.save_depth`` writes them)."""
-
-
-def sha256_bytes_of(path) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _commit(tmp: str, dst: Path) -> None:

@@ -25,7 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._atomic import place, sha256_bytes_of, write_bytes, write_data_png, write_json
+from ..files import sha256_file
+from ._atomic import place, write_bytes, write_data_png, write_json
 from ._read import (
     _diameter,
     _flag,
@@ -395,7 +396,7 @@ def write_bop(tmp, splits: dict, *, modality: str, link: bool, progress=None, wo
     models, obj_of, hull_of = {}, {}, {}
     by_hash = {}
     for seq in order:
-        digest = sha256_bytes_of(seq.model_path)
+        digest = sha256_file(seq.model_path)
         if digest not in by_hash:
             obj_id = obj_id_start + len(by_hash)
             mesh = _load_mesh(seq.model_path)

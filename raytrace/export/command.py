@@ -27,8 +27,8 @@ from pathlib import Path
 
 from ..dataset import PROG, UsageError
 from ..dataset import options as opt
-from ..files import remove_stale_temporaries
-from ._atomic import sha256_bytes_of, write_json
+from ..files import remove_stale_temporaries, sha256_file
+from ._atomic import write_json
 from ._read import _IMAGE_MODALITIES, _read_sequence
 from .splits import SPLIT_BY, assign, parse_split_spec
 
@@ -90,8 +90,8 @@ def _input_hashes(seq) -> dict:
     out = {}
     for name in ("labels.json", "camera.json", "manifest.json"):
         if (seq.root / name).is_file():
-            out[name] = sha256_bytes_of(seq.root / name)
-    out["model"] = sha256_bytes_of(seq.model_path)
+            out[name] = sha256_file(seq.root / name)
+    out["model"] = sha256_file(seq.model_path)
     return out
 
 
