@@ -1,0 +1,456 @@
+"""Flight-camera artefacts: vignetting, fixed-pattern noise, hot pixels, blooming, smear,
+stray light and ghosts, on-board JPEG.
+
+Each artefact is one parameter group of :class:`ArtefactConfig` (docs/degradation.md,
+"Camera artefacts", gives the model, default and source of each) and is switched off by a
+zero (or False) parameter:
+
+* **Vignetting** — relative illumination of the lens, cos⁴θ of the field angle θ
+  (tan θ = r·p/f at a distance r [px] from the principal point, pitch p, focal length f;
+  W. J. Smith, *Modern Optical Engineering*, 4th ed., McGraw-Hill 2008, §9.6 "cosine-fourth
+  law"), optionally times a mechanical term 1 − α·ρ (ρ = r / half-diagonal, α the loss in
+  the corners; the geometric factor of Kang & Weiss, "Can we calibrate a camera using an image
+  of a flat, textureless Lambertian surface?", ECCV 2000).
+* **PRNU / DSNU** — a gain map 1 + σ_PRNU·N(0, 1) on the photo-electrons and an offset map
+  σ_DSNU·N(0, 1) [e⁻] (EMVA Standard 1288, Release 4.0, 2021, §8: PRNU in % of the signal,
+  DSNU in e⁻).
+* **Hot pixels** — a fraction of the photosites with an extra dark current drawn from an
+  exponential distribution of mean ``hot_pixel_dark_e_per_s``.
+* **Frame-transfer smear** — each photosite gets ``smear_fraction`` × its column's mean
+  photo-signal (the charge collected while the rows shift under the light; off for CMOS).
+* **Blooming** — charge above the full well of a run of full photosites spills half up,
+  half down the column into the nearest photosites with room, conserving charge until it
+  leaves the array.
+* **Stray light and ghost** — a veiling glare E = PST(θ_sun)·E_sun with a point-source
+  transmittance PST falling as a power of the Sun's off-axis angle, a linear gradient
+  toward the Sun's side, and a ghost: a uniform disc holding the fraction R² (two surface
+  reflections) of the solar power entering the pupil, centred on the line through the image
+  centre at ``ghost_magnification`` × the Sun's pinhole position.
+* **JPEG** — the degraded 8-bit image compressed and decoded by OpenImageIO's JPEG codec
+  (libjpeg) at a quality 1–100.
+
+The fixed maps (PRNU, DSNU, hot pixels) are drawn from a *camera* seed, not the frame's: the
+same for every frame of a sequence (:func:`camera_maps`).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _checks
+
+__all__ = ["ARTEFACTS_OFF", "SOLAR_IRRADIANCE_W_M2", "ArtefactConfig", "CameraMaps", "bloom", "camera_maps", "irradiance_to_signal", "jpeg_roundtrip",
+           "relative_illumination", "smear", "stray_light"]
+
+SOLAR_IRRADIANCE_W_M2 = 1361.0
+"""Total solar irradiance at 1 au [W/m²] (G. Kopp, J. L. Lean, "A new, lower value of total
+solar irradiance", Geophys. Res. Lett. 38, L01706, 2011)."""
+
+_CAMERA_TAG = 0x43414D  # "CAM": the camera maps' stream, apart from every frame's
+
+
+@dataclass(frozen=True, slots=True)
+class ArtefactConfig:
+    """The camera artefacts of the physical chain (zero or False: off).
+
+    Attributes
+    ----------
+    vignetting : bool
+        Multiply the image by the cos⁴ relative illumination. Default True.
+    mechanical_vignetting : float
+        α in [0, 1): extra loss 1 − α·ρ of the mechanical (pupil-clipping) vignetting, α the
+        loss in the image corners. Default 0.
+    prnu_sigma : float
+        σ of the photo-response non-uniformity, a fraction of the signal, in [0, 0.2].
+        Default 0.01 (1 %, EMVA 1288 data sheets of industrial CMOS cameras report 0.5–1 %).
+    dsnu_sigma_e : float
+        σ of the dark-signal non-uniformity [e⁻], ≥ 0. Default 2.
+    hot_pixel_fraction : float
+        Fraction of hot photosites in [0, 0.1]. Default 1e-4.
+    hot_pixel_dark_e_per_s : float
+        Mean extra dark current of a hot photosite [e⁻/s] (exponentially distributed), ≥ 0.
+        Default 5e4.
+    blooming : bool
+        Spill charge above the full well along the column. Default True.
+    smear_fraction : float
+        Frame-transfer smear: transfer time / exposure time, in [0, 1]. Default 0 (CMOS).
+    stray_light : bool
+        Veiling glare and ghost from the Sun outside the field. Default True.
+    pst_edge : float
+        Point-source transmittance at the field edge (half-diagonal angle) [1], in [0, 1].
+        Default 1e-3.
+    pst_slope : float
+        n of PST(θ) = pst_edge·(θ_edge/θ)ⁿ, ≥ 0. Default 3.
+    sun_exclusion_deg : float
+        Off-axis angle beyond which the baffle blocks the Sun (no glare, no ghost) [deg],
+        in (0, 90]. Default 60.
+    glare_gradient : float
+        Relative glare gradient toward the Sun across the half-diagonal, in [0, 1]. Default 0.5.
+    ghost_reflectance : float
+        Residual reflectance R of the two lens surfaces that make the ghost (fraction R²), in
+        [0, 1]. Default 0.005 (a broadband anti-reflection coating).
+    ghost_radius_px : float
+        Radius of the defocused ghost disc [px], > 0. Default 20.
+    ghost_magnification : float
+        Ghost position = centre + m·(Sun's pinhole position − centre); m in [−10, 10].
+        Default −0.5 (on the far side of the centre).
+    jpeg_quality : int
+        On-board JPEG compression of the 8-bit image, 1–100; 0: off. Default 0.
+    wavelength_m : float
+        Wavelength at which stray-light power becomes photons [m]. Default 530 nm.
+    """
+
+    vignetting: bool = True
+    mechanical_vignetting: float = 0.0
+    prnu_sigma: float = 0.01
+    dsnu_sigma_e: float = 2.0
+    hot_pixel_fraction: float = 1e-4
+    hot_pixel_dark_e_per_s: float = 5e4
+    blooming: bool = True
+    smear_fraction: float = 0.0
+    stray_light: bool = True
+    pst_edge: float = 1e-3
+    pst_slope: float = 3.0
+    sun_exclusion_deg: float = 60.0
+    glare_gradient: float = 0.5
+    ghost_reflectance: float = 0.005
+    ghost_radius_px: float = 20.0
+    ghost_magnification: float = -0.5
+    jpeg_quality: int = 0
+    wavelength_m: float = 530e-9
+
+    def __post_init__(self):
+        for name in ("vignetting", "blooming", "stray_light"):
+            object.__setattr__(self, name, _checks.flag(name, getattr(self, name)))
+        ranges = {"mechanical_vignetting": (0.0, 0.99), "prnu_sigma": (0.0, 0.2), "hot_pixel_fraction": (0.0, 0.1),
+                  "smear_fraction": (0.0, 1.0), "pst_edge": (0.0, 1.0), "pst_slope": (0.0, 10.0),
+                  "sun_exclusion_deg": (1e-6, 90.0), "glare_gradient": (0.0, 1.0), "ghost_reflectance": (0.0, 1.0),
+                  "ghost_magnification": (-10.0, 10.0)}
+        for name, (lo, hi) in ranges.items():
+            v = _checks.finite_scalar(name, getattr(self, name))
+            if not lo <= v <= hi:
+                raise ValueError(f"{name} must be in [{lo:g}, {hi:g}], got {getattr(self, name)!r}")
+            object.__setattr__(self, name, v)
+        for name in ("dsnu_sigma_e", "hot_pixel_dark_e_per_s"):
+            object.__setattr__(self, name, _checks.finite_scalar(name, getattr(self, name), nonnegative=True))
+        for name in ("ghost_radius_px", "wavelength_m"):
+            object.__setattr__(self, name, _checks.finite_scalar(name, getattr(self, name), positive=True))
+        object.__setattr__(self, "jpeg_quality", _checks.integer("jpeg_quality", self.jpeg_quality, 0, 100))
+
+    @property
+    def fixed_pattern(self) -> bool:
+        """Whether any fixed map (PRNU, DSNU, hot pixels) is drawn."""
+        return self.prnu_sigma > 0 or self.dsnu_sigma_e > 0 or (
+            self.hot_pixel_fraction > 0 and self.hot_pixel_dark_e_per_s > 0)
+
+
+ARTEFACTS_OFF = ArtefactConfig(vignetting=False, prnu_sigma=0.0, dsnu_sigma_e=0.0, hot_pixel_fraction=0.0,
+                               blooming=False, stray_light=False)
+"""Every artefact off: the chain as without artefacts, but with ``signal_e`` and ``saturation``."""
+
+
+# --------------------------------------------------------------------------- vignetting
+
+
+def _centred_grid(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """Column and row offsets from the image centre ((W − 1)/2, (H − 1)/2: pixel centres are
+    integers) [px], shapes (1, W) and (H, 1)."""
+    return (np.arange(w, dtype=np.float64) - (w - 1) / 2)[None, :], (np.arange(h, dtype=np.float64) - (h - 1) / 2)[:, None]
+
+
+def relative_illumination(h: int, w: int, *, focal_length_m: float, pixel_pitch_m: float,
+                          mechanical: float = 0.0) -> np.ndarray:
+    """Relative illumination of the lens over an H×W image: cos⁴θ · (1 − α·ρ).
+
+    Parameters
+    ----------
+    h, w : int
+        Image height and width [px].
+    focal_length_m, pixel_pitch_m : float, keyword-only
+        Focal length f and pixel pitch p [m]; tan θ = r·p/f at r [px] from the image centre.
+    mechanical : float, keyword-only
+        α in [0, 1): mechanical vignetting, the loss at the corners (ρ = r / half-diagonal).
+
+    Returns
+    -------
+    factor : ndarray of float32, shape (H, W)
+        1 at the centre, falling toward the corners [1].
+    """
+    h = _checks.integer("h", h, 1, 1 << 20)
+    w = _checks.integer("w", w, 1, 1 << 20)
+    f = _checks.finite_scalar("focal_length_m", focal_length_m, positive=True)
+    p = _checks.finite_scalar("pixel_pitch_m", pixel_pitch_m, positive=True)
+    alpha = _checks.finite_scalar("mechanical", mechanical, nonnegative=True)
+    if alpha >= 1.0:
+        raise ValueError(f"mechanical must be in [0, 1), got {mechanical!r}")
+    return _relative_illumination(h, w, f, p, alpha)
+
+
+@functools.lru_cache(maxsize=8)
+def _relative_illumination(h: int, w: int, f: float, p: float, alpha: float) -> np.ndarray:
+    x, y = _centred_grid(h, w)
+    r2 = x * x + y * y
+    tan2 = r2 * (p / f) ** 2
+    out = 1.0 / (1.0 + tan2) ** 2  # cos⁴θ = 1/(1 + tan²θ)²
+    if alpha > 0.0:
+        half_diag = math.hypot((w - 1) / 2, (h - 1) / 2) or 1.0
+        out = out * (1.0 - alpha * np.sqrt(r2) / half_diag)
+    out = out.astype(np.float32)
+    out.flags.writeable = False
+    return out
+
+
+# --------------------------------------------------------------------------- fixed-pattern maps
+
+
+@dataclass(frozen=True)
+class CameraMaps:
+    """The fixed maps of one camera, on the photosites (read-only).
+
+    Attributes
+    ----------
+    gain : ndarray of float32 or None
+        PRNU gain 1 + σ·N(0, 1), clipped at 0 [1]; None without PRNU.
+    offset_e : ndarray of float32 or None
+        DSNU offset σ·N(0, 1) [e⁻]; None without DSNU.
+    hot_dark_e_per_s : ndarray of float32 or None
+        Extra dark current, 0 except at hot photosites [e⁻/s]; None without hot pixels.
+    """
+
+    gain: np.ndarray | None
+    offset_e: np.ndarray | None
+    hot_dark_e_per_s: np.ndarray | None
+
+
+def camera_maps(shape, config: ArtefactConfig, camera_seed: int) -> CameraMaps:
+    """PRNU, DSNU and hot-pixel maps of a camera: drawn from ``camera_seed`` alone (the same for
+    every frame of a sequence; another seed, another camera).
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Shape of the photosite array ((H, W) mosaic, or (H, W, C)).
+    config : ArtefactConfig
+        ``prnu_sigma``, ``dsnu_sigma_e``, ``hot_pixel_fraction``, ``hot_pixel_dark_e_per_s``.
+    camera_seed : int
+        The camera's seed, ≥ 0. The standard normal, uniform and exponential fields are drawn
+        in this order from ``SeedSequence([camera_seed, tag])`` whatever the parameters, so a
+        parameter scales a map without moving its pattern.
+
+    Returns
+    -------
+    maps : CameraMaps
+    """
+    _checks.instance("config", config, ArtefactConfig)
+    seed = _checks.integer("camera_seed", camera_seed, 0, 2**63 - 1)
+    shape = tuple(_checks.integer("shape", s, 1, 1 << 20) for s in shape)
+    if not config.fixed_pattern:
+        return CameraMaps(None, None, None)
+    return _camera_maps(shape, config.prnu_sigma, config.dsnu_sigma_e, config.hot_pixel_fraction,
+                        config.hot_pixel_dark_e_per_s, seed)
+
+
+@functools.lru_cache(maxsize=4)
+def _camera_maps(shape, prnu, dsnu, fraction, hot_e_s, seed) -> CameraMaps:
+    rng = np.random.default_rng(np.random.SeedSequence([seed, _CAMERA_TAG]))
+    z_gain = rng.standard_normal(shape, dtype=np.float32)
+    z_offset = rng.standard_normal(shape, dtype=np.float32)
+    u_hot = rng.random(shape, dtype=np.float32)
+    x_hot = rng.standard_exponential(shape, dtype=np.float32)
+    gain = offset = hot = None
+    if prnu > 0:
+        gain = np.maximum(np.float32(1.0) + np.float32(prnu) * z_gain, np.float32(0.0))
+    if dsnu > 0:
+        offset = np.float32(dsnu) * z_offset
+    if fraction > 0 and hot_e_s > 0:
+        hot = np.where(u_hot < np.float32(fraction), np.float32(hot_e_s) * x_hot, np.float32(0.0))
+    for a in (gain, offset, hot):
+        if a is not None:
+            a.flags.writeable = False
+    return CameraMaps(gain, offset, hot)
+
+
+# --------------------------------------------------------------------------- smear and blooming
+
+
+def smear(mean_e, fraction: float) -> np.ndarray:
+    """Frame-transfer smear of mean photo-electrons ``mean_e`` (H×W, rows shift along axis 0):
+    each photosite gains ``fraction`` × its column's mean [e⁻] (a row passes under every other
+    row for transfer time / rows; fraction = t_transfer / t_exp)."""
+    e = np.asarray(mean_e, dtype=np.float64)
+    fraction = _checks.finite_scalar("fraction", fraction, nonnegative=True)
+    return e + fraction * e.mean(axis=0, keepdims=True)
+
+
+def _fill(view: np.ndarray, charge: float, full_well: float) -> None:
+    """Add ``charge`` to ``view`` (1-D, in the order it spreads), filling each element to
+    ``full_well`` before the next; what is left at the end leaves the array."""
+    if charge <= 0.0 or view.size == 0:
+        return
+    room = np.maximum(full_well - view, 0.0)
+    before = np.cumsum(room) - room
+    view += np.clip(charge - before, 0.0, room)
+
+
+def bloom(electrons, full_well_e: float) -> np.ndarray:
+    """Blooming: the charge above the full well spills along the column (axis 0).
+
+    Parameters
+    ----------
+    electrons : array_like of float, shape (H, W) or (H, W, C)
+        Charge per photosite before the full-well limit [e⁻].
+    full_well_e : float
+        Full-well capacity FW, > 0 [e⁻].
+
+    Returns
+    -------
+    electrons : ndarray of float64, shape like ``electrons``
+        Every photosite ≤ FW. Each run of full photosites (≥ FW) of a column holding excess
+        charge X = Σ(e − FW) is set to FW and X/2 spreads up, X/2 down the column, filling the
+        nearest photosites with room in turn (passing through full ones); charge is conserved
+        until it runs off the array's top or bottom edge. Runs are taken top to bottom.
+    """
+    e = np.array(electrons, dtype=np.float64)
+    fw = _checks.finite_scalar("full_well_e", full_well_e, positive=True)
+    flat = e.reshape(e.shape[0], -1)  # columns (and channels) side by side
+    for j in np.flatnonzero((flat > fw).any(axis=0)):
+        col = flat[:, j].copy()
+        edges = np.diff(np.concatenate(([0], (col >= fw).view(np.int8), [0])))
+        for s, t in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            excess = float(np.sum(col[s:t] - fw))
+            if excess <= 0.0:
+                continue
+            col[s:t] = fw
+            up = 0.5 * excess
+            _fill(col[s - 1::-1] if s > 0 else col[:0], up, fw)
+            _fill(col[t:], excess - up, fw)
+        flat[:, j] = col
+    return e
+
+
+# --------------------------------------------------------------------------- stray light and ghost
+
+
+def stray_light(h: int, w: int, sun_dir_cam, *, focal_length_m: float, pixel_pitch_m: float,
+                aperture_m: float | None, config: ArtefactConfig,
+                sun_irradiance_W_m2: float = SOLAR_IRRADIANCE_W_M2) -> np.ndarray | None:
+    """Irradiance of the Sun's veiling glare and ghost on the focal plane [W/m²].
+
+    Parameters
+    ----------
+    h, w : int
+        Image height and width [px] (principal point at the centre, pinhole projection).
+    sun_dir_cam : array_like of 3 float
+        Direction to the Sun in the camera frame (OpenCV axes: z forward), any length > 0.
+    focal_length_m, pixel_pitch_m : float, keyword-only
+        f and p [m].
+    aperture_m : float or None, keyword-only
+        Entrance-pupil diameter D [m] (None: no ghost).
+    config : ArtefactConfig, keyword-only
+        ``pst_edge``, ``pst_slope``, ``sun_exclusion_deg``, ``glare_gradient``,
+        ``ghost_reflectance``, ``ghost_radius_px``, ``ghost_magnification``.
+    sun_irradiance_W_m2 : float, keyword-only
+        Solar irradiance at the camera [W/m²]. Default 1361 (1 au).
+
+    Returns
+    -------
+    irradiance : ndarray of float64, shape (H, W), or None
+        None when the Sun is behind the camera (z ≤ 0) or at least ``sun_exclusion_deg``
+        off-axis. Else glare + ghost:
+
+        * glare: PST(θ)·E_sun·(1 + g·s), PST(θ) = pst_edge·(θ_edge / max(θ, θ_edge))ⁿ with
+          θ the Sun's off-axis angle, θ_edge = atan(half-diagonal·p/f) and s ∈ [−1, 1] the
+          pixel's offset from the centre toward the Sun's azimuth over the half-diagonal (the
+          PST's definition: E. Fest, *Stray Light Analysis and Control*, SPIE Press 2013, §1.5;
+          power-law fall-off as for Harvey-type scatter of the lens surfaces);
+        * ghost: a uniform disc of radius R_g [px] centred at c + m·(u_sun − c) (c the image
+          centre, u_sun the Sun's pinhole projection), holding the power
+          R²·E_sun·cos θ·πD²/4 (two reflections of the light entering the pupil).
+
+        A Sun inside the field keeps the edge value of the PST (its own image is not drawn;
+        such frames are flagged ``sun_in_lens``).
+    """
+    _checks.instance("config", config, ArtefactConfig)
+    d = np.asarray(sun_dir_cam, dtype=np.float64)
+    if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
+        raise ValueError(f"sun_dir_cam must be a finite non-zero 3-vector, got {sun_dir_cam!r}")
+    d = d / np.linalg.norm(d)
+    f = _checks.finite_scalar("focal_length_m", focal_length_m, positive=True)
+    p = _checks.finite_scalar("pixel_pitch_m", pixel_pitch_m, positive=True)
+    e_sun = _checks.finite_scalar("sun_irradiance_W_m2", sun_irradiance_W_m2, nonnegative=True)
+    theta = math.acos(min(max(d[2], -1.0), 1.0))
+    if d[2] <= 0.0 or theta >= math.radians(config.sun_exclusion_deg):
+        return None
+    x, y = _centred_grid(h, w)
+    half_diag = math.hypot((w - 1) / 2, (h - 1) / 2) or 1.0
+    theta_edge = math.atan(math.hypot(w / 2, h / 2) * p / f)
+    pst = config.pst_edge * (theta_edge / max(theta, theta_edge)) ** config.pst_slope
+    out = np.full((h, w), pst * e_sun)
+    azimuth = math.hypot(d[0], d[1])
+    if config.glare_gradient > 0 and azimuth > 0:
+        s = (x * (d[0] / azimuth) + y * (d[1] / azimuth)) / half_diag
+        out *= 1.0 + config.glare_gradient * s
+    if aperture_m is not None and config.ghost_reflectance > 0:
+        D = _checks.finite_scalar("aperture_m", aperture_m, positive=True)
+        u_sun, v_sun = (f / p) * d[0] / d[2], (f / p) * d[1] / d[2]  # from the centre [px]
+        m = config.ghost_magnification
+        gx, gy, rg = m * u_sun, m * v_sun, config.ghost_radius_px
+        power = config.ghost_reflectance ** 2 * e_sun * d[2] * math.pi * D * D / 4  # [W]
+        # pixels of the disc on the unbounded pixel grid (so its power stays with the disc's part in view)
+        r = int(math.ceil(rg)) + 1
+        k = np.arange(-r, r + 1)
+        gxf, gyf = gx - math.floor(gx), gy - math.floor(gy)
+        n_disc = int(np.count_nonzero((k[None, :] - gxf) ** 2 + (k[:, None] - gyf) ** 2 <= rg * rg))
+        if n_disc:
+            inside = (x - gx) ** 2 + (y - gy) ** 2 <= rg * rg
+            out[inside] += power / (n_disc * p * p)
+    return out
+
+
+def irradiance_to_signal(irradiance, *, exposure_s: float, pixel_pitch_m: float, wavelength_m: float,
+                         photons_at_one: float):
+    """Focal-plane irradiance [W/m²] → the chain's linear signal (1 = ``photons_at_one``
+    photons per pixel): E·p²·t·λ/(h c) photons per pixel, as in the camera equation
+    (:func:`degrade.exposure.physical_exposure`; the sensor applies the QE)."""
+    from .exposure import LIGHT_SPEED_M_S, PLANCK_J_S
+    photons = irradiance * (pixel_pitch_m ** 2 * exposure_s * wavelength_m / (PLANCK_J_S * LIGHT_SPEED_M_S))
+    return photons / photons_at_one
+
+
+# --------------------------------------------------------------------------- JPEG
+
+
+def jpeg_roundtrip(rgb8, quality: int) -> np.ndarray:
+    """Compress an 8-bit image to JPEG at ``quality`` (1–100) with OpenImageIO's codec and
+    decode it again.
+
+    Parameters
+    ----------
+    rgb8 : array_like of uint8, shape (H, W, 3) or (H, W)
+        The image.
+    quality : int
+        JPEG quality 1–100 (OpenImageIO ``Compression = "jpeg:Q"``).
+
+    Returns
+    -------
+    decoded : ndarray of uint8, shape like ``rgb8``
+    """
+    import OpenImageIO as oiio
+    img = np.ascontiguousarray(rgb8)
+    if img.dtype != np.uint8 or img.ndim not in (2, 3):
+        raise ValueError(f"rgb8 must be an H×W(×C) uint8 image, got {img.dtype} of shape {img.shape}")
+    q = _checks.integer("quality", quality, 1, 100)
+    buf = oiio.ImageBuf(img if img.ndim == 3 else img[:, :, None])
+    buf.specmod().attribute("Compression", f"jpeg:{q}")
+    with tempfile.TemporaryDirectory(prefix="orbitsynth-jpeg-") as tmp:
+        path = os.path.join(tmp, "frame.jpg")
+        if not buf.write(path):  # pragma: no cover - OpenImageIO failure
+            raise RuntimeError(f"OpenImageIO could not write JPEG: {buf.geterror()}")
+        out = oiio.ImageBuf(path).get_pixels(oiio.UINT8)
+    return np.ascontiguousarray(out.reshape(img.shape))
