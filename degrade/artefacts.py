@@ -45,7 +45,7 @@ import numpy as np
 
 from . import _checks
 
-__all__ = ["ARTEFACTS_OFF", "SOLAR_IRRADIANCE_W_M2", "ArtefactConfig", "CameraMaps", "bloom", "camera_maps", "irradiance_to_signal", "jpeg_roundtrip",
+__all__ = ["ARTEFACTS_OFF", "SOLAR_IRRADIANCE_W_M2", "ArtefactConfig", "CameraMaps", "bloom", "camera_maps", "irradiance_to_signal", "jpeg_bytes", "jpeg_roundtrip",
            "relative_illumination", "smear", "stray_light"]
 
 SOLAR_IRRADIANCE_W_M2 = 1361.0
@@ -405,7 +405,8 @@ def stray_light(h: int, w: int, sun_dir_cam, *, focal_length_m: float, pixel_pit
         # pixels of the disc on the unbounded pixel grid (so its power stays with the disc's part in view)
         r = int(math.ceil(rg)) + 1
         k = np.arange(-r, r + 1)
-        gxf, gyf = gx - math.floor(gx), gy - math.floor(gy)
+        gcol, grow = gx + (w - 1) / 2, gy + (h - 1) / 2  # in pixel indices (integers at pixel centres)
+        gxf, gyf = gcol - math.floor(gcol), grow - math.floor(grow)
         n_disc = int(np.count_nonzero((k[None, :] - gxf) ** 2 + (k[:, None] - gyf) ** 2 <= rg * rg))
         if n_disc:
             inside = (x - gx) ** 2 + (y - gy) ** 2 <= rg * rg
@@ -426,9 +427,35 @@ def irradiance_to_signal(irradiance, *, exposure_s: float, pixel_pitch_m: float,
 # --------------------------------------------------------------------------- JPEG
 
 
+def _jpeg_input(rgb8, quality) -> tuple[np.ndarray, int]:
+    img = np.ascontiguousarray(rgb8)
+    if img.dtype != np.uint8 or img.ndim not in (2, 3):
+        raise ValueError(f"rgb8 must be an H×W(×C) uint8 image, got {img.dtype} of shape {img.shape}")
+    return img, _checks.integer("quality", quality, 1, 100)
+
+
+def _write_jpeg(img: np.ndarray, quality: int, path: str) -> None:
+    import OpenImageIO as oiio
+    buf = oiio.ImageBuf(img if img.ndim == 3 else img[:, :, None])
+    buf.specmod().attribute("Compression", f"jpeg:{quality}")
+    if not buf.write(path):  # pragma: no cover - OpenImageIO failure
+        raise RuntimeError(f"OpenImageIO could not write JPEG: {buf.geterror()}")
+
+
+def jpeg_bytes(rgb8, quality: int) -> bytes:
+    """The JPEG file (baseline, OpenImageIO's libjpeg codec, ``Compression = "jpeg:Q"``) of an
+    8-bit image at ``quality`` 1–100: what :func:`jpeg_roundtrip` decodes."""
+    img, q = _jpeg_input(rgb8, quality)
+    with tempfile.TemporaryDirectory(prefix="orbitsynth-jpeg-") as tmp:
+        path = os.path.join(tmp, "frame.jpg")
+        _write_jpeg(img, q, path)
+        with open(path, "rb") as fh:
+            return fh.read()
+
+
 def jpeg_roundtrip(rgb8, quality: int) -> np.ndarray:
     """Compress an 8-bit image to JPEG at ``quality`` (1–100) with OpenImageIO's codec and
-    decode it again.
+    decode it again (the on-board compression of the degraded copy).
 
     Parameters
     ----------
@@ -442,15 +469,9 @@ def jpeg_roundtrip(rgb8, quality: int) -> np.ndarray:
     decoded : ndarray of uint8, shape like ``rgb8``
     """
     import OpenImageIO as oiio
-    img = np.ascontiguousarray(rgb8)
-    if img.dtype != np.uint8 or img.ndim not in (2, 3):
-        raise ValueError(f"rgb8 must be an H×W(×C) uint8 image, got {img.dtype} of shape {img.shape}")
-    q = _checks.integer("quality", quality, 1, 100)
-    buf = oiio.ImageBuf(img if img.ndim == 3 else img[:, :, None])
-    buf.specmod().attribute("Compression", f"jpeg:{q}")
+    img, q = _jpeg_input(rgb8, quality)
     with tempfile.TemporaryDirectory(prefix="orbitsynth-jpeg-") as tmp:
         path = os.path.join(tmp, "frame.jpg")
-        if not buf.write(path):  # pragma: no cover - OpenImageIO failure
-            raise RuntimeError(f"OpenImageIO could not write JPEG: {buf.geterror()}")
+        _write_jpeg(img, q, path)
         out = oiio.ImageBuf(path).get_pixels(oiio.UINT8)
     return np.ascontiguousarray(out.reshape(img.shape))
