@@ -265,10 +265,18 @@ SMALL = ["--target", "cassini", "--pattern", "spiral", "--frames", "1", "--width
          "--quiet", "--workers", "1"]
 
 
-def test_main_job_writes_signal_e_and_saturation_consistent_with_rgb_degraded(tmp_path):
-    seq = tmp_path / "seq"
-    assert run_main(*SMALL, "--modalities", "rgb_degraded,signal_e,saturation", "--degrade", "physical",
-                    "--exposure-us", "3000", "--out", seq) == 0
+CAMERA = ["--modalities", "rgb_degraded,signal_e,saturation", "--degrade", "physical", "--exposure-us", "3000"]
+
+
+@pytest.fixture(scope="module")
+def base_sequence(tmp_path_factory):
+    seq = tmp_path_factory.mktemp("camera") / "seq"
+    assert run_main(*SMALL, *CAMERA, "--out", seq) == 0
+    return seq
+
+
+def test_main_job_writes_signal_e_and_saturation_consistent_with_rgb_degraded(base_sequence):
+    seq = base_sequence
     sig = oiio.ImageBuf(str(seq / "signal_e" / "000000.exr")).get_pixels(oiio.FLOAT)
     sat = oiio.ImageBuf(str(seq / "saturation" / "000000.png")).get_pixels(oiio.UINT8)
     rgb = oiio.ImageBuf(str(seq / "rgb_degraded" / "000000.png")).get_pixels(oiio.UINT8)
@@ -280,6 +288,17 @@ def test_main_job_writes_signal_e_and_saturation_consistent_with_rgb_degraded(tm
     assert np.all(dn[sat == 255] == max_dn)
     rgb_again = srgb_encode(np.clip(demosaic((dn / max_dn).astype(np.float32)), 0, 1), bits=8)
     assert np.array_equal(np.rint(rgb_again * 255).astype(np.uint8), rgb)
+
+
+@pytest.mark.parametrize("extra", [["--vignetting", "false"], ["--blooming", "false"], ["--jpeg-quality", "50"],
+                                   ["--camera-seed", "5"]])
+def test_each_artefact_option_reaches_the_degraded_image(base_sequence, tmp_path, extra):
+    import tomllib
+    seq = tmp_path / "seq"
+    assert run_main(*SMALL, *CAMERA, *extra, "--out", seq) == 0
+    assert (seq / "rgb_degraded/000000.png").read_bytes() != (base_sequence / "rgb_degraded/000000.png").read_bytes()
+    cfg = tomllib.loads((seq / "config.toml").read_text())["degrade"]
+    assert str(cfg[extra[0][2:].replace("-", "_")]).lower() == extra[1]
 
 
 @pytest.mark.parametrize("args, flag", [
