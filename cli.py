@@ -388,7 +388,7 @@ def degrade_frame(cfg: dict, task: dict, rgb8, radiance, degrade_seq, want=("rgb
     """:func:`degrade.presets.degrade_outputs` ``want`` of one frame task, with its motion blur and Sun."""
     from degrade.presets import degrade_outputs
     return degrade_outputs(cfg["degrade"], cfg["camera"], rgb8, radiance, degrade_seq, task["light"].get("motion"),
-                           sun_dir_cam=task["label"]["sun_dir_cam"], sequence_seed=cfg["sequence"]["seed"], want=want)
+                           label=task["label"], sequence_seed=cfg["sequence"]["seed"], want=want)
 
 
 def render_frame_images(task: dict) -> tuple[dict, dict]:

@@ -84,7 +84,7 @@ class ArtefactConfig:
         Veiling glare and ghost from the Sun outside the field. Default True.
     pst_edge : float
         Point-source transmittance at the field edge (half-diagonal angle) [1], in [0, 1].
-        Default 1e-3.
+        Default 1e-4 (a baffled camera; an unbaffled lens is nearer 1e-3).
     pst_slope : float
         n of PST(θ) = pst_edge·(θ_edge/θ)ⁿ, ≥ 0. Default 3.
     sun_exclusion_deg : float
@@ -115,7 +115,7 @@ class ArtefactConfig:
     blooming: bool = True
     smear_fraction: float = 0.0
     stray_light: bool = True
-    pst_edge: float = 1e-3
+    pst_edge: float = 1e-4
     pst_slope: float = 3.0
     sun_exclusion_deg: float = 60.0
     glare_gradient: float = 0.5

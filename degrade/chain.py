@@ -235,7 +235,7 @@ class FrameOutput(NamedTuple):
 
 
 def degrade(image_linear, config: DegradeConfig = DegradeConfig(), *, rng=None, sun_dir_cam=None,
-            camera_seed: int = 0) -> np.ndarray:
+            sun_fraction: float = 1.0, camera_seed: int = 0) -> np.ndarray:
     """Run the physical chain (docs/degradation.md, "Physical chain") on one linear frame.
 
     Parameters
@@ -252,6 +252,8 @@ def degrade(image_linear, config: DegradeConfig = DegradeConfig(), *, rng=None, 
     sun_dir_cam : array_like of 3 float or None, keyword-only
         Direction to the Sun in the camera frame, for the stray light of ``config.artefacts``
         (None: no Sun).
+    sun_fraction : float, keyword-only
+        Visible fraction of the solar disc in [0, 1] (penumbra), scaling the stray light. Default 1.
     camera_seed : int, keyword-only
         Seed of the camera's fixed maps (PRNU, DSNU, hot pixels): :func:`degrade.artefacts.camera_maps`.
 
@@ -261,11 +263,12 @@ def degrade(image_linear, config: DegradeConfig = DegradeConfig(), *, rng=None, 
         Encoded as ``config.encoding`` says: for "srgb8"/"srgb16" the values are exactly
         ``code/(2**bits − 1)`` (see :func:`degrade.encode.quantise`) [1].
     """
-    return simulate_frame(image_linear, config, rng=rng, sun_dir_cam=sun_dir_cam, camera_seed=camera_seed).image
+    return simulate_frame(image_linear, config, rng=rng, sun_dir_cam=sun_dir_cam, sun_fraction=sun_fraction,
+                          camera_seed=camera_seed).image
 
 
 def simulate_frame(image_linear, config: DegradeConfig = DegradeConfig(), *, rng=None, sun_dir_cam=None,
-                   camera_seed: int = 0) -> FrameOutput:
+                   sun_fraction: float = 1.0, camera_seed: int = 0) -> FrameOutput:
     """:func:`degrade`, also returning the photosites' electrons and saturation mask.
 
     With ``config.artefacts`` the chain is: optics PSF → × relative illumination → + stray
@@ -276,12 +279,15 @@ def simulate_frame(image_linear, config: DegradeConfig = DegradeConfig(), *, rng
     """
     _checks.instance("config", config, DegradeConfig)
     img = _checks.image("image_linear", image_linear, channels=3)
+    sun_fraction = _checks.finite_scalar("sun_fraction", sun_fraction, nonnegative=True)
+    if sun_fraction > 1.0:
+        raise ValueError(f"sun_fraction must be in [0, 1], got {sun_fraction!r}")
     rng = np.random.default_rng(rng)
     signal_e = saturation = None
     if config.optics is not None:
         img = _apply_optics(img, config.optics)
     if config.artefacts is not None:
-        img, signal_e, saturation = _sensor_with_artefacts(img, config, sun_dir_cam, camera_seed, rng)
+        img, signal_e, saturation = _sensor_with_artefacts(img, config, sun_dir_cam, sun_fraction, camera_seed, rng)
     elif config.sensor is not None:
         img = _simulate(img, config.sensor, rng)
     if config.encoding == "linear":
@@ -295,8 +301,8 @@ def simulate_frame(image_linear, config: DegradeConfig = DegradeConfig(), *, rng
     return FrameOutput(out, signal_e, saturation)
 
 
-def _sensor_with_artefacts(img: np.ndarray, config: DegradeConfig, sun_dir_cam, camera_seed, rng):
-    from .artefacts import camera_maps, irradiance_to_signal, relative_illumination, stray_light
+def _sensor_with_artefacts(img: np.ndarray, config: DegradeConfig, sun_dir_cam, sun_fraction, camera_seed, rng):
+    from .artefacts import SOLAR_IRRADIANCE_W_M2, camera_maps, irradiance_to_signal, relative_illumination, stray_light
     from .sensor import _demosaic, _mosaic, _signal_e
     art, optics, c = config.artefacts, config.optics, config.sensor
     h, w = img.shape[:2]
@@ -305,9 +311,9 @@ def _sensor_with_artefacts(img: np.ndarray, config: DegradeConfig, sun_dir_cam, 
         vig = relative_illumination(h, w, focal_length_m=optics.focal_length_m, pixel_pitch_m=optics.pixel_pitch_m,
                                     mechanical=art.mechanical_vignetting)
         img *= vig if img.ndim == 2 else vig[:, :, None]
-    if art.stray_light and sun_dir_cam is not None:
+    if art.stray_light and sun_dir_cam is not None and sun_fraction > 0.0:
         e = stray_light(h, w, sun_dir_cam, focal_length_m=optics.focal_length_m, pixel_pitch_m=optics.pixel_pitch_m,
-                        aperture_m=optics.aperture_m, config=art)
+                        aperture_m=optics.aperture_m, config=art, sun_irradiance_W_m2=SOLAR_IRRADIANCE_W_M2 * sun_fraction)
         if e is not None:
             add = irradiance_to_signal(e, exposure_s=c.exposure_s, pixel_pitch_m=optics.pixel_pitch_m,
                                        wavelength_m=art.wavelength_m, photons_at_one=c.photons_max).astype(np.float32)

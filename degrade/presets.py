@@ -82,22 +82,24 @@ def physical_config(d: dict, cam: dict, motion=None):
     return DegradeConfig(optics=optics, sensor=sensor, encoding="srgb8", artefacts=artefact_config(d))
 
 
-def degrade_frame(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *, sun_dir_cam=None,
+def degrade_frame(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *, label=None,
                   sequence_seed: int = 0) -> np.ndarray:
     """The degraded 8-bit RGB of one frame: ``degrade_outputs(...)["rgb_degraded"]``."""
-    return degrade_outputs(d, cam, rgb8, radiance, seed_seq, motion, sun_dir_cam=sun_dir_cam,
+    return degrade_outputs(d, cam, rgb8, radiance, seed_seq, motion, label=label,
                            sequence_seed=sequence_seed)["rgb_degraded"]
 
 
-def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *, sun_dir_cam=None,
+def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *, label=None,
                     sequence_seed: int = 0, want=("rgb_degraded",)) -> dict:
     """The camera outputs ``want`` (of :data:`CAMERA_OUTPUTS`) of one frame, from one
     simulation (``d["degrade"]`` is ``paper`` or ``physical``): the paper's group applied to
     the clean 8-bit image ``rgb8``, or the camera equation and imaging chain applied to the
     linear ``radiance`` [W/(m²·sr)], drawing from ``numpy.random.default_rng(seed_seq)``;
-    ``motion``: the frame's (L [px], θ [deg]) for the ``auto`` motion blur; ``sun_dir_cam``:
-    the Sun's direction in the camera frame (stray light); ``sequence_seed``: the camera's
-    fixed maps' seed unless ``d`` sets ``camera_seed`` (:func:`camera_seed`).
+    ``motion``: the frame's (L [px], θ [deg]) for the ``auto`` motion blur; ``label``: the
+    frame's label, whose ``sun_dir_cam`` (the Sun's direction in the camera frame) and
+    ``shadow_fraction`` (the visible fraction of the solar disc: none in Earth's umbra) set the
+    stray light (None: no Sun); ``sequence_seed``: the camera's fixed maps' seed unless ``d``
+    sets ``camera_seed`` (:func:`camera_seed`).
 
     Raises
     ------
@@ -121,8 +123,10 @@ def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *
                                pixel_pitch_m=cam["pixel_pitch_um"] * 1e-6,
                                quantum_efficiency=d["quantum_efficiency"], full_well_e=d["full_well_e"],
                                wavelengths_m=(WHITE_BALANCE_M,) * 3)
-    res = simulate_frame(signal, physical_config(d, cam, motion), rng=rng, sun_dir_cam=sun_dir_cam,
-                         camera_seed=camera_seed(d, sequence_seed))
+    sun = None if label is None else label.get("sun_dir_cam")
+    visible = 1.0 if label is None else float(label.get("shadow_fraction", 1.0))
+    res = simulate_frame(signal, physical_config(d, cam, motion), rng=rng, sun_dir_cam=sun if visible > 0 else None,
+                         sun_fraction=visible, camera_seed=camera_seed(d, sequence_seed))
     out = {"rgb_degraded": quantise(res.image, 8), "signal_e": res.signal_e,
            "saturation": np.where(res.saturation, np.uint8(255), np.uint8(0))}
     return {w: out[w] for w in want}

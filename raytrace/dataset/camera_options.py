@@ -32,7 +32,7 @@ def _camera_options() -> tuple:
           _P + "frame-transfer smear, transfer time / exposure time (0: off, as for CMOS)"),
         O("--stray-light", "degrade", opt.boolean, True,
           _P + "veiling glare and ghost of the Sun outside the field (true/false)"),
-        O("--pst-edge", "degrade", opt.float_in(0.0, 1.0), 1e-3,
+        O("--pst-edge", "degrade", opt.float_in(0.0, 1.0), 1e-4,
           _P + "stray light: point-source transmittance with the Sun at the field's edge"),
         O("--pst-slope", "degrade", opt.float_in(0.0, 10.0), 3.0,
           _P + "stray light: PST falls as (theta_edge / theta)^slope with the Sun's off-axis angle"),

@@ -168,7 +168,7 @@ def test_stray_light_is_zero_behind_and_far_off_axis_and_rises_toward_the_field_
     angles = np.linspace(59.5, edge_deg + 0.1, 12)
     means = [stray_light(h, w, _sun(a), config=art, **kw).mean() for a in angles]
     assert all(b > a for a, b in zip(means, means[1:])) and means[0] > 0
-    np.testing.assert_allclose(means[-1], 1e-3 * 1361.0 * (edge_deg / (edge_deg + 0.1)) ** 3, rtol=1e-9)
+    np.testing.assert_allclose(means[-1], art.pst_edge * 1361.0 * (edge_deg / (edge_deg + 0.1)) ** 3, rtol=1e-9)
     glare = stray_light(h, w, _sun(50.0, 0.0), config=art, **kw)
     assert glare[:, -1].mean() > glare[:, 0].mean()  # brighter on the Sun's side (+x)
 
@@ -188,6 +188,21 @@ def test_ghost_is_centred_at_the_mirrored_pinhole_position_and_holds_its_power()
                                expected, atol=0.35)
     power = 0.005 ** 2 * 1361.0 * sun[2] * math.pi * 1e-3 ** 2 / 4
     np.testing.assert_allclose(e.sum() * p_m * p_m, power, rtol=1e-9)
+
+
+def test_glare_in_electrons_is_the_pst_times_the_solar_photons_and_follows_the_visible_sun():
+    h, w, t_s, qe, lam = 48, 64, 1e-3, 0.6, 530e-9
+    sensor = SensorConfig(quantum_efficiency=qe, shot_noise=False, read_noise_e=0.0, quantise=False, demosaic=None,
+                          exposure_s=t_s)
+    cfg = _config(sensor, stray_light=True, glare_gradient=0.0, ghost_reflectance=0.0)
+    sun = _sun(45.0)
+    full = simulate_frame(np.zeros((h, w), np.float32), cfg, rng=0, sun_dir_cam=sun).signal_e
+    half = simulate_frame(np.zeros((h, w), np.float32), cfg, rng=0, sun_dir_cam=sun, sun_fraction=0.5).signal_e
+    theta_edge = math.atan(math.hypot(w / 2, h / 2) * P_M / F_M)
+    pst = 1e-4 * (theta_edge / math.radians(45.0)) ** 3
+    photons = pst * 1361.0 * P_M**2 * t_s * lam / (6.62607015e-34 * 299792458.0)
+    np.testing.assert_allclose(full, qe * photons, rtol=1e-5)
+    np.testing.assert_allclose(half, 0.5 * qe * photons, rtol=1e-5)
 
 
 # --------------------------------------------------------------------------- JPEG
