@@ -18,9 +18,9 @@ zero (or False) parameter:
   exponential distribution of mean ``hot_pixel_dark_e_per_s``.
 * **Frame-transfer smear** — each photosite gets ``smear_fraction`` × its column's mean
   photo-signal (the charge collected while the rows shift under the light; off for CMOS).
-* **Blooming** — charge above the full well of a run of full photosites spills half up,
-  half down the column into the nearest photosites with room, conserving charge until it
-  leaves the array.
+* **Blooming** — the charge above the full well of a run of full photosites spills half
+  up, half down the column into the nearest photosites with room (runs whose spills meet
+  join and spill again), conserving charge until it leaves the array.
 * **Stray light and ghost** — a veiling glare E = PST(θ_sun)·E_sun with a point-source
   transmittance PST falling as a power of the Sun's off-axis angle, a linear gradient
   toward the Sun's side, and a ghost: a uniform disc holding the fraction R² (two surface
@@ -288,16 +288,6 @@ def smear(mean_e, fraction: float) -> np.ndarray:
     return e + fraction * e.mean(axis=0, keepdims=True)
 
 
-def _fill(view: np.ndarray, charge: float, full_well: float) -> None:
-    """Add ``charge`` to ``view`` (1-D, in the order it spreads), filling each element to
-    ``full_well`` before the next; what is left at the end leaves the array."""
-    if charge <= 0.0 or view.size == 0:
-        return
-    room = np.maximum(full_well - view, 0.0)
-    before = np.cumsum(room) - room
-    view += np.clip(charge - before, 0.0, room)
-
-
 def bloom(electrons, full_well_e: float) -> np.ndarray:
     """Blooming: the charge above the full well spills along the column (axis 0).
 
@@ -311,27 +301,65 @@ def bloom(electrons, full_well_e: float) -> np.ndarray:
     Returns
     -------
     electrons : ndarray of float64, shape like ``electrons``
-        Every photosite ≤ FW. Each run of full photosites (≥ FW) of a column holding excess
-        charge X = Σ(e − FW) is set to FW and X/2 spreads up, X/2 down the column, filling the
-        nearest photosites with room in turn (passing through full ones); charge is conserved
-        until it runs off the array's top or bottom edge. Runs are taken top to bottom.
+        Every photosite ≤ FW; each column holds the charge it held, less what ran off its top
+        or bottom end.
+
+    Notes
+    -----
+    Each run of full photosites (≥ FW) of a column is set to FW and its excess
+    X = Σ(e − FW) flows out, X/2 up and X/2 down, into the gaps next to it; a gap is filled
+    from its top by the run above and from its bottom by the run below, nearest photosites
+    first. A gap given more than its room fills up and joins the runs on either side into one
+    run whose excess is what the gap could not hold; that run spills again, half each way,
+    until every excess has found room or left the array (every column at once, one pass per
+    round of joins). Symmetric: a lone run's trail is centred on it.
     """
     e = np.array(electrons, dtype=np.float64)
     fw = _checks.finite_scalar("full_well_e", full_well_e, positive=True)
     flat = e.reshape(e.shape[0], -1)  # columns (and channels) side by side
-    for j in np.flatnonzero((flat > fw).any(axis=0)):
-        col = flat[:, j].copy()
-        edges = np.diff(np.concatenate(([0], (col >= fw).view(np.int8), [0])))
-        for s, t in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
-            excess = float(np.sum(col[s:t] - fw))
-            if excess <= 0.0:
-                continue
-            col[s:t] = fw
-            up = 0.5 * excess
-            _fill(col[s - 1::-1] if s > 0 else col[:0], up, fw)
-            _fill(col[t:], excess - up, fw)
-        flat[:, j] = col
+    hot = np.flatnonzero((flat > fw).any(axis=0))
+    if hot.size == 0:
+        return e
+    cols = np.ascontiguousarray(flat[:, hot].T)  # (n, H): one column per row
+    active = np.arange(hot.size)
+    while active.size:
+        cols[active] = _bloom_pass(cols[active], fw)
+        active = active[(cols[active] > fw).any(axis=1)]
+    flat[:, hot] = cols.T
     return e
+
+
+def _bloom_pass(cols: np.ndarray, fw: float) -> np.ndarray:
+    """One round of :func:`bloom` on columns laid out as rows, shape (n, H)."""
+    n, h = cols.shape
+    full = cols >= fw
+    room = np.where(full, 0.0, fw - cols)
+    f, v, r = full.ravel(), cols.ravel(), room.ravel()
+    start = np.ones(f.size, dtype=bool)
+    start[1:] = f[1:] != f[:-1]
+    start[::h] = True  # a column starts a segment
+    seg = np.cumsum(start) - 1  # segment (run of full photosites, or gap) of each photosite
+    seg_start = np.flatnonzero(start)
+    seg_col = seg_start // h
+    seg_full = f[seg_start]
+    excess = np.bincount(seg, weights=np.where(f, v - fw, 0.0), minlength=seg_start.size)
+    up = 0.5 * excess
+    down = excess - up
+    same = seg_col[1:] == seg_col[:-1]  # what would flow past a column's end leaves the array
+    from_above = np.zeros(seg_start.size)
+    from_above[1:] = np.where(same, down[:-1], 0.0)  # a gap gets the run above's lower half ...
+    from_below = np.zeros(seg_start.size)
+    from_below[:-1] = np.where(same, up[1:], 0.0)  # ... and the run below's upper half
+    seg_room = np.bincount(seg, weights=r, minlength=seg_start.size)
+    above = np.cumsum(room, axis=1).ravel() - r  # room above in the column (per column: small sums)
+    above -= above[seg_start][seg]  # ... within the segment
+    below = seg_room[seg] - above - r
+    out = np.where(f, fw, v + np.clip(from_above[seg] - above, 0.0, r) + np.clip(from_below[seg] - below, 0.0, r))
+    left = np.where(seg_full, 0.0, from_above + from_below - seg_room)
+    over = left > 0.0  # gaps given more than their room: full, the rest in their first photosite
+    out[over[seg]] = fw
+    out[seg_start[over]] += left[over]
+    return out.reshape(n, h)
 
 
 # --------------------------------------------------------------------------- stray light and ghost

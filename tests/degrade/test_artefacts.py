@@ -141,6 +141,26 @@ def test_blooming_conserves_charge_spills_along_the_column_and_stops_at_full_wel
     assert np.allclose(bloom(e, fw), fw)
 
 
+def test_blooming_runs_that_join_spill_their_common_excess_symmetrically():
+    fw = 1000.0
+    e = np.zeros((40, 1))
+    e[10, 0] = e[13, 0] = fw + 4 * fw  # two runs 2 rows apart, 4 wells of excess each
+    # round 1: rows 8, 9 and 14, 15 fill; the gap 11-12 gets 4 wells for 2 of room and joins
+    # rows 8-15 into one run with 2 wells of excess; round 2: rows 7 and 16 fill
+    expected = np.zeros(40)
+    expected[7:17] = fw
+    np.testing.assert_allclose(bloom(e, fw)[:, 0], expected, rtol=0, atol=1e-9)
+    # many fragmented runs: conserved per column, bounded, symmetric under flipping the column
+    rng = np.random.default_rng(11)
+    e = rng.uniform(0, 1.05 * fw, (80, 60))  # 5 % of the photosites just over the well: runs 1-2 long
+    e[rng.random(e.shape) < 0.03] = 6 * fw
+    e[:10] = e[-10:] = 0.0  # room at both ends: nothing leaves
+    out = bloom(e, fw)
+    assert out.max() <= fw
+    np.testing.assert_allclose(out.sum(axis=0), e.sum(axis=0), rtol=1e-12)
+    np.testing.assert_allclose(bloom(e[::-1], fw)[::-1], out, rtol=0, atol=1e-9)
+
+
 def test_smear_adds_the_fraction_of_the_column_mean():
     e = np.zeros((10, 3))
     e[2, 1] = 1000.0
