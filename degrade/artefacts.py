@@ -7,12 +7,12 @@ zero (or False) parameter:
 
 * **Vignetting** — relative illumination of the lens, cos⁴θ of the field angle θ
   (tan θ = r·p/f at a distance r [px] from the principal point, pitch p, focal length f;
-  W. J. Smith, *Modern Optical Engineering*, 4th ed., McGraw-Hill 2008, §9.6 "cosine-fourth
-  law"), optionally times a mechanical term 1 − α·ρ (ρ = r / half-diagonal, α the loss in
+  the cosine-fourth law of illumination, W. J. Smith, *Modern Optical Engineering*, 4th ed.,
+  McGraw-Hill 2008), optionally times a mechanical term 1 − α·ρ (ρ = r / half-diagonal, α the loss in
   the corners; the geometric factor of Kang & Weiss, "Can we calibrate a camera using an image
   of a flat, textureless Lambertian surface?", ECCV 2000).
 * **PRNU / DSNU** — a gain map 1 + σ_PRNU·N(0, 1) on the photo-electrons and an offset map
-  σ_DSNU·N(0, 1) [e⁻] (EMVA Standard 1288, Release 4.0, 2021, §8: PRNU in % of the signal,
+  σ_DSNU·N(0, 1) [e⁻] (EMVA Standard 1288, Release 4.0, 2021: PRNU in % of the signal,
   DSNU in e⁻).
 * **Hot pixels** — a fraction of the photosites with an extra dark current drawn from an
   exponential distribution of mean ``hot_pixel_dark_e_per_s``.
@@ -68,7 +68,8 @@ class ArtefactConfig:
         loss in the image corners. Default 0.
     prnu_sigma : float
         σ of the photo-response non-uniformity, a fraction of the signal, in [0, 0.2].
-        Default 0.01 (1 %, EMVA 1288 data sheets of industrial CMOS cameras report 0.5–1 %).
+        Default 0.01 (1 %: a round value of the order EMVA 1288 data sheets of industrial
+        global-shutter CMOS cameras give; check a specific camera's data sheet).
     dsnu_sigma_e : float
         σ of the dark-signal non-uniformity [e⁻], ≥ 0. Default 2.
     hot_pixel_fraction : float
@@ -395,7 +396,7 @@ def stray_light(h: int, w: int, sun_dir_cam, *, focal_length_m: float, pixel_pit
         * glare: PST(θ)·E_sun·(1 + g·s), PST(θ) = pst_edge·(θ_edge / max(θ, θ_edge))ⁿ with
           θ the Sun's off-axis angle, θ_edge = atan(half-diagonal·p/f) and s ∈ [−1, 1] the
           pixel's offset from the centre toward the Sun's azimuth over the half-diagonal (the
-          PST's definition: E. Fest, *Stray Light Analysis and Control*, SPIE Press 2013, §1.5;
+          PST's definition: E. Fest, *Stray Light Analysis and Control*, SPIE Press 2013; a
           power-law fall-off as for Harvey-type scatter of the lens surfaces);
         * ghost: a uniform disc of radius R_g [px] centred at c + m·(u_sun − c) (c the image
           centre, u_sun the Sun's pinhole projection), holding the power
