@@ -299,8 +299,8 @@ def resolve_config(args: argparse.Namespace, defaults: dict | None = None) -> tu
     if out["modalities"] is None:
         mods = defaults.get("modalities") or list(DEFAULT_MODALITIES)
         out["modalities"] = [m for m in mods if not (m == "rgb_degraded" and d["degrade"] == "none")]
-    elif preset_error(out["modalities"], d["degrade"]):
-        raise CLIError(preset_error(out["modalities"], d["degrade"]))
+    elif why := preset_error(out["modalities"], d["degrade"]):  # e.g. rgb_degraded with --degrade none
+        raise CLIError(why)
     if d["degrade"] == "physical":
         full_scale = 2 ** d["bit_depth"] - 1
         if d["offset_dn"] > full_scale / 2:
@@ -429,7 +429,7 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
         images["rgb"] = quantise(srgb_encode(np.minimum(linear, np.float32(1.0))), 8)
         info["exposure_scale"] = float(scale)
     if mods.intersection(CAMERA_MODALITIES):  # one simulation for rgb_degraded, signal_e, saturation
-        images.update(degrade_frame(cfg, task, images.get("rgb"), radiance, degrade_seq, sorted(mods & set(CAMERA_MODALITIES))))
+        images.update(degrade_frame(cfg, task, images.get("rgb"), radiance, degrade_seq, sorted(mods.intersection(CAMERA_MODALITIES))))
     hits = FrameHits(scene, camera, R, t, geo, task.get("next_pose"))  # hit points made on first use
     for m in task["modalities"]:  # the rest from the geometry and radiance (raytrace.dataset.modalities)
         if MODALITY[m].produce is not None:

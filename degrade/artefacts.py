@@ -406,6 +406,8 @@ def stray_light(h: int, w: int, sun_dir_cam, *, focal_length_m: float, pixel_pit
         such frames are flagged ``sun_in_lens``).
     """
     _checks.instance("config", config, ArtefactConfig)
+    h = _checks.integer("h", h, 1, 1 << 20)
+    w = _checks.integer("w", w, 1, 1 << 20)
     d = np.asarray(sun_dir_cam, dtype=np.float64)
     if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
         raise ValueError(f"sun_dir_cam must be a finite non-zero 3-vector, got {sun_dir_cam!r}")
