@@ -131,12 +131,13 @@ class ArtefactConfig:
             object.__setattr__(self, name, _checks.flag(name, getattr(self, name)))
         ranges = {"mechanical_vignetting": (0.0, 0.99), "prnu_sigma": (0.0, 0.2), "hot_pixel_fraction": (0.0, 0.1),
                   "smear_fraction": (0.0, 1.0), "pst_edge": (0.0, 1.0), "pst_slope": (0.0, 10.0),
-                  "sun_exclusion_deg": (1e-6, 90.0), "glare_gradient": (0.0, 1.0), "ghost_reflectance": (0.0, 1.0),
+                  "sun_exclusion_deg": (0.0, 90.0), "glare_gradient": (0.0, 1.0), "ghost_reflectance": (0.0, 1.0),
                   "ghost_magnification": (-10.0, 10.0)}
         for name, (lo, hi) in ranges.items():
             v = _checks.finite_scalar(name, getattr(self, name))
-            if not lo <= v <= hi:
-                raise ValueError(f"{name} must be in [{lo:g}, {hi:g}], got {getattr(self, name)!r}")
+            lo_open = name == "sun_exclusion_deg"
+            if not (lo < v if lo_open else lo <= v) or v > hi:
+                raise ValueError(f"{name} must be in {'(' if lo_open else '['}{lo:g}, {hi:g}], got {getattr(self, name)!r}")
             object.__setattr__(self, name, v)
         for name in ("dsnu_sigma_e", "hot_pixel_dark_e_per_s"):
             object.__setattr__(self, name, _checks.finite_scalar(name, getattr(self, name), nonnegative=True))
