@@ -390,7 +390,7 @@ def stray_light(h: int, w: int, sun_dir_cam, *, focal_length_m: float, pixel_pit
 
     Returns
     -------
-    irradiance : ndarray of float64, shape (H, W), or None
+    irradiance : ndarray of float32, shape (H, W), or None
         None when the Sun is behind the camera (z ≤ 0) or at least ``sun_exclusion_deg``
         off-axis. Else glare + ghost:
 
@@ -422,12 +422,13 @@ def stray_light(h: int, w: int, sun_dir_cam, *, focal_length_m: float, pixel_pit
     x, y = _centred_grid(h, w)
     half_diag = math.hypot((w - 1) / 2, (h - 1) / 2) or 1.0
     theta_edge = math.atan(math.hypot(w / 2, h / 2) * p / f)
-    pst = config.pst_edge * (theta_edge / max(theta, theta_edge)) ** config.pst_slope
-    out = np.full((h, w), pst * e_sun)
+    level = config.pst_edge * (theta_edge / max(theta, theta_edge)) ** config.pst_slope * e_sun
     azimuth = math.hypot(d[0], d[1])
-    if config.glare_gradient > 0 and azimuth > 0:
-        s = (x * (d[0] / azimuth) + y * (d[1] / azimuth)) / half_diag
-        out *= 1.0 + config.glare_gradient * s
+    g = config.glare_gradient / half_diag if azimuth > 0 else 0.0
+    # level·(1 + g·s) as the sum of a row and a column term: one pass over the frame
+    row = (level * (1.0 + g * x * (d[0] / (azimuth or 1.0)))).astype(np.float32)
+    col = (level * g * y * (d[1] / (azimuth or 1.0))).astype(np.float32)
+    out = row + col
     if aperture_m is not None and config.ghost_reflectance > 0:
         D = _checks.finite_scalar("aperture_m", aperture_m, positive=True)
         u_sun, v_sun = (f / p) * d[0] / d[2], (f / p) * d[1] / d[2]  # from the centre [px]
@@ -440,9 +441,11 @@ def stray_light(h: int, w: int, sun_dir_cam, *, focal_length_m: float, pixel_pit
         gcol, grow = gx + (w - 1) / 2, gy + (h - 1) / 2  # in pixel indices (integers at pixel centres)
         gxf, gyf = gcol - math.floor(gcol), grow - math.floor(grow)
         n_disc = int(np.count_nonzero((k[None, :] - gxf) ** 2 + (k[:, None] - gyf) ** 2 <= rg * rg))
-        if n_disc:
-            inside = (x - gx) ** 2 + (y - gy) ** 2 <= rg * rg
-            out[inside] += power / (n_disc * p * p)
+        c0, c1 = max(0, math.floor(gcol - rg)), min(w, math.ceil(gcol + rg) + 1)
+        r0, r1 = max(0, math.floor(grow - rg)), min(h, math.ceil(grow + rg) + 1)
+        if n_disc and c0 < c1 and r0 < r1:  # the disc's bounding box in view
+            inside = (x[:, c0:c1] - gx) ** 2 + (y[r0:r1] - gy) ** 2 <= rg * rg
+            out[r0:r1, c0:c1] += np.float32(power / (n_disc * p * p)) * inside
     return out
 
 

@@ -315,9 +315,9 @@ def _sensor_with_artefacts(img: np.ndarray, config: DegradeConfig, sun_dir_cam, 
         e = stray_light(h, w, sun_dir_cam, focal_length_m=optics.focal_length_m, pixel_pitch_m=optics.pixel_pitch_m,
                         aperture_m=optics.aperture_m, config=art, sun_irradiance_W_m2=SOLAR_IRRADIANCE_W_M2 * sun_fraction)
         if e is not None:
-            add = irradiance_to_signal(e, exposure_s=c.exposure_s, pixel_pitch_m=optics.pixel_pitch_m,
-                                       wavelength_m=art.wavelength_m, photons_at_one=c.photons_max).astype(np.float32)
-            img += add if img.ndim == 2 else add[:, :, None]
+            e *= np.float32(irradiance_to_signal(1.0, exposure_s=c.exposure_s, pixel_pitch_m=optics.pixel_pitch_m,
+                                                 wavelength_m=art.wavelength_m, photons_at_one=c.photons_max))
+            img += e if img.ndim == 2 else e[:, :, None]
     if c.demosaic is not None and img.ndim == 2:
         raise ValueError("image_linear is H×W (monochrome): it needs config.sensor.demosaic=None, "
                          f"got demosaic={c.demosaic!r}")
