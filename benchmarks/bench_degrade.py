@@ -19,8 +19,8 @@ hits all methods alike); wall time and process CPU time (all threads) where it h
 4. Camera artefacts (degrade.artefacts): the whole chain with them off and with the physical
    preset's defaults side by side, and each artefact alone on top of the chain, on the
    textured target at 1.3× exposure (its brightest panels saturate, so blooming has work)
-   with the Sun 40° off-axis (glare and ghost in the frame), exposure 20 µs as in the main job. ``--artefacts`` prints only this
-   table.
+   with the Sun 40° off-axis (glare and ghost in the frame), exposure 20 µs as in the main
+   job. ``--artefacts`` prints only this table.
 """
 
 from __future__ import annotations

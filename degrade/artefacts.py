@@ -8,9 +8,9 @@ zero (or False) parameter:
 * **Vignetting** — relative illumination of the lens, cos⁴θ of the field angle θ
   (tan θ = r·p/f at a distance r [px] from the principal point, pitch p, focal length f;
   the cosine-fourth law of illumination, W. J. Smith, *Modern Optical Engineering*, 4th ed.,
-  McGraw-Hill 2008), optionally times a mechanical term 1 − α·ρ (ρ = r / half-diagonal, α the loss in
-  the corners; the geometric factor of Kang & Weiss, "Can we calibrate a camera using an image
-  of a flat, textureless Lambertian surface?", ECCV 2000).
+  McGraw-Hill 2008), optionally times a mechanical term 1 − α·ρ (ρ = r / half-diagonal, α the
+  loss in the corners; the geometric factor of Kang & Weiss, "Can we calibrate a camera using
+  an image of a flat, textureless Lambertian surface?", ECCV 2000).
 * **PRNU / DSNU** — a gain map 1 + σ_PRNU·N(0, 1) on the photo-electrons and an offset map
   σ_DSNU·N(0, 1) [e⁻] (EMVA Standard 1288, Release 4.0, 2021: PRNU in % of the signal,
   DSNU in e⁻).
@@ -45,8 +45,8 @@ import numpy as np
 
 from . import _checks
 
-__all__ = ["ARTEFACTS_OFF", "SOLAR_IRRADIANCE_W_M2", "ArtefactConfig", "CameraMaps", "bloom", "camera_maps", "irradiance_to_signal", "jpeg_bytes", "jpeg_roundtrip",
-           "relative_illumination", "smear", "stray_light"]
+__all__ = ["ARTEFACTS_OFF", "SOLAR_IRRADIANCE_W_M2", "ArtefactConfig", "CameraMaps", "bloom", "camera_maps",
+           "irradiance_to_signal", "jpeg_bytes", "jpeg_roundtrip", "relative_illumination", "smear", "stray_light"]
 
 SOLAR_IRRADIANCE_W_M2 = 1361.0
 """Total solar irradiance at 1 au [W/m²] (G. Kopp, J. L. Lean, "A new, lower value of total
@@ -163,7 +163,9 @@ ARTEFACTS_OFF = ArtefactConfig(vignetting=False, prnu_sigma=0.0, dsnu_sigma_e=0.
 def _centred_grid(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
     """Column and row offsets from the image centre ((W − 1)/2, (H − 1)/2: pixel centres are
     integers) [px], shapes (1, W) and (H, 1)."""
-    return (np.arange(w, dtype=np.float64) - (w - 1) / 2)[None, :], (np.arange(h, dtype=np.float64) - (h - 1) / 2)[:, None]
+    x = np.arange(w, dtype=np.float64) - (w - 1) / 2
+    y = np.arange(h, dtype=np.float64) - (h - 1) / 2
+    return x[None, :], y[:, None]
 
 
 def relative_illumination(h: int, w: int, *, focal_length_m: float, pixel_pitch_m: float,
