@@ -431,7 +431,10 @@ def stray_light(h: int, w: int, sun_dir_cam, *, focal_length_m: float, pixel_pit
     row = (level * (1.0 + g * x * (d[0] / (azimuth or 1.0)))).astype(np.float32)
     col = (level * g * y * (d[1] / (azimuth or 1.0))).astype(np.float32)
     out = row + col
-    if aperture_m is not None and config.ghost_reflectance > 0:
+    # the ghost's distance from the centre, |m|·(f/p)·tan θ, against the image's size (no overflow near 90°)
+    reach = 4.0 * (w + h + 2 * config.ghost_radius_px)
+    far = abs(config.ghost_magnification) * (f / p) * math.hypot(d[0], d[1]) > d[2] * reach
+    if aperture_m is not None and config.ghost_reflectance > 0 and not far:
         D = _checks.finite_scalar("aperture_m", aperture_m, positive=True)
         u_sun, v_sun = (f / p) * d[0] / d[2], (f / p) * d[1] / d[2]  # from the centre [px]
         m = config.ghost_magnification
