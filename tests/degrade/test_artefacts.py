@@ -285,6 +285,28 @@ def test_option_defaults_are_the_artefact_config_defaults():
             assert getattr(d, field.get(key, key)) == value, key
 
 
+def test_every_value_an_option_takes_the_artefact_config_takes():
+    """A value the command line lets through must not fail later, in a worker, mid-sequence."""
+    import argparse
+    import re
+    field = {"hot_pixel_dark_e_s": "hot_pixel_dark_e_per_s"}
+    checked = 0
+    for o in CAMERA_OPTIONS:
+        if o.key == "camera_seed" or getattr(o.parse, "toml", None) not in ("a number", "an integer"):
+            continue
+        checked += 1
+        with pytest.raises(argparse.ArgumentTypeError) as exc:
+            o.parse("nan")
+        lo_b, lo, hi = re.search(r"([\[(])(-?[\d.e+]+), (-?[\d.e+]+)\]", str(exc.value)).groups()
+        lo, hi = float(lo), float(hi)
+        values = [hi, 0.5 * (lo + hi)] + ([lo] if lo_b == "[" else [lo + 1e-9 * (hi - lo)])
+        for v in values:
+            v = int(v) if o.parse.toml == "an integer" else v
+            parsed = o.parse(str(v))
+            ArtefactConfig(**{field.get(o.key, o.key): parsed})
+    assert checked == 14
+
+
 def test_bad_parameters_are_one_line_value_errors():
     for kwargs, name in ((dict(prnu_sigma=0.5), "prnu_sigma"), (dict(jpeg_quality=101), "jpeg_quality"),
                          (dict(sun_exclusion_deg=0.0), "sun_exclusion_deg"), (dict(blooming="yes"), "blooming")):
