@@ -202,12 +202,12 @@ def artefacts_table(repeats: int) -> list[str]:
     base = DegradeConfig(sensor=dataclasses.replace(DegradeConfig().sensor, exposure_s=20e-6))
     off = dataclasses.replace(base, artefacts=ARTEFACTS_OFF)
     alone = {
-        "vignetting (cos⁴)": dict(vignetting=True),
-        "PRNU + DSNU + hot pixels (maps cached per camera)": dict(prnu_sigma=0.01, dsnu_sigma_e=2.0,
-                                                                   hot_pixel_fraction=1e-4),
-        "blooming": dict(blooming=True),
-        "stray light + ghost (Sun 40° off-axis)": dict(stray_light=True),
-        "JPEG quality 90 (OpenImageIO)": dict(jpeg_quality=90),
+        "vignetting (cos⁴)": {"vignetting": True},
+        "PRNU + DSNU + hot pixels (maps cached per camera)": {"prnu_sigma": 0.01, "dsnu_sigma_e": 2.0,
+                                                              "hot_pixel_fraction": 1e-4},
+        "blooming": {"blooming": True},
+        "stray light + ghost (Sun 40° off-axis)": {"stray_light": True},
+        "JPEG quality 90 (OpenImageIO)": {"jpeg_quality": 90},
     }
     cases = {
         "chain without artefacts `degrade(img)`": lambda: degrade(img, base, rng=2),

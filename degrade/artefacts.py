@@ -441,7 +441,7 @@ def stray_light(h: int, w: int, sun_dir_cam, *, focal_length_m: float, pixel_pit
         gx, gy, rg = m * u_sun, m * v_sun, config.ghost_radius_px
         power = config.ghost_reflectance ** 2 * e_sun * d[2] * math.pi * D * D / 4  # [W]
         # pixels of the disc on the unbounded pixel grid (so its power stays with the disc's part in view)
-        r = int(math.ceil(rg)) + 1
+        r = math.ceil(rg) + 1
         k = np.arange(-r, r + 1)
         gcol, grow = gx + (w - 1) / 2, gy + (h - 1) / 2  # in pixel indices (integers at pixel centres)
         gxf, gyf = gcol - math.floor(gcol), grow - math.floor(grow)

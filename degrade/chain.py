@@ -302,7 +302,13 @@ def simulate_frame(image_linear, config: DegradeConfig = DegradeConfig(), *, rng
 
 
 def _sensor_with_artefacts(img: np.ndarray, config: DegradeConfig, sun_dir_cam, sun_fraction, camera_seed, rng):
-    from .artefacts import SOLAR_IRRADIANCE_W_M2, camera_maps, irradiance_to_signal, relative_illumination, stray_light
+    from .artefacts import (
+        SOLAR_IRRADIANCE_W_M2,
+        camera_maps,
+        irradiance_to_signal,
+        relative_illumination,
+        stray_light,
+    )
     from .sensor import _demosaic, _mosaic, _signal_e
     art, optics, c = config.artefacts, config.optics, config.sensor
     h, w = img.shape[:2]

@@ -4,6 +4,7 @@ charge bookkeeping, the pinhole projection of the Sun, a third-party JPEG decode
 camera equation."""
 
 import io
+import itertools
 import math
 
 import numpy as np
@@ -34,8 +35,8 @@ QUIET = SensorConfig(shot_noise=False, read_noise_e=0.0, quantise=False, demosai
 
 
 def _config(sensor=QUIET, **art) -> DegradeConfig:
-    base = dict(vignetting=False, prnu_sigma=0.0, dsnu_sigma_e=0.0, hot_pixel_fraction=0.0, blooming=False,
-                stray_light=False)
+    base = {"vignetting": False, "prnu_sigma": 0.0, "dsnu_sigma_e": 0.0, "hot_pixel_fraction": 0.0, "blooming": False,
+            "stray_light": False}
     base.update(art)
     return DegradeConfig(optics=OpticsConfig(focal_length_m=F_M, pixel_pitch_m=P_M, aperture_m=None), sensor=sensor,
                          encoding="linear", artefacts=ArtefactConfig(**base))
@@ -180,14 +181,14 @@ def _sun(theta_deg: float, phi_deg: float = 30.0) -> np.ndarray:
 
 def test_stray_light_is_zero_behind_and_far_off_axis_and_rises_toward_the_field_edge():
     h, w = 60, 80
-    kw = dict(focal_length_m=F_M, pixel_pitch_m=20e-6, aperture_m=1e-3)
+    kw = {"focal_length_m": F_M, "pixel_pitch_m": 20e-6, "aperture_m": 1e-3}
     art = ArtefactConfig(ghost_reflectance=0.0)
     assert stray_light(h, w, [0.1, 0.2, -1.0], config=art, **kw) is None  # behind the camera
     assert stray_light(h, w, _sun(61.0), config=art, **kw) is None  # beyond the 60° exclusion
     edge_deg = math.degrees(math.atan(math.hypot(w / 2, h / 2) * 20e-6 / F_M))
     angles = np.linspace(59.5, edge_deg + 0.1, 12)
     means = [stray_light(h, w, _sun(a), config=art, **kw).astype(np.float64).mean() for a in angles]
-    assert all(b > a for a, b in zip(means, means[1:])) and means[0] > 0
+    assert all(b > a for a, b in itertools.pairwise(means)) and means[0] > 0
     np.testing.assert_allclose(means[-1], art.pst_edge * 1361.0 * (edge_deg / (edge_deg + 0.1)) ** 3, rtol=1e-6)  # float32
     glare = stray_light(h, w, _sun(50.0, 0.0), config=art, **kw)
     assert glare[:, -1].mean() > glare[:, 0].mean()  # brighter on the Sun's side (+x)
@@ -308,8 +309,8 @@ def test_every_value_an_option_takes_the_artefact_config_takes():
 
 
 def test_bad_parameters_are_one_line_value_errors():
-    for kwargs, name in ((dict(prnu_sigma=0.5), "prnu_sigma"), (dict(jpeg_quality=101), "jpeg_quality"),
-                         (dict(sun_exclusion_deg=0.0), "sun_exclusion_deg"), (dict(blooming="yes"), "blooming")):
+    for kwargs, name in (({"prnu_sigma": 0.5}, "prnu_sigma"), ({"jpeg_quality": 101}, "jpeg_quality"),
+                         ({"sun_exclusion_deg": 0.0}, "sun_exclusion_deg"), ({"blooming": "yes"}, "blooming")):
         with pytest.raises(ValueError, match=name) as exc:
             ArtefactConfig(**kwargs)
         assert "\n" not in str(exc.value)
