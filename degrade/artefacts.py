@@ -79,6 +79,9 @@ class ArtefactConfig:
         Default 5e4.
     blooming : bool
         Spill charge above the full well along the column. Default True.
+    blooming_spill : float
+        Fraction of a run's excess charge that spills at each step, in [0, 1]; the rest is
+        drained (an anti-blooming gate). Default 1 (all of it: charge conserved).
     smear_fraction : float
         Frame-transfer smear: transfer time / exposure time, in [0, 1]. Default 0 (CMOS).
     stray_light : bool
@@ -114,6 +117,7 @@ class ArtefactConfig:
     hot_pixel_fraction: float = 1e-4
     hot_pixel_dark_e_per_s: float = 5e4
     blooming: bool = True
+    blooming_spill: float = 1.0
     smear_fraction: float = 0.0
     stray_light: bool = True
     pst_edge: float = 1e-4
@@ -130,6 +134,7 @@ class ArtefactConfig:
         for name in ("vignetting", "blooming", "stray_light"):
             object.__setattr__(self, name, _checks.flag(name, getattr(self, name)))
         ranges = {"mechanical_vignetting": (0.0, 0.99), "prnu_sigma": (0.0, 0.2), "hot_pixel_fraction": (0.0, 0.1),
+                  "blooming_spill": (0.0, 1.0),
                   "smear_fraction": (0.0, 1.0), "pst_edge": (0.0, 1.0), "pst_slope": (0.0, 10.0),
                   "sun_exclusion_deg": (0.0, 90.0), "glare_gradient": (0.0, 1.0), "ghost_reflectance": (0.0, 1.0),
                   "ghost_magnification": (-10.0, 10.0)}
@@ -292,7 +297,7 @@ def smear(mean_e, fraction: float) -> np.ndarray:
     return e + fraction * e.mean(axis=0, keepdims=True)
 
 
-def bloom(electrons, full_well_e: float) -> np.ndarray:
+def bloom(electrons, full_well_e: float, spill: float = 1.0) -> np.ndarray:
     """Blooming: the charge above the full well spills along the column (axis 0).
 
     Parameters
@@ -301,17 +306,20 @@ def bloom(electrons, full_well_e: float) -> np.ndarray:
         Charge per photosite before the full-well limit [e⁻].
     full_well_e : float
         Full-well capacity FW, > 0 [e⁻].
+    spill : float, optional
+        Fraction s in [0, 1] of a run's excess that flows out at each step; the rest is drained
+        (an anti-blooming gate). Default 1: charge is conserved. 0: a plain clip at FW.
 
     Returns
     -------
     electrons : ndarray of float64, shape like ``electrons``
-        Every photosite ≤ FW; each column holds the charge it held, less what ran off its top
-        or bottom end.
+        Every photosite ≤ FW; with ``spill=1`` each column holds the charge it held, less what
+        ran off its top or bottom end.
 
     Notes
     -----
     Each run of full photosites (≥ FW) of a column is set to FW and its excess
-    X = Σ(e − FW) flows out, X/2 up and X/2 down, into the gaps next to it; a gap is filled
+    X = s·Σ(e − FW) flows out, X/2 up and X/2 down, into the gaps next to it; a gap is filled
     from its top by the run above and from its bottom by the run below, nearest photosites
     first. A gap given more than its room fills up and joins the runs on either side into one
     run whose excess is what the gap could not hold; that run spills again, half each way,
@@ -320,6 +328,9 @@ def bloom(electrons, full_well_e: float) -> np.ndarray:
     """
     e = np.array(electrons, dtype=np.float64)
     fw = _checks.finite_scalar("full_well_e", full_well_e, positive=True)
+    spill = _checks.finite_scalar("spill", spill, nonnegative=True)
+    if spill > 1.0:
+        raise ValueError(f"spill must be in [0, 1], got {spill!r}")
     flat = e.reshape(e.shape[0], -1)  # columns (and channels) side by side
     hot = np.flatnonzero((flat > fw).any(axis=0))
     if hot.size == 0:
@@ -327,13 +338,13 @@ def bloom(electrons, full_well_e: float) -> np.ndarray:
     cols = np.ascontiguousarray(flat[:, hot].T)  # (n, H): one column per row
     active = np.arange(hot.size)
     while active.size:
-        cols[active] = _bloom_pass(cols[active], fw)
+        cols[active] = _bloom_pass(cols[active], fw, spill)
         active = active[(cols[active] > fw).any(axis=1)]
     flat[:, hot] = cols.T
     return e
 
 
-def _bloom_pass(cols: np.ndarray, fw: float) -> np.ndarray:
+def _bloom_pass(cols: np.ndarray, fw: float, spill: float) -> np.ndarray:
     """One round of :func:`bloom` on columns laid out as rows, shape (n, H)."""
     n, h = cols.shape
     full = cols >= fw
@@ -347,6 +358,8 @@ def _bloom_pass(cols: np.ndarray, fw: float) -> np.ndarray:
     seg_col = seg_start // h
     seg_full = f[seg_start]
     excess = np.bincount(seg, weights=np.where(f, v - fw, 0.0), minlength=seg_start.size)
+    if spill < 1.0:
+        excess *= spill
     up = 0.5 * excess
     down = excess - up
     same = seg_col[1:] == seg_col[:-1]  # what would flow past a column's end leaves the array

@@ -46,7 +46,7 @@ def artefact_config(d: dict):
     from .artefacts import ArtefactConfig
     keys = {"vignetting": "vignetting", "mechanical_vignetting": "mechanical_vignetting", "prnu_sigma": "prnu_sigma",
             "dsnu_sigma_e": "dsnu_sigma_e", "hot_pixel_fraction": "hot_pixel_fraction",
-            "hot_pixel_dark_e_s": "hot_pixel_dark_e_per_s", "blooming": "blooming", "smear_fraction": "smear_fraction",
+            "hot_pixel_dark_e_s": "hot_pixel_dark_e_per_s", "blooming": "blooming", "blooming_spill": "blooming_spill", "smear_fraction": "smear_fraction",
             "stray_light": "stray_light", "pst_edge": "pst_edge", "pst_slope": "pst_slope",
             "sun_exclusion_deg": "sun_exclusion_deg", "glare_gradient": "glare_gradient",
             "ghost_reflectance": "ghost_reflectance", "ghost_radius_px": "ghost_radius_px",

@@ -371,7 +371,7 @@ def _signal_e(img: np.ndarray, c: SensorConfig, art, maps, rng: np.random.Genera
     if maps.offset_e is not None:
         charge += maps.offset_e
         np.maximum(charge, 0.0, out=charge)
-    charge = bloom(charge, c.full_well_e) if art.blooming else np.minimum(charge, c.full_well_e)
+    charge = bloom(charge, c.full_well_e, art.blooming_spill) if art.blooming else np.minimum(charge, c.full_well_e)
     signal = charge
     signal += noise.reshape(img.shape)
     np.minimum(signal, c.full_well_e, out=signal)

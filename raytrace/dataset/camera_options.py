@@ -28,6 +28,9 @@ def _camera_options() -> tuple:
           _P + "mean extra dark current of a hot photosite [e-/s] (exponentially distributed)"),
         O("--blooming", "degrade", opt.boolean, True,
           _P + "charge above the full well spills along the column", "{true,false}"),
+        O("--blooming-spill", "degrade", opt.float_in(0.0, 1.0), 1.0,
+          _P + "fraction of the excess charge that spills on at each step; the rest is drained by an "
+          "anti-blooming gate (1: all, charge conserved)"),
         O("--smear-fraction", "degrade", opt.float_in(0.0, 1.0), 0.0,
           _P + "frame-transfer smear, transfer time / exposure time (0: off, as for CMOS)"),
         O("--stray-light", "degrade", opt.boolean, True,

@@ -142,6 +142,17 @@ def test_blooming_conserves_charge_spills_along_the_column_and_stops_at_full_wel
     assert np.allclose(bloom(e, fw), fw)
 
 
+def test_blooming_with_an_anti_blooming_drain_spills_only_its_share():
+    fw = 1000.0
+    e = np.zeros((40, 3))
+    e[20, 1] = fw + 3.5 * fw
+    half = np.zeros(40)
+    half[20] = fw
+    half[19] = half[21] = 0.875 * fw  # half of 3.5 wells spills: 0.875 each way, the rest drained
+    np.testing.assert_allclose(bloom(e, fw, spill=0.5)[:, 1], half)
+    assert np.array_equal(bloom(e, fw, spill=0.0), np.minimum(e, fw))  # no spill: a plain clip
+
+
 def test_blooming_runs_that_join_spill_their_common_excess_symmetrically():
     fw = 1000.0
     e = np.zeros((40, 1))
@@ -305,7 +316,7 @@ def test_every_value_an_option_takes_the_artefact_config_takes():
             v = int(v) if o.parse.toml == "an integer" else v
             parsed = o.parse(str(v))
             ArtefactConfig(**{field.get(o.key, o.key): parsed})
-    assert checked == 14
+    assert checked == 15
 
 
 def test_bad_parameters_are_one_line_value_errors():
