@@ -46,7 +46,8 @@ from raytrace.dataset import UsageError as CLIError
 from raytrace.dataset import folder, jit, pool, scenes, snapshots
 from raytrace.dataset import options as opt
 from raytrace.dataset import run as runner
-from raytrace.dataset.modalities import MODALITIES as MODALITY
+from raytrace.dataset.camera_options import CAMERA_OPTIONS
+from raytrace.dataset.modalities import MODALITIES as MODALITY, CAMERA as CAMERA_MODALITIES, preset_error
 from raytrace.dataset.modalities import DEFAULT as DEFAULT_MODALITIES
 from raytrace.dataset.modalities import NAMES as MODALITIES
 from raytrace.presets import QUALITIES
@@ -215,6 +216,7 @@ def _options() -> tuple:
         O("--motion-blur", "degrade", opt.choice(("fixed", "auto")), "fixed",
           "physical preset: 'fixed' blurs every frame by --motion-blur-px at --motion-angle-deg; 'auto' takes "
           "each frame's blur from the target's own image motion during the exposure"),
+        *CAMERA_OPTIONS,
         # [output]
         O("--modalities", "output", opt.subset(MODALITIES), None,
           f"files per frame, comma-separated (default: {','.join(DEFAULT_MODALITIES)}; no rgb_degraded with --degrade "
@@ -297,8 +299,8 @@ def resolve_config(args: argparse.Namespace, defaults: dict | None = None) -> tu
     if out["modalities"] is None:
         mods = defaults.get("modalities") or list(DEFAULT_MODALITIES)
         out["modalities"] = [m for m in mods if not (m == "rgb_degraded" and d["degrade"] == "none")]
-    elif "rgb_degraded" in out["modalities"] and d["degrade"] == "none":
-        raise CLIError("argument --modalities: rgb_degraded needs --degrade paper or physical, got --degrade none")
+    elif why := preset_error(out["modalities"], d["degrade"]):  # e.g. rgb_degraded with --degrade none
+        raise CLIError(why)
     if d["degrade"] == "physical":
         full_scale = 2 ** d["bit_depth"] - 1
         if d["offset_dn"] > full_scale / 2:
@@ -382,10 +384,11 @@ def _worker_ready(quality: str) -> None:
         split_sum_table()
 
 
-def degrade_frame(cfg: dict, task: dict, rgb8, radiance, degrade_seq) -> np.ndarray:
-    """:func:`degrade.presets.degrade_frame` of one frame task, with its motion blur."""
-    from degrade.presets import degrade_frame as degrade_one
-    return degrade_one(cfg["degrade"], cfg["camera"], rgb8, radiance, degrade_seq, task["light"].get("motion"))
+def degrade_frame(cfg: dict, task: dict, rgb8, radiance, degrade_seq, want=("rgb_degraded",)) -> dict:
+    """:func:`degrade.presets.degrade_outputs` ``want`` of one frame task, with its motion blur and Sun."""
+    from degrade.presets import degrade_outputs
+    return degrade_outputs(cfg["degrade"], cfg["camera"], rgb8, radiance, degrade_seq, task["light"].get("motion"),
+                           label=task["label"], sequence_seed=cfg["sequence"]["seed"], want=want)
 
 
 def render_frame_images(task: dict) -> tuple[dict, dict]:
@@ -425,8 +428,8 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
             linear = radiance * np.float32(scale)
         images["rgb"] = quantise(srgb_encode(np.minimum(linear, np.float32(1.0))), 8)
         info["exposure_scale"] = float(scale)
-    if "rgb_degraded" in mods:
-        images["rgb_degraded"] = degrade_frame(cfg, task, images.get("rgb"), radiance, degrade_seq)
+    if mods.intersection(CAMERA_MODALITIES):  # one simulation for rgb_degraded, signal_e, saturation
+        images.update(degrade_frame(cfg, task, images.get("rgb"), radiance, degrade_seq, sorted(mods.intersection(CAMERA_MODALITIES))))
     hits = FrameHits(scene, camera, R, t, geo, task.get("next_pose"))  # hit points made on first use
     for m in task["modalities"]:  # the rest from the geometry and radiance (raytrace.dataset.modalities)
         if MODALITY[m].produce is not None:
@@ -876,7 +879,7 @@ def degrade_snapshot(name: str, images: dict) -> dict:
         for j, task in enumerate(tasks):
             cols = slice(j * width, (j + 1) * width)
             _render_seed, degrade_seq = folder.frame_seeds(c["sequence"]["seed"], task["frame"])
-            strips.append(degrade_frame(c, task, images["rgb"][:, cols], images["radiance"][:, cols], degrade_seq))
+            strips.append(degrade_frame(c, task, images["rgb"][:, cols], images["radiance"][:, cols], degrade_seq)["rgb_degraded"])
         out[f"rgb_{preset}"] = np.concatenate(strips, axis=1)
     return out
 

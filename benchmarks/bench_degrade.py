@@ -16,12 +16,18 @@ hits all methods alike); wall time and process CPU time (all threads) where it h
    checks that both give identical noise on the same blurred image.
 3. convolve_image: direct vs FFT by kernel size, one kernel for all channels and one per
    channel (the measurement behind degrade.convolve.DIRECT_MAX_TAPS).
+4. Camera artefacts (degrade.artefacts): the whole chain with them off and with the physical
+   preset's defaults side by side, and each artefact alone on top of the chain, on the
+   textured target at 1.3× exposure (its brightest panels saturate, so blooming has work)
+   with the Sun 40° off-axis (glare and ghost in the frame), exposure 20 µs as in the main
+   job. ``--artefacts`` prints only this table.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import os
 import platform
 import statistics
@@ -187,12 +193,52 @@ def convolution_table(repeats: int) -> list[str]:
     return lines
 
 
+def artefacts_table(repeats: int) -> list[str]:
+    from degrade.artefacts import ARTEFACTS_OFF, ArtefactConfig
+    from degrade.chain import simulate_frame
+    img = frame(0.25) * np.float32(1.3)
+    sun = [math.sin(math.radians(40.0)), 0.0, math.cos(math.radians(40.0))]
+    # the main job's exposure (20 µs): the stray light's photons are counted over the sensor's exposure
+    base = DegradeConfig(sensor=dataclasses.replace(DegradeConfig().sensor, exposure_s=20e-6))
+    off = dataclasses.replace(base, artefacts=ARTEFACTS_OFF)
+    alone = {
+        "vignetting (cos⁴)": {"vignetting": True},
+        "PRNU + DSNU + hot pixels (maps cached per camera)": {"prnu_sigma": 0.01, "dsnu_sigma_e": 2.0,
+                                                              "hot_pixel_fraction": 1e-4},
+        "blooming": {"blooming": True},
+        "stray light + ghost (Sun 40° off-axis)": {"stray_light": True},
+        "JPEG quality 90 (OpenImageIO)": {"jpeg_quality": 90},
+    }
+    cases = {
+        "chain without artefacts `degrade(img)`": lambda: degrade(img, base, rng=2),
+        "chain, artefacts all off (`ARTEFACTS_OFF`: + signal_e, saturation)": lambda: simulate_frame(img, off, rng=2),
+        "**chain, preset defaults** (vignetting, PRNU/DSNU, hot pixels, blooming, stray light)":
+            lambda: simulate_frame(img, dataclasses.replace(base, artefacts=ArtefactConfig()), rng=2, sun_dir_cam=sun),
+    }
+    for name, kw in alone.items():
+        cfg = dataclasses.replace(base, artefacts=dataclasses.replace(ARTEFACTS_OFF, **kw))
+        cases[f"+ {name} alone"] = lambda c=cfg: simulate_frame(img, c, rng=2, sun_dir_cam=sun)
+    t = run_interleaved(cases, repeats)
+    lines = ["| chain | wall / CPU [ms] |", "|---|---:|"]
+    lines += [f"| {name} | {1e3 * w:.1f} / {1e3 * c:.1f} |" for name, (w, c) in t.items()]
+    return lines
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=int, default=9)
     ap.add_argument("--quick", action="store_true", help="3 repeats")
+    ap.add_argument("--artefacts", action="store_true", help="only the camera-artefacts table")
     args = ap.parse_args(argv)
     repeats = 3 if args.quick else args.repeats
+    if args.artefacts:
+        table = artefacts_table(repeats)
+        print(f"1280×960 RGB float32, median of {repeats} interleaved runs; {os.cpu_count()} cores "
+              f"({platform.machine()}), NumPy {np.__version__}, OpenImageIO {oiio.__version__}; 1-minute load "
+              f"average {os.getloadavg()[0]:.1f} after the runs.")
+        print(f"Command: `python benchmarks/bench_degrade.py --artefacts{' --quick' if args.quick else ''}`\n")
+        print("\n".join(table))
+        return 0
     load_start = os.getloadavg()[0]
     physical = physical_table(repeats)  # runs the parallel kernels: threading layer known
     paper = paper_table(repeats)
@@ -208,6 +254,8 @@ def main(argv=None) -> int:
     print("\n".join(paper))
     print("\n### Convolution: direct vs FFT (1280×960×3 float32)\n")
     print("\n".join(convolution_table(max(3, repeats // 2))))
+    print("\n### Camera artefacts (degrade.artefacts)\n")
+    print("\n".join(artefacts_table(repeats)))
     return 0
 
 

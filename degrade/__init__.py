@@ -12,7 +12,10 @@ psf        Airy, Gaussian, pillbox (defocus) and motion PSFs (L, θ from the ima
 convolve   Mirror-padded convolution, direct or FFT picked by kernel size.
 sensor     RGGB mosaic, Poisson shot noise, full well, read noise, ADC, OpenImageIO demosaic.
 encode     sRGB transfer curve (IEC 61966-2-1) and integer quantisation.
-chain      ``OpticsConfig``, ``DegradeConfig`` and ``degrade``: the physical chain in one call.
+artefacts  Camera artefacts: vignetting, PRNU/DSNU, hot pixels, smear, blooming, stray light and
+           ghost, on-board JPEG.
+chain      ``OpticsConfig``, ``DegradeConfig``, ``degrade`` and ``simulate_frame``: the physical
+           chain in one call.
 paper      The paper's groups D1–D4, bit-identical to ``skimage.util.random_noise``.
 ablation   PSNR/SSIM(/LPIPS) cost of each paper group and physical stage, and a text table.
 """
@@ -26,13 +29,16 @@ from .ablation import (
     physical_stage_configs,
     run_ablation,
 )
+from .artefacts import ArtefactConfig
 from .chain import (
     ENCODINGS,
     DegradeConfig,
+    FrameOutput,
     OpticsConfig,
     apply_optics,
     degrade,
     optics_psf,
+    simulate_frame,
 )
 from .convolve import convolve_image
 from .encode import dequantise, quantise, srgb_decode, srgb_encode
@@ -69,7 +75,9 @@ __all__ = [
     "PHYSICAL_STAGES",
     "AblationReport",
     "AblationRow",
+    "ArtefactConfig",
     "DegradeConfig",
+    "FrameOutput",
     "OpticsConfig",
     "PaperConfig",
     "SensorConfig",
@@ -97,6 +105,7 @@ __all__ = [
     "quantise",
     "run_ablation",
     "sensor_readout",
+    "simulate_frame",
     "simulate_sensor",
     "srgb_decode",
     "srgb_encode",

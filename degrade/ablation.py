@@ -129,12 +129,15 @@ def physical_stage_configs(config: DegradeConfig) -> dict[str, DegradeConfig]:
     -------
     stages : dict of str → DegradeConfig
         Keys :data:`PHYSICAL_STAGES`; the last value is ``config`` itself, except that a
-        "linear" encoding becomes "srgb" (metrics compare sRGB-encoded images).
+        "linear" encoding becomes "srgb" (metrics compare sRGB-encoded images) and the camera
+        artefacts (``config.artefacts``) are left out: the ablation measures the optics and
+        sensor stages.
     """
     _checks.instance("physical", config, DegradeConfig)
     if config.sensor is None:
         raise ValueError("physical.sensor must be a SensorConfig for the physical ablation, got None")
     replace = dataclasses.replace
+    config = replace(config, artefacts=None)
     if config.encoding == "linear":
         config = replace(config, encoding="srgb")
     no_cfa = replace(config.sensor, demosaic=None)

@@ -17,16 +17,19 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from . import _checks
+from .artefacts import ArtefactConfig
 from .convolve import convolve_image
 from .encode import srgb_encode
 from .psf import airy_psf, compose, defocus_psf, gaussian_psf, motion_psf
 from .sensor import SensorConfig, _simulate
 
-__all__ = ["ENCODINGS", "DegradeConfig", "OpticsConfig", "apply_optics", "degrade", "optics_psf"]
+__all__ = ["ENCODINGS", "DegradeConfig", "FrameOutput", "OpticsConfig", "apply_optics", "degrade", "optics_psf",
+           "simulate_frame"]
 
 ENCODINGS = ("srgb8", "srgb16", "srgb", "linear")
 """Output encodings: sRGB rounded to 8 or 16 bit levels, sRGB float, or linear float."""
@@ -103,11 +106,16 @@ class DegradeConfig:
         Mosaic, noise, ADC and demosaic; None skips them (the image stays noiseless).
     encoding : {"srgb8", "srgb16", "srgb", "linear"}
         Output: sRGB (IEC 61966-2-1) rounded to 8- or 16-bit levels, sRGB float, or linear.
+    artefacts : ArtefactConfig or None
+        Camera artefacts (:mod:`degrade.artefacts`: vignetting, fixed-pattern noise, hot
+        pixels, smear, blooming, stray light, JPEG); None: none (the chain as before they
+        existed). They need ``optics`` and ``sensor``; JPEG needs ``encoding="srgb8"``.
     """
 
     optics: OpticsConfig | None = field(default_factory=OpticsConfig)
     sensor: SensorConfig | None = field(default_factory=SensorConfig)
     encoding: str = "srgb8"
+    artefacts: ArtefactConfig | None = None
 
     def __post_init__(self):
         if self.optics is not None:
@@ -115,6 +123,14 @@ class DegradeConfig:
         if self.sensor is not None:
             _checks.instance("sensor", self.sensor, SensorConfig)
         _checks.one_of("encoding", self.encoding, ENCODINGS)
+        if self.artefacts is not None:
+            _checks.instance("artefacts", self.artefacts, ArtefactConfig)
+            if self.optics is None or self.sensor is None:
+                raise ValueError("artefacts need optics and sensor (the lens' focal length and pitch, the photosites), "
+                                 "got optics or sensor None")
+            if self.artefacts.jpeg_quality and self.encoding != "srgb8":
+                raise ValueError(f"artefacts.jpeg_quality needs encoding='srgb8' (JPEG holds 8-bit codes), "
+                                 f"got {self.encoding!r}")
 
 
 def optics_psf(optics: OpticsConfig, channels: int = 3, *, corner: bool = False) -> np.ndarray:
@@ -204,7 +220,22 @@ def _apply_optics(img: np.ndarray, optics: OpticsConfig) -> np.ndarray:
     return centre
 
 
-def degrade(image_linear, config: DegradeConfig = DegradeConfig(), *, rng=None) -> np.ndarray:
+class FrameOutput(NamedTuple):
+    """What :func:`simulate_frame` returns (one simulation, one set of random draws)."""
+
+    image: np.ndarray
+    """The degraded image, as :func:`degrade` returns it."""
+    signal_e: np.ndarray | None
+    """Electrons per photosite at the ADC's input (shot, dark and read noise, fixed-pattern
+    noise, blooming, full-well clip), float32, shaped as the photosite array (H×W on the RGGB
+    mosaic); None without ``config.artefacts``."""
+    saturation: np.ndarray | None
+    """bool, same shape: the photosite reached full well (``signal_e >= full_well_e``: the
+    ADC's top code); None without ``config.artefacts``."""
+
+
+def degrade(image_linear, config: DegradeConfig = DegradeConfig(), *, rng=None, sun_dir_cam=None,
+            sun_fraction: float = 1.0, camera_seed: int = 0) -> np.ndarray:
     """Run the physical chain (docs/degradation.md, "Physical chain") on one linear frame.
 
     Parameters
@@ -214,10 +245,17 @@ def degrade(image_linear, config: DegradeConfig = DegradeConfig(), *, rng=None) 
         (by default just a full well). float32 is used as is, other floats are converted.
         H×W images are monochrome and need ``config.sensor.demosaic=None``.
     config : DegradeConfig, optional
-        Optics, sensor and output encoding.
+        Optics, sensor, output encoding and camera artefacts.
     rng : numpy.random.Generator or int or None, keyword-only
         Random source (normalised with :func:`numpy.random.default_rng`); the same seed gives
         byte-identical output.
+    sun_dir_cam : array_like of 3 float or None, keyword-only
+        Direction to the Sun in the camera frame, for the stray light of ``config.artefacts``
+        (None: no Sun).
+    sun_fraction : float, keyword-only
+        Visible fraction of the solar disc in [0, 1] (penumbra), scaling the stray light. Default 1.
+    camera_seed : int, keyword-only
+        Seed of the camera's fixed maps (PRNU, DSNU, hot pixels): :func:`degrade.artefacts.camera_maps`.
 
     Returns
     -------
@@ -225,14 +263,74 @@ def degrade(image_linear, config: DegradeConfig = DegradeConfig(), *, rng=None) 
         Encoded as ``config.encoding`` says: for "srgb8"/"srgb16" the values are exactly
         ``code/(2**bits − 1)`` (see :func:`degrade.encode.quantise`) [1].
     """
+    return simulate_frame(image_linear, config, rng=rng, sun_dir_cam=sun_dir_cam, sun_fraction=sun_fraction,
+                          camera_seed=camera_seed).image
+
+
+def simulate_frame(image_linear, config: DegradeConfig = DegradeConfig(), *, rng=None, sun_dir_cam=None,
+                   sun_fraction: float = 1.0, camera_seed: int = 0) -> FrameOutput:
+    """:func:`degrade`, also returning the photosites' electrons and saturation mask.
+
+    With ``config.artefacts`` the chain is: optics PSF → × relative illumination → + stray
+    light and ghost (focal-plane irradiance, :func:`degrade.artefacts.stray_light`) → RGGB
+    mosaic → :func:`degrade.sensor._signal_e` (PRNU, smear, dark and hot-pixel current, shot
+    noise, DSNU, blooming, read noise, full well, ADC) → demosaic → encoding (→ JPEG).
+    Parameters and result as :func:`degrade` (``image`` of the result is what it returns).
+    """
     _checks.instance("config", config, DegradeConfig)
     img = _checks.image("image_linear", image_linear, channels=3)
+    sun_fraction = _checks.finite_scalar("sun_fraction", sun_fraction, nonnegative=True)
+    if sun_fraction > 1.0:
+        raise ValueError(f"sun_fraction must be in [0, 1], got {sun_fraction!r}")
     rng = np.random.default_rng(rng)
+    signal_e = saturation = None
     if config.optics is not None:
         img = _apply_optics(img, config.optics)
-    if config.sensor is not None:
+    if config.artefacts is not None:
+        img, signal_e, saturation = _sensor_with_artefacts(img, config, sun_dir_cam, sun_fraction, camera_seed, rng)
+    elif config.sensor is not None:
         img = _simulate(img, config.sensor, rng)
     if config.encoding == "linear":
-        return img.copy() if img is image_linear else img
+        return FrameOutput(img.copy() if img is image_linear else img, signal_e, saturation)
     bits = {"srgb8": 8, "srgb16": 16, "srgb": None}[config.encoding]
-    return srgb_encode(img, bits=bits)
+    out = srgb_encode(img, bits=bits)
+    if config.artefacts is not None and config.artefacts.jpeg_quality:
+        from .artefacts import jpeg_roundtrip
+        from .encode import dequantise, quantise
+        out = dequantise(jpeg_roundtrip(quantise(out, 8), config.artefacts.jpeg_quality), 8)
+    return FrameOutput(out, signal_e, saturation)
+
+
+def _sensor_with_artefacts(img: np.ndarray, config: DegradeConfig, sun_dir_cam, sun_fraction, camera_seed, rng):
+    from .artefacts import (
+        SOLAR_IRRADIANCE_W_M2,
+        camera_maps,
+        irradiance_to_signal,
+        relative_illumination,
+        stray_light,
+    )
+    from .sensor import _demosaic, _mosaic, _signal_e
+    art, optics, c = config.artefacts, config.optics, config.sensor
+    h, w = img.shape[:2]
+    img = np.array(img, dtype=np.float32)  # the optics may have returned the caller's array
+    if art.vignetting:
+        vig = relative_illumination(h, w, focal_length_m=optics.focal_length_m, pixel_pitch_m=optics.pixel_pitch_m,
+                                    mechanical=art.mechanical_vignetting)
+        img *= vig if img.ndim == 2 else vig[:, :, None]
+    if art.stray_light and sun_dir_cam is not None and sun_fraction > 0.0:
+        e = stray_light(h, w, sun_dir_cam, focal_length_m=optics.focal_length_m, pixel_pitch_m=optics.pixel_pitch_m,
+                        aperture_m=optics.aperture_m, config=art, sun_irradiance_W_m2=SOLAR_IRRADIANCE_W_M2 * sun_fraction)
+        if e is not None:
+            e *= np.float32(irradiance_to_signal(1.0, exposure_s=c.exposure_s, pixel_pitch_m=optics.pixel_pitch_m,
+                                                 wavelength_m=art.wavelength_m, photons_at_one=c.photons_max))
+            img += e if img.ndim == 2 else e[:, :, None]
+    if c.demosaic is not None and img.ndim == 2:
+        raise ValueError("image_linear is H×W (monochrome): it needs config.sensor.demosaic=None, "
+                         f"got demosaic={c.demosaic!r}")
+    sites = img if c.demosaic is None else _mosaic(img)
+    maps = camera_maps(sites.shape, art, camera_seed)
+    signal_e, dn = _signal_e(sites, c, art, maps, rng)
+    if c.demosaic is not None:
+        dn = _demosaic(dn, c.demosaic)
+        np.clip(dn, 0.0, 1.0, out=dn)
+    return dn, signal_e, signal_e >= np.float32(c.full_well_e)

@@ -9,7 +9,10 @@ is the option ``--degrade paper``):
   :mod:`degrade.paper`) applied to the clean 8-bit sRGB image;
 * ``physical`` — the camera equation (:func:`degrade.exposure.physical_exposure`) on the linear
   radiance, then the imaging chain (:func:`degrade.chain.degrade`: optics PSF, RGGB mosaic,
-  shot, dark and read noise, ADC, demosaic) and an 8-bit sRGB encoding.
+  shot, dark and read noise, ADC, demosaic), the camera artefacts (:mod:`degrade.artefacts`:
+  vignetting, PRNU/DSNU, hot pixels, smear, blooming, stray light and ghost, JPEG) and an
+  8-bit sRGB encoding; only this preset can also give the photosites' electrons
+  (``signal_e``) and saturation mask (``saturation``).
 
 docs/degradation.md gives the maths of each stage.
 """
@@ -18,7 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["PRESETS", "WHITE_BALANCE_M", "physical_config", "degrade_frame"]
+__all__ = ["CAMERA_OUTPUTS", "PRESETS", "WHITE_BALANCE_M", "artefact_config", "camera_seed", "degrade_frame",
+           "degrade_outputs", "physical_config"]
 
 PRESETS = ("none", "paper", "physical")
 """The presets, the first meaning no degraded copy."""
@@ -26,6 +30,36 @@ PRESETS = ("none", "paper", "physical")
 WHITE_BALANCE_M = 530e-9
 """Photon energy used for every channel in the camera equation: a white-balanced sensor (a grey
 surface gives equal R, G, B signals) [m]."""
+
+
+CAMERA_OUTPUTS = ("rgb_degraded", "signal_e", "saturation")
+"""What :func:`degrade_outputs` makes: the degraded 8-bit RGB, the photosites' electrons
+(float32, H×W mosaic) and the saturation mask (uint8, 255 where a photosite reached full well)."""
+
+_CAMERA_SEED_TAG = 0x5EED
+"""Mixed into the sequence's seed when the ``degrade`` table sets no ``camera_seed``."""
+
+
+def artefact_config(d: dict):
+    """The :class:`degrade.artefacts.ArtefactConfig` of the ``degrade`` table ``d`` (keys as
+    the option table's; missing keys keep the defaults)."""
+    from .artefacts import ArtefactConfig
+    keys = {"vignetting": "vignetting", "mechanical_vignetting": "mechanical_vignetting", "prnu_sigma": "prnu_sigma",
+            "dsnu_sigma_e": "dsnu_sigma_e", "hot_pixel_fraction": "hot_pixel_fraction",
+            "hot_pixel_dark_e_s": "hot_pixel_dark_e_per_s", "blooming": "blooming", "blooming_spill": "blooming_spill", "smear_fraction": "smear_fraction",
+            "stray_light": "stray_light", "pst_edge": "pst_edge", "pst_slope": "pst_slope",
+            "sun_exclusion_deg": "sun_exclusion_deg", "glare_gradient": "glare_gradient",
+            "ghost_reflectance": "ghost_reflectance", "ghost_radius_px": "ghost_radius_px",
+            "ghost_magnification": "ghost_magnification", "jpeg_quality": "jpeg_quality"}
+    return ArtefactConfig(**{field: d[key] for key, field in keys.items() if key in d})
+
+
+def camera_seed(d: dict, sequence_seed: int) -> int:
+    """The seed of the camera's fixed maps: the ``degrade`` table's ``camera_seed``, or one
+    derived from the sequence's seed (the same camera over the sequence)."""
+    if d.get("camera_seed") is not None:
+        return int(d["camera_seed"])
+    return int(np.random.SeedSequence([int(sequence_seed), _CAMERA_SEED_TAG]).generate_state(2, np.uint64)[0] >> 1)
 
 
 def physical_config(d: dict, cam: dict, motion=None):
@@ -45,28 +79,54 @@ def physical_config(d: dict, cam: dict, motion=None):
     sensor = SensorConfig(quantum_efficiency=d["quantum_efficiency"], full_well_e=d["full_well_e"],
                           read_noise_e=d["read_noise_e"], bit_depth=d["bit_depth"], exposure_s=d["exposure_us"] * 1e-6,
                           offset_dn=d["offset_dn"], dark_current_e_per_s=d["dark_current_e_s"], demosaic=d["demosaic"])
-    return DegradeConfig(optics=optics, sensor=sensor, encoding="srgb8")
+    return DegradeConfig(optics=optics, sensor=sensor, encoding="srgb8", artefacts=artefact_config(d))
 
 
-def degrade_frame(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None) -> np.ndarray:
-    """The degraded 8-bit RGB of one frame (``d["degrade"]`` is ``paper`` or ``physical``): the
-    paper's group applied to the clean 8-bit image ``rgb8``, or the camera equation and imaging
-    chain applied to the linear ``radiance`` [W/(m²·sr)], drawing from
-    ``numpy.random.default_rng(seed_seq)``; ``motion``: the frame's (L [px], θ [deg]) for the
-    ``auto`` motion blur."""
+def degrade_frame(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *, label=None,
+                  sequence_seed: int = 0) -> np.ndarray:
+    """The degraded 8-bit RGB of one frame: ``degrade_outputs(...)["rgb_degraded"]``."""
+    return degrade_outputs(d, cam, rgb8, radiance, seed_seq, motion, label=label,
+                           sequence_seed=sequence_seed)["rgb_degraded"]
+
+
+def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *, label=None,
+                    sequence_seed: int = 0, want=("rgb_degraded",)) -> dict:
+    """The camera outputs ``want`` (of :data:`CAMERA_OUTPUTS`) of one frame, from one
+    simulation (``d["degrade"]`` is ``paper`` or ``physical``): the paper's group applied to
+    the clean 8-bit image ``rgb8``, or the camera equation and imaging chain applied to the
+    linear ``radiance`` [W/(m²·sr)], drawing from ``numpy.random.default_rng(seed_seq)``;
+    ``motion``: the frame's (L [px], θ [deg]) for the ``auto`` motion blur; ``label``: the
+    frame's label, whose ``sun_dir_cam`` (the Sun's direction in the camera frame) and
+    ``shadow_fraction`` (the visible fraction of the solar disc: none in Earth's umbra) set the
+    stray light (None: no Sun); ``sequence_seed``: the camera's fixed maps' seed unless ``d``
+    sets ``camera_seed`` (:func:`camera_seed`).
+
+    Raises
+    ------
+    ValueError
+        ``signal_e`` or ``saturation`` asked of another preset than ``physical``.
+    """
     from .encode import quantise
+    extra = [w for w in want if w != "rgb_degraded"]
+    if extra and d["degrade"] != "physical":
+        raise ValueError(f"{extra[0]} needs degrade = 'physical', got {d['degrade']!r}")
     rng = np.random.default_rng(seed_seq)
     if d["degrade"] == "paper":
         from .paper import PaperConfig, paper_degrade
         paper = PaperConfig(length_px=d["paper_blur_px"], angle_deg=d["paper_angle_deg"],
                             gaussian_var=d["paper_gaussian_var"])
         out = paper_degrade(np.asarray(rgb8).astype(np.float32) / np.float32(255.0), d["paper_group"], paper, rng=rng)
-    else:
-        from .chain import degrade
-        from .exposure import physical_exposure
-        signal = physical_exposure(radiance, f_number=d["f_number"], exposure_s=d["exposure_us"] * 1e-6,
-                                   pixel_pitch_m=cam["pixel_pitch_um"] * 1e-6,
-                                   quantum_efficiency=d["quantum_efficiency"], full_well_e=d["full_well_e"],
-                                   wavelengths_m=(WHITE_BALANCE_M,) * 3)
-        out = degrade(signal, physical_config(d, cam, motion), rng=rng)
-    return quantise(out, 8)
+        return {"rgb_degraded": quantise(out, 8)}
+    from .chain import simulate_frame
+    from .exposure import physical_exposure
+    signal = physical_exposure(radiance, f_number=d["f_number"], exposure_s=d["exposure_us"] * 1e-6,
+                               pixel_pitch_m=cam["pixel_pitch_um"] * 1e-6,
+                               quantum_efficiency=d["quantum_efficiency"], full_well_e=d["full_well_e"],
+                               wavelengths_m=(WHITE_BALANCE_M,) * 3)
+    sun = None if label is None else label.get("sun_dir_cam")
+    visible = 1.0 if label is None else float(label.get("shadow_fraction", 1.0))
+    res = simulate_frame(signal, physical_config(d, cam, motion), rng=rng, sun_dir_cam=sun if visible > 0 else None,
+                         sun_fraction=visible, camera_seed=camera_seed(d, sequence_seed))
+    out = {"rgb_degraded": quantise(res.image, 8), "signal_e": res.signal_e,
+           "saturation": np.where(res.saturation, np.uint8(255), np.uint8(0))}
+    return {w: out[w] for w in want}

@@ -321,3 +321,64 @@ def _simulate(img: np.ndarray, c: SensorConfig, rng: np.random.Generator) -> np.
                          f"got demosaic={c.demosaic!r}")
     out = _demosaic(_readout(_mosaic(img), c, rng), c.demosaic)
     return np.clip(out, 0.0, 1.0, out=out)  # MHC over/undershoots at edges: back to ADC range
+
+
+def _signal_e(img: np.ndarray, c: SensorConfig, art, maps, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """The photosites' electrons at the ADC's input and the ADC's output, with the camera
+    artefacts ``art`` (:class:`degrade.artefacts.ArtefactConfig`) and fixed maps ``maps``
+    (:class:`degrade.artefacts.CameraMaps`) on the photosite array ``img`` (1 = Φ_max photons):
+
+        μ = QE·Φ·gain (+ smear) + (D_c + D_hot)·t;  q = max(Poisson(μ) + DSNU, 0);
+        q → bloom (or min(q, FW));  signal_e = min(q + N(0, σ_r²), FW);
+        DN = clip(round(signal_e/g + offset), 0, 2^b − 1)
+
+    The random streams are those of :func:`sensor_readout` (block k: its Poisson values, then
+    its read noise, from child k of ``rng.spawn``). Returns (signal_e float32 [e⁻], DN/(2^b − 1)
+    float32), both shaped like ``img``."""
+    from .artefacts import bloom, smear
+    flat_in = img.ravel()
+    n_blocks = max(1, min(_MAX_BLOCKS, flat_in.size // _MIN_BLOCK))
+    edges = [flat_in.size * k // n_blocks for k in range(n_blocks + 1)]
+    mean_e = img.astype(np.float64) * (c.quantum_efficiency * c.photons_max)
+    if maps.gain is not None:
+        mean_e *= maps.gain
+    if art.smear_fraction > 0.0:
+        mean_e = smear(mean_e, art.smear_fraction)
+    dark_e = c.dark_current_e_per_s * c.exposure_s
+    if dark_e > 0.0:
+        mean_e += dark_e
+    if maps.hot_dark_e_per_s is not None:
+        mean_e += maps.hot_dark_e_per_s * c.exposure_s
+    mean_flat = mean_e.ravel()
+    charge = np.empty(flat_in.size, np.float64)
+    noise = np.zeros(flat_in.size, np.float64)
+    streams = rng.spawn(n_blocks)
+
+    def run(step, k: int) -> None:
+        lo, hi = edges[k], edges[k + 1]
+        if step == "shot":
+            charge[lo:hi] = streams[k].poisson(mean_flat[lo:hi]) if c.shot_noise else mean_flat[lo:hi]
+        elif c.read_noise_e > 0.0:
+            noise[lo:hi] = streams[k].normal(0.0, c.read_noise_e, hi - lo)
+
+    for step in ("shot", "read"):
+        if n_blocks == 1:
+            run(step, 0)
+        else:
+            for f in [pool().submit(run, step, k) for k in range(n_blocks)]:
+                f.result()
+    charge = charge.reshape(img.shape)
+    if maps.offset_e is not None:
+        charge += maps.offset_e
+        np.maximum(charge, 0.0, out=charge)
+    charge = bloom(charge, c.full_well_e, art.blooming_spill) if art.blooming else np.minimum(charge, c.full_well_e)
+    signal = charge
+    signal += noise.reshape(img.shape)
+    np.minimum(signal, c.full_well_e, out=signal)
+    dn = signal / c.gain
+    dn += c.offset_dn
+    if c.quantise:
+        np.rint(dn, out=dn)
+    np.clip(dn, 0.0, float(c.max_dn), out=dn)
+    dn /= float(c.max_dn)
+    return signal.astype(np.float32), dn.astype(np.float32)

@@ -23,7 +23,7 @@ def test_the_table_is_what_the_command_line_and_the_exports_offer():
     assert cli.MODALITIES == NAMES and len(set(NAMES)) == len(NAMES)
     assert all(m.ext in (".png", ".exr") and m.name == n for n, m in MODALITIES.items())
     # everything but the pipeline's own images has a producer
-    assert {n for n, m in MODALITIES.items() if m.produce is None} == {"rgb", "rgb_degraded"}
+    assert {n for n, m in MODALITIES.items() if m.produce is None} == {"rgb", "rgb_degraded", "signal_e", "saturation"}
     assert set(PICTURES) == {"rgb", "rgb_degraded"} and export._IMAGE_MODALITIES == PICTURES
     assert "hdr" not in DEFAULT and "semantic" not in DEFAULT and "mask" in DEFAULT
     assert relpath("depth", 12) == "depth/000012.exr" and relpath("mask", "000000") == "mask/000000.png"

@@ -4,7 +4,8 @@ What turns per-frame renders into a dataset on disk, apart from how a frame is m
 of output modalities (:mod:`.modalities`), the sequence folder format, its claim, resume and
 completion (:mod:`.folder`), each process's scenes (:mod:`.scenes`), the worker pool, its
 signals and memory fit (:mod:`.pool`), the first run's kernel compilation (:mod:`.jit`),
-running planned sequences (:mod:`.run`) and the render snapshots (:mod:`.snapshots`).
+running planned sequences (:mod:`.run`), the render snapshots (:mod:`.snapshots`), and the
+options of the camera's artefacts (:mod:`.camera_options`, typed by :mod:`.options`).
 
 The frame itself comes in as a function: the command line (``cli.py``) composes the orbit
 plan, the renderer and the degradation, and hands :func:`.run.run_plans` its per-frame

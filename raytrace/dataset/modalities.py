@@ -5,7 +5,8 @@ Each :class:`Modality` names its folder (the modality's name) and file extension
 holds, whether making it needs the shaded radiance, and, for those made from the frame's
 geometry or radiance alone, the function that makes its pixels. ``rgb`` and ``rgb_degraded``
 are made by the pipeline (exposure and sRGB encoding, then the degradation chain, which live
-outside ``raytrace``) and have no producer here. A new modality is one entry here and its
+outside ``raytrace``) and have no producer here, nor have ``signal_e`` and ``saturation``, made
+by the same simulation as ``rgb_degraded`` (physical preset only). A new modality is one entry here and its
 producer (docs/formats.md lists the files).
 """
 
@@ -17,7 +18,8 @@ import numpy as np
 
 from .. import _light_parts
 
-__all__ = ["Modality", "MODALITIES", "NAMES", "DEFAULT", "PICTURES", "needs_radiance", "relpath"]
+__all__ = ["Modality", "MODALITIES", "NAMES", "DEFAULT", "PICTURES", "CAMERA", "needs_radiance", "preset_error",
+           "relpath"]
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,8 @@ class Modality:
         render computes it only when such a modality is asked for.
     channels : tuple of str or None
         The file's channel names (None: the writer's default).
+    presets : tuple of str or None
+        The degradation presets (``--degrade``) that make it; None: made without one.
     """
 
     name: str
@@ -68,12 +72,13 @@ class Modality:
     hits: bool = False
     light_parts: bool = False
     channels: tuple | None = None
+    presets: tuple | None = None
 
 
 MODALITIES = {m.name: m for m in (
     Modality("rgb", ".png", "clean sRGB, 8 bit (exposure fixed or auto)", shaded=True, picture=True),
     Modality("rgb_degraded", ".png", "the camera's copy: the degradation preset applied, sRGB 8 bit", shaded=True,
-             noisy=True, picture=True),
+             noisy=True, picture=True, presets=("paper", "physical")),
     Modality("mask", ".png", "instance ids, 16 bit (component index + 1; 0 background)",
              produce=lambda geo, radiance: geo.instance.astype(np.uint16)),
     Modality("depth", ".exr", "z-depth along the optical axis, float32 m (inf on background)",
@@ -91,6 +96,11 @@ MODALITIES = {m.name: m for m in (
     Modality("light", ".exr", "hdr split by source, float32 W/(m²·sr), layers earth, inter, sky, sun (RGB); "
              "their sum is hdr", shaded=True, default=False, light_parts=True, channels=_light_parts.CHANNELS,
              produce=lambda geo, parts: parts.astype(np.float32)),
+    Modality("signal_e", ".exr", "electrons per photosite at the ADC's input (noise, artefacts, blooming, full-well "
+             "clip), float32 e-, one channel on the RGGB mosaic", shaded=True, default=False,
+             presets=("physical",)),
+    Modality("saturation", ".png", "photosites at full well, 8 bit (255 saturated, 0 not), on the RGGB mosaic",
+             shaded=True, default=False, presets=("physical",)),
 )}
 """Every modality by name, in the order they are listed and written."""
 
@@ -100,6 +110,18 @@ DEFAULT = tuple(m.name for m in MODALITIES.values() if m.default)
 """The modalities written when none are named."""
 PICTURES = tuple(m.name for m in MODALITIES.values() if m.picture)
 """The 8-bit sRGB colour modalities."""
+CAMERA = tuple(m.name for m in MODALITIES.values() if m.presets is not None)
+"""The modalities the degradation preset makes (one simulation per frame)."""
+
+
+def preset_error(names, preset: str) -> str | None:
+    """The one-line error when a modality of ``names`` cannot be made with ``--degrade preset``
+    (``argument --modalities: ...``), else None."""
+    for n in names:
+        allowed = MODALITIES[n].presets
+        if allowed is not None and preset not in allowed:
+            return (f"argument --modalities: {n} needs --degrade {' or '.join(allowed)}, got --degrade {preset}")
+    return None
 
 
 def needs_radiance(names) -> bool:

@@ -175,6 +175,8 @@ def show(value) -> str:
     """A default as ``--help`` shows it (None: automatic)."""
     if value is None:
         return "automatic"
+    if isinstance(value, bool):
+        return "true" if value else "false"
     if isinstance(value, (list, tuple)):
         return ",".join(show(v) for v in value)
     return f"{value:g}" if isinstance(value, float) else str(value)
