@@ -390,7 +390,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     D = np.empty((len(pix), 3))
     centre_rays(pix, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, *camera.lens_arrays(), O, D)
     face = geo.face_index.ravel()[pix].astype(np.int64)
-    s = _surfaces(scene, O, D, face)
+    s = _surfaces(scene, O, D, face, 1.0 / camera.fx)
     soft = q.sun_rays > 1 and lighting.sun_angular_diameter_rad > 0.0
     occ_t = np.full(len(pix), np.inf) if soft else None  # occluder distances cost a closest-hit query
     L, vis = sunl.sunlight(s, occluder_t=occ_t, robust=True)
