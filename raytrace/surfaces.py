@@ -266,3 +266,76 @@ def point_materials(scene, s: dict, O, px_rad: float = 0.0) -> None:
     s["m_alpha"] = np.empty(n)
     T.eval_hits(np.ascontiguousarray(s["face"], dtype=np.int64), s["comp"], s["B"], s["NS"], s["WO"], foot, diff, f0,
                 alpha, mat_par, face_uv, atlas, s["m_diff"], s["m_f0"], s["m_alpha"])
+
+
+def _image(img, mode: str) -> np.ndarray:
+    return np.asarray(img.convert(mode) if hasattr(img, "convert") else img)
+
+
+def obj_texture_names(path) -> dict:
+    """{material name: map_Kd file name} of the MTL libraries an OBJ file names (its own
+    folder), to tell a texture trimesh could not read from none at all."""
+    from pathlib import Path
+    p = Path(path)
+    out = {}
+    try:
+        libs = [line.split(None, 1)[1].strip() for line in p.read_text(errors="replace").splitlines()
+                if line.startswith("mtllib ") and len(line.split(None, 1)) > 1]
+    except OSError:
+        return out
+    for lib in libs:
+        try:
+            text = (p.parent / lib).read_text(errors="replace")
+        except OSError:
+            continue
+        current = None
+        for line in text.splitlines():
+            words = line.strip().split()
+            if len(words) >= 2 and words[0] == "newmtl":
+                current = words[1]
+            elif len(words) >= 2 and words[0] == "map_Kd" and current is not None:
+                out[current] = words[-1]
+    return out
+
+
+def surface_from_visual(visual, corner_vertex: np.ndarray, where: str, obj_textures: dict | None = None):
+    """A file part's textured material as a :class:`SurfaceMaterial` (None: the part has no
+    texture, and the presets' rules apply): glTF's ``PBRMaterial`` (baseColorFactor and
+    texture, metallic/roughness factors and texture, normal texture; TEXCOORD_0) or OBJ/MTL's
+    ``SimpleMaterial`` (``Kd``, ``map_Kd``: Lambertian). ``corner_vertex`` (n_faces, 3): the
+    file's vertex of each kept corner. ``where`` names the part in messages; ``obj_textures``
+    (:func:`obj_texture_names`) lets an unreadable ``map_Kd`` raise instead of vanishing."""
+    from trimesh.visual.material import PBRMaterial, SimpleMaterial
+    mat = getattr(visual, "material", None)
+    uv = getattr(visual, "uv", None)
+    mname = getattr(mat, "name", None)
+    if obj_textures and mname in obj_textures and getattr(mat, "image", None) is None:
+        raise ValueError(f"{where}: texture {obj_textures[mname]!r} of material {mname!r} cannot be read "
+                         f"(missing or not an image)")
+    if isinstance(mat, PBRMaterial):
+        base, mr, nrm = mat.baseColorTexture, mat.metallicRoughnessTexture, mat.normalTexture
+        if base is None and mr is None and nrm is None:
+            return None
+        f = np.asarray(mat.baseColorFactor if mat.baseColorFactor is not None else [255, 255, 255, 255], float)
+        f = f / 255.0 if f.max() > 1.0 or np.asarray(mat.baseColorFactor).dtype == np.uint8 else f
+        kw = dict(base_color=tuple(np.clip(f[:3], 0.0, 1.0).tolist()),
+                  metallic=1.0 if mat.metallicFactor is None else float(mat.metallicFactor),
+                  roughness=1.0 if mat.roughnessFactor is None else float(mat.roughnessFactor),
+                  base_texture=None if base is None else srgb_to_linear(_image(base, "RGB") / 255.0),
+                  mr_texture=None if mr is None else _image(mr, "RGB") / 255.0,
+                  normal_texture=None if nrm is None else decode_normal_map(_image(nrm, "RGB")))
+    elif isinstance(mat, SimpleMaterial):
+        if getattr(mat, "image", None) is None:
+            return None
+        kd = np.asarray(mat.diffuse if mat.diffuse is not None else [255, 255, 255, 255], float)[:3] / 255.0
+        kw = dict(base_color=tuple(kd.tolist()), metallic=0.0, roughness=1.0, dielectric_f0=0.0,
+                  base_texture=srgb_to_linear(_image(mat.image, "RGB") / 255.0))
+    else:
+        return None
+    if uv is None or len(uv) <= int(np.max(corner_vertex)):
+        raise ValueError(f"{where}: material {mname!r} has a texture but the part has no texture "
+                         f"coordinates (glTF TEXCOORD_0, OBJ vt)")
+    corner_uv = np.asarray(uv, dtype=np.float64)[corner_vertex]
+    if not np.isfinite(corner_uv).all():
+        raise ValueError(f"{where}: material {mname!r}: texture coordinates must be finite")
+    return SurfaceMaterial("gltf", corner_uv=corner_uv, name=str(mname or ""), **kw)
