@@ -96,6 +96,7 @@ class _Sunlight:
         self.eps = scene.ray_eps_m
         self.p_background, self.tex = _background_params(lighting)
         self.mat_par, self.face_uv, self.atlas, self.varying = scene.material_tables
+        self.px_rad = 0.0  # the angle a pixel spans, where the frame's camera sets it (procedural materials)
 
     def _mats(self, s):
         """(comp, diff, f0, alpha, rows) as the kernels index the materials of the points ``s``:

@@ -245,7 +245,7 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
     es = ex
     # the hit's own material (raytrace._texture; the component's row where it is uniform): its
     # perturbed normal shapes the specular terms, the irradiance stays the surface's
-    dr, dg, db, f0r, f0g, f0b, al, nx, ny, nz = material_at(c, f, hu, hv, nx, ny, nz, 0.0, mat_diff, mat_f0, mat_alpha,
+    dr, dg, db, f0r, f0g, f0b, al, nx, ny, nz = material_at(c, f, hu, hv, nx, ny, nz, -1.0, mat_diff, mat_f0, mat_alpha,
                                                             mat_par, face_uv, atlas)
     lr = dr / math.pi * er
     lg = dg / math.pi * eg

@@ -33,7 +33,7 @@ K_CONST, K_GLTF, K_MLI, K_SOLAR = 0, 1, 2, 3
 P_KIND = 0
 P_BASE = 1  # 3: glTF baseColorFactor (linear RGB) / procedural's second material's diffuse
 P_METAL = 4  # metallicFactor
-P_ROUGH = 5  # roughnessFactor (perceptual: α = roughness²) / procedural's GGX α
+P_ROUGH = 5  # roughnessFactor (perceptual: α = roughness²) / MLI foil's GGX α
 P_NSCALE = 6  # normalTexture.scale
 P_SEED = 7
 P_TEX_BASE = 8  # 4 each: atlas offset (−1: none), width, height, channels
@@ -44,7 +44,7 @@ P_AX1 = 23  # 3: its first axis (unit)
 P_AX2 = 26  # 3: its second axis (unit)
 P_SCALE = 29  # MLI: noise cell [m]; solar grid: gap width [m]
 P_AMP = 30  # MLI: slope amplitude; solar grid: busbar width [m]
-P_EXTRA = 31  # glTF: the dielectric F0 (0.04); solar grid: F0 of the busbar (grey)
+P_EXTRA = 31  # glTF: the dielectric F0 (0.04); solar grid: the busbar's diffuse albedo (grey)
 FACE_COLS = 21  # uv (6), tangent (3), bitangent (3), corner points (9)
 
 # solar-cell grid: cell size (AZUR SPACE 3G30C-Advanced, 40 × 80 mm; datasheet
@@ -52,6 +52,10 @@ FACE_COLS = 21  # uv (6), tangent (3), bitangent (3), corner points (9)
 SOLAR_CELL_U_M = 0.040
 SOLAR_CELL_V_M = 0.080
 GAP_DIFFUSE = (0.30, 0.30, 0.30)  # the panel substrate showing between cells (Kapton/white)
+# variance of one component of the crinkle's noise vector (value noise + ½ the next octave):
+# 0.200, measured over 2·10⁵ random points
+MLI_NOISE_VAR = 0.20
+MLI_FILTER = 8.0
 
 
 @inline
@@ -163,7 +167,9 @@ def material_at(c, f, b1, b2, nx, ny, nz, foot, mat_diff, mat_f0, mat_alpha, mat
     """The BRDF parameters and shading normal at barycentrics (b1, b2) of face ``f`` of
     component ``c``, whose interpolated shading normal (facing the viewer) is n; ``foot`` the
     width [m] a pixel covers there (the procedural patterns are box-filtered over it; 0: the
-    point's own). Returns (ρ_d r, g, b, F0 r, g, b, α, n'x, n'y, n'z)."""
+    point's own; < 0: their mean, as the surfaces that secondary rays hit take them: their
+    glints and gaps would only add noise to the light those rays gather). Returns
+    (ρ_d r, g, b, F0 r, g, b, α, n'x, n'y, n'z)."""
     dr, dg, db = mat_diff[c, 0], mat_diff[c, 1], mat_diff[c, 2]
     fr, fg, fb = mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2]
     al = mat_alpha[c]
@@ -236,15 +242,25 @@ def material_at(c, f, b1, b2, nx, ny, nz, foot, mat_diff, mat_f0, mat_alpha, mat
         s = 1.0 / mat_par[c, P_SCALE]
         amp = mat_par[c, P_AMP]
         seed = int(mat_par[c, P_SEED])
+        # the crinkle keeps the fraction r = exp(−(8·foot/cell)²) of its slope variance (none
+        # once a pixel spans a quarter of a noise cell: pixel centres would alias it); the rest
+        # widens the lobe (α² += 2σ² of the unresolved slopes, the Beckmann relation α² = 2σ²,
+        # as in Toksvig 2005 / LEAN mapping, Olano & Baker 2010)
+        w = MLI_FILTER * foot * s
+        r = math.exp(-w * w) if foot >= 0.0 else 0.0
+        al = math.sqrt(mat_par[c, P_ROUGH] ** 2 + 2.0 * (1.0 - r) * MLI_NOISE_VAR * amp * amp)
+        amp *= math.sqrt(r)
         x, y, z = px * s, py * s, pz * s
         # two octaves (cm and half-cm wrinkles)
         gx = value_noise(x, y, z, seed) + 0.5 * value_noise(2.0 * x, 2.0 * y, 2.0 * z, seed + 3)
         gy = value_noise(x, y, z, seed + 1) + 0.5 * value_noise(2.0 * x, 2.0 * y, 2.0 * z, seed + 4)
         gz = value_noise(x, y, z, seed + 2) + 0.5 * value_noise(2.0 * x, 2.0 * y, 2.0 * z, seed + 5)
         nx, ny, nz = _perturb(nx, ny, nz, amp * gx, amp * gy, amp * gz)
-        return dr, dg, db, fr, fg, fb, mat_par[c, P_ROUGH], nx, ny, nz
-    # K_SOLAR: cells (the component's preset) with gaps (substrate) and a busbar (silver) along
-    # one short edge of each cell, in the plane of the part's two first principal axes
+        return dr, dg, db, fr, fg, fb, al, nx, ny, nz
+    # K_SOLAR: cells (the component's preset) with gaps (substrate) and a busbar along one short
+    # edge of each cell, in the plane of the part's two first principal axes. The cover glass
+    # over them keeps the preset's specular lobe everywhere; the pattern is in the diffuse
+    # albedo alone, so the box filter over a pixel's footprint is exact in the BRDF
     qx, qy, qz = px - mat_par[c, P_ORIGIN], py - mat_par[c, P_ORIGIN + 1], pz - mat_par[c, P_ORIGIN + 2]
     uu = qx * mat_par[c, P_AX1] + qy * mat_par[c, P_AX1 + 1] + qz * mat_par[c, P_AX1 + 2]
     vv = qx * mat_par[c, P_AX2] + qy * mat_par[c, P_AX2 + 1] + qz * mat_par[c, P_AX2 + 2]
@@ -252,20 +268,21 @@ def material_at(c, f, b1, b2, nx, ny, nz, foot, mat_diff, mat_f0, mat_alpha, mat
     bus = mat_par[c, P_AMP]
     pu = SOLAR_CELL_U_M + gap
     pv = SOLAR_CELL_V_M + gap
-    gu = _periodic_cover(uu, pu, 0.0, gap, foot)
-    gv = _periodic_cover(vv, pv, 0.0, gap, foot)
-    bv = _periodic_cover(vv, pv, gap, gap + bus, foot)
+    if foot >= 0.0:
+        gu = _periodic_cover(uu, pu, 0.0, gap, foot)
+        gv = _periodic_cover(vv, pv, 0.0, gap, foot)
+        bv = _periodic_cover(vv, pv, gap, gap + bus, foot)
+    else:  # the pattern's mean
+        gu = gap / pu
+        gv = gap / pv
+        bv = bus / pv
     w_cell = (1.0 - gu) * max(1.0 - gv - bv, 0.0)
     w_bus = (1.0 - gu) * bv
     w_gap = max(1.0 - w_cell - w_bus, 0.0)
-    fbus = mat_par[c, P_EXTRA]
-    dr = w_cell * dr + w_gap * mat_par[c, P_BASE]
-    dg = w_cell * dg + w_gap * mat_par[c, P_BASE + 1]
-    db = w_cell * db + w_gap * mat_par[c, P_BASE + 2]
-    fr = w_cell * fr + w_gap * 0.04 + w_bus * fbus
-    fg = w_cell * fg + w_gap * 0.04 + w_bus * fbus
-    fb = w_cell * fb + w_gap * 0.04 + w_bus * fbus
-    al = w_cell * al + (w_gap + w_bus) * mat_par[c, P_ROUGH]
+    bus_d = mat_par[c, P_EXTRA]
+    dr = w_cell * dr + w_gap * mat_par[c, P_BASE] + w_bus * bus_d
+    dg = w_cell * dg + w_gap * mat_par[c, P_BASE + 1] + w_bus * bus_d
+    db = w_cell * db + w_gap * mat_par[c, P_BASE + 2] + w_bus * bus_d
     return dr, dg, db, fr, fg, fb, al, nx, ny, nz
 
 

@@ -239,9 +239,12 @@ def render_reference(scene, camera, R, t, lighting, geo, *, spp: int, seed: int)
                      P, NS, NG, WO, B, SIDE)
             comp = scene.component_of_face[face]
             # each vertex's own material where materials vary (raytrace.surfaces): rows
-            # n_comp + k of the material arrays, the components' rows before them
+            # n_comp + k of the material arrays, the components' rows before them; at the
+            # camera's hits filtered over a pixel's footprint as the presets filter it (the
+            # procedural patterns' level of detail is part of the material, as a texture's
+            # mipmap is), deeper vertices with the patterns' mean, as the presets' secondary hits
             vx = {"face": face, "comp": comp, "B": B, "NS": NS, "WO": WO, "P": P}
-            point_materials(scene, vx, O)
+            point_materials(scene, vx, O, 1.0 / camera.fx if depth == 0 else -1.0)
             k_comp, k_diff, k_f0, k_alpha = comp, diff, f0, alpha
             if "m_diff" in vx:
                 k_comp = len(diff) + np.arange(m, dtype=np.int64)

@@ -360,7 +360,7 @@ class Scene:
             self._materials = tuple(material_of(c) for c in self.model.components)
         return self._materials
 
-    procedural_materials = False
+    procedural_materials = True
     """Whether the presets with a procedural material (gold/silver MLI's crinkle, the solar
     cells' grid: :mod:`raytrace.surfaces`) use it; False shades them uniform (set before the
     first frame)."""

@@ -21,12 +21,16 @@ Sources
 * Solar cells: 40 × 80 mm triple-junction cells (AZUR SPACE 3G30C-Advanced datasheet), laid with
   ~1 mm gaps (ESA ECSS-E-ST-20-08C, photovoltaic assemblies; typical cell spacing 0.8–1.0 mm) and a
   ~1 mm silver-plated busbar/interconnector along one short edge; cells ρ_d from their solar
-  absorptance ≈ 0.9 (Gilmore 2002, Appendix A), busbar silver F0 ≈ 0.97 (Real-Time Rendering
-  4th ed., Table 9.2) dulled to 0.9 by the interconnector's texture.
+  absorptance ≈ 0.9 (Gilmore 2002, Appendix A). The cover glass over cells and interconnectors
+  keeps the preset's specular lobe (F0 0.04, α 0.08) everywhere; the pattern changes the
+  diffuse albedo only: cells the preset's, gaps 0.30 (substrate), the busbar 0.60 (matte
+  silver seen through the glass; silver's reflectance ≈ 0.97, Real-Time Rendering 4th ed.,
+  Table 9.2, dulled by its plating's texture — a plausible value, not a measured one).
 * MLI: the outer layer is crinkled so that it does not touch the layers below (Gilmore 2002,
-  ch. 5, "Insulation"; wrinkles of ~1–3 cm); the foil between wrinkles is glossy: GGX α 0.12
-  here, the crinkle's normal spread (slope amplitude 0.35) supplying the rest of the
-  preset's wide lobe (α 0.30–0.32).
+  ch. 5, "Insulation"; wrinkles of ~1–3 cm); the foil between wrinkles is glossy: GGX α 0.15
+  here, the crinkle's normal spread (slope amplitude 0.45, per-axis slope variance
+  0.45²·0.2) supplying the rest of the preset's wide lobe: seen from afar, where a pixel
+  covers many wrinkles, α² + 2σ² = 0.32², the preset's.
 """
 
 from __future__ import annotations
@@ -42,12 +46,11 @@ __all__ = ["SurfaceMaterial", "material_tables", "mean_material", "procedural_su
            "decode_normal_map"]
 
 MLI_CRINKLE_M = 0.02  # noise cell of the crinkle [m]
-MLI_SLOPE = 0.35  # its slope amplitude
-MLI_ALPHA = 0.12  # the foil's own GGX α between wrinkles
+MLI_SLOPE = 0.45  # its slope amplitude
+MLI_ALPHA = 0.15  # the foil's own GGX α between wrinkles
 SOLAR_GAP_M = 0.001
 SOLAR_BUSBAR_M = 0.001
-SOLAR_GAP_ALPHA = 0.5
-SOLAR_BUSBAR_F0 = 0.90
+SOLAR_BUSBAR_DIFFUSE = 0.60
 
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
@@ -214,8 +217,7 @@ def material_tables(components, materials, faces: np.ndarray, vertices: np.ndarr
             par[k, T.P_SCALE] = SOLAR_GAP_M
             par[k, T.P_AMP] = SOLAR_BUSBAR_M
             par[k, T.P_BASE:T.P_BASE + 3] = T.GAP_DIFFUSE
-            par[k, T.P_ROUGH] = SOLAR_GAP_ALPHA
-            par[k, T.P_EXTRA] = SOLAR_BUSBAR_F0
+            par[k, T.P_EXTRA] = SOLAR_BUSBAR_DIFFUSE
         else:
             par[k, T.P_KIND] = T.K_GLTF
             par[k, T.P_BASE:T.P_BASE + 3] = s.base_color
@@ -250,8 +252,9 @@ def point_materials(scene, s: dict, O, px_rad: float = 0.0) -> None:
     """Where some component's material varies over its surface (:mod:`raytrace.surfaces`): the
     points' own materials into ``s`` (``m_diff``, ``m_f0``, ``m_alpha``) and their shading
     normals ``NS`` perturbed (normal maps, MLI crinkle); ``px_rad`` the angle a pixel spans
-    (the procedural patterns are box-filtered over its footprint, |P − O|·px_rad). Nothing
-    where every material is uniform: the kernels then read the components' rows."""
+    (the procedural patterns are box-filtered over its footprint, |P − O|·px_rad; 0: not
+    filtered; < 0: their mean, :func:`raytrace._texture.material_at`). Nothing where every
+    material is uniform: the kernels then read the components' rows."""
     mat_par, face_uv, atlas, varying = scene.material_tables
     if not varying:
         return
@@ -260,7 +263,10 @@ def point_materials(scene, s: dict, O, px_rad: float = 0.0) -> None:
     diff = np.array([m.diffuse for m in mats], dtype=np.float64)
     f0 = np.array([m.f0 for m in mats], dtype=np.float64)
     alpha = np.array([m.roughness for m in mats], dtype=np.float64)
-    foot = np.linalg.norm(s["P"] - np.asarray(O).reshape(-1, 3), axis=1) * px_rad if px_rad > 0.0 else np.zeros(n)
+    if px_rad > 0.0:
+        foot = np.linalg.norm(s["P"] - np.asarray(O).reshape(-1, 3), axis=1) * px_rad
+    else:
+        foot = np.full(n, -1.0 if px_rad < 0.0 else 0.0)
     s["m_diff"] = np.empty((n, 3))
     s["m_f0"] = np.empty((n, 3))
     s["m_alpha"] = np.empty(n)

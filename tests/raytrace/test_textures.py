@@ -308,3 +308,142 @@ def test_scene_file_uses_the_file_materials_only_when_asked(tmp_path):
     (tmp_path / "s.json").write_text(json.dumps(doc))
     with pytest.raises(ValueError, match=r"meshes\[0\]\.materials must be 'presets' or 'file', got 'textures'"):
         load_scene_file(str(tmp_path / "s.json"))
+
+
+# ------------------------------------------------------------------ balanced vs reference
+def _floor_and_wall(floor: Component, size_m: float) -> TargetModel:
+    """``floor`` (in the plane z = 0, |x|, |y| ≤ size/2) and a white wall standing on its +y edge
+    that bounces sunlight onto it."""
+    h = size_m / 2
+    wall = trimesh.Trimesh(np.array([[-h, h, 0], [h, h, 0], [h, h, size_m], [-h, h, size_m]]),
+                           np.array([[0, 2, 1], [0, 3, 2]]), process=False)
+    return TargetModel("floor_wall", (floor, Component("wall", wall, "white_paint", "bus", 1.0)))
+
+
+def _quad(size_m: float):
+    return trimesh.Trimesh(V * size_m, F, process=False)
+
+
+def _oblique_view(size_m: float):
+    """A camera above the floor's −y side looking at its centre, the image's x along the body x."""
+    eye = np.array([0.0, -0.9, 1.1]) * size_m
+    z = -eye / np.linalg.norm(eye)
+    x = np.array([1.0, 0.0, 0.0])
+    y = np.cross(z, x)
+    Rv = np.stack([x, y, z])
+    return Rv, -Rv @ eye
+
+
+def _balanced_error(model, size_m: float, spp: int = 64):
+    scene = Scene(model)
+    Rv, tv = _oblique_view(size_m)
+    light = Lighting(sun_dir_body=tuple(np.array([0.2, 0.5, 0.84]) / np.linalg.norm([0.2, 0.5, 0.84])), earth=None,
+                     ambient_radiance_W_m2_sr=1.0)
+    runs = [render(scene, CAM, Rv, tv, light, quality="reference", samples=spp, seed=s) for s in (1, 2)]
+    a, b = (r.radiance.astype(np.float64) for r in runs)
+    mask = runs[0].geometry.mask
+
+    def rel(x, y):
+        return float(np.sqrt(((x[mask] - y[mask]) ** 2).sum() / (y[mask] ** 2).sum()))
+
+    ref = (a + b) / 2
+    noise = rel(a, b) / 2
+    img = render(scene, CAM, Rv, tv, light, quality="balanced", seed=3).radiance.astype(np.float64)
+    e = rel(img, ref)
+    return math.sqrt(max(e * e - noise * noise, 0.0)), noise, int(mask.sum())
+
+
+def _bumpy_gltf(tmp_path):
+    """Base colour, metallic-roughness and normal textures that all vary (8×8 texels)."""
+    i = np.arange(N_TEX)
+    uu, vv = np.meshgrid((i + 0.5) / N_TEX, (i + 0.5) / N_TEX)
+    mr = np.zeros((N_TEX, N_TEX, 3))
+    mr[..., 1] = 0.35 + 0.5 * uu  # roughness
+    mr[..., 2] = np.where(vv > 0.5, 0.9, 0.0)  # metal in the top half
+    nrm = np.stack([0.25 * np.sin(2 * np.pi * uu), 0.25 * np.cos(2 * np.pi * vv), np.ones_like(uu)], -1)
+    nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
+    nrm_u8 = np.round(nrm * 127 + 128).astype(np.uint8)
+    return _write_gltf(tmp_path / "bumpy.gltf", base_png=_png(_u8(_pattern_linear())),
+                       mr_png=_png(np.round(mr * 255).astype(np.uint8)), normal_png=_png(nrm_u8), metallic=1.0,
+                       roughness=1.0)
+
+
+def test_balanced_matches_the_reference_on_a_textured_floor(tmp_path):
+    floor, _ = load_mesh(_bumpy_gltf(tmp_path), unit_scale_m=1.0)
+    comp = floor.components[0]
+    err, noise, n = _balanced_error(_floor_and_wall(comp, 1.0), 1.0)
+    print(f"textured: balanced {100 * err:.2f} %, reference noise {100 * noise:.2f} %, {n} px")
+    assert n > 1000 and noise < 0.03
+    assert err < 0.02
+
+
+@pytest.mark.parametrize("preset, size_m", [("gold_mli", 0.12), ("silver_mli", 0.12), ("solar_cell", 0.25)])
+def test_balanced_matches_the_reference_on_the_procedural_materials(preset, size_m):
+    floor = Component("floor", _quad(size_m), preset, "bus", 1.0)
+    model = _floor_and_wall(floor, size_m)
+    mat_par = Scene(model).material_tables[0]
+    assert mat_par[0, 0] != 0  # procedural, not the uniform preset
+    err, noise, n = _balanced_error(model, size_m)
+    print(f"{preset}: balanced {100 * err:.2f} %, reference noise {100 * noise:.2f} %, {n} px")
+    assert n > 1000 and noise < 0.03
+    assert err < 0.02
+
+
+# ------------------------------------------------------------------ procedural materials
+def _tables(preset: str):
+    """A 1 m × 0.5 m panel (its first principal axis x) of ``preset`` and its material tables."""
+    mesh = trimesh.Trimesh(V * [1.0, 0.5, 0.0], F, process=False)
+    model = TargetModel("one", (Component("panel", mesh, preset, "bus", 1.0),))
+    scene = Scene(model)
+    mats = scene.materials
+    arrays = (np.array([m.diffuse for m in mats]), np.array([m.f0 for m in mats]),
+              np.array([m.roughness for m in mats]))
+    return scene, arrays, scene.material_tables
+
+
+def test_the_solar_grid_box_filter_and_mean_against_point_samples():
+    from raytrace import _texture as tx
+    from raytrace.surfaces import SOLAR_BUSBAR_DIFFUSE, SOLAR_BUSBAR_M, SOLAR_GAP_M
+    scene, (d, f0, a), (par, fuv, atlas, varying) = _tables("solar_cell")
+    assert varying
+
+    def at(b1, b2, foot):
+        return tx.material_at(0, 0, b1, b2, 0.0, 0.0, 1.0, foot, d, f0, a, par, fuv, atlas)
+
+    # face 0 is (v0, v1, v2): the point b0·v0 + b1·v1 + b2·v2
+    rng = np.random.default_rng(1)
+    pts = rng.uniform(0, 1, (20000, 2))
+    pts = pts[pts.sum(1) <= 1]
+    rho = np.array([at(b1, b2, 0.0)[0] for b1, b2 in pts])
+    # the area fractions of a 40 × 80 mm cell with its 1 mm gaps and 1 mm busbar
+    pu, pv = 0.040 + SOLAR_GAP_M, 0.080 + SOLAR_GAP_M
+    f_cell = (1 - SOLAR_GAP_M / pu) * (1 - (SOLAR_GAP_M + SOLAR_BUSBAR_M) / pv)
+    f_bus = (1 - SOLAR_GAP_M / pu) * SOLAR_BUSBAR_M / pv
+    want = f_cell * d[0, 0] + f_bus * SOLAR_BUSBAR_DIFFUSE + (1 - f_cell - f_bus) * 0.30
+    assert at(0.3, 0.3, -1.0)[0] == pytest.approx(want, rel=1e-12)
+    assert rho.mean() == pytest.approx(want, rel=0.05)  # Monte Carlo over ~10⁴ points
+    # the box filter over a footprint w: the mean of point samples across it along u (x, the
+    # panel's first principal axis: b1 moves the point along x by b1 metres), at y = −0.1 m,
+    # inside a cell row (v = 0.15 m: 69 mm into its 81 mm period), where only u's gaps vary
+    assert abs(par[0, tx.P_AX1]) == pytest.approx(1.0)
+    filtered, sampled = [], []
+    for b1 in np.linspace(0.2, 0.241, 83):  # one period of u, every 0.5 mm
+        w = 0.003  # [m]: b1 ± 0.0015
+        s = np.linspace(b1 - 0.0015, b1 + 0.0015, 1501)
+        sampled.append(np.mean([at(x, 0.3, 0.0)[0] for x in s]))
+        filtered.append(at(b1, 0.3, w)[0])
+    np.testing.assert_allclose(filtered, sampled, atol=1e-3)
+    assert np.ptp(filtered) > 0.05  # some windows cross a gap
+    # the specular lobe is the preset's everywhere (cover glass)
+    assert at(0.3, 0.3, 0.0)[3:7] == pytest.approx((*f0[0], a[0]))
+
+
+def test_mli_crinkle_seen_from_afar_is_the_preset_lobe():
+    from raytrace import _texture as tx
+    for preset in ("gold_mli", "silver_mli"):
+        _, (d, f0, a), (par, fuv, atlas, _) = _tables(preset)
+        near = tx.material_at(0, 0, 0.3, 0.3, 0.0, 0.0, 1.0, 0.0, d, f0, a, par, fuv, atlas)
+        far = tx.material_at(0, 0, 0.3, 0.3, 0.0, 0.0, 1.0, -1.0, d, f0, a, par, fuv, atlas)
+        assert far[7:] == (0.0, 0.0, 1.0)  # unperturbed
+        assert far[6] == pytest.approx(0.32, abs=0.005)  # α² + 2σ² of the crinkle: the preset's wide lobe
+        assert near[6] == pytest.approx(0.15) and near[9] < 1.0  # a glossy foil, its normal tilted
