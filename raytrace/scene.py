@@ -411,6 +411,8 @@ class Scene:
         state["_direct"] = None
         state["_direct_fast"] = None
         state["_caches"] = {}
+        state.pop("_material_tables", None)  # rebuilt on first use (per-face, MBs on big meshes)
+        state.pop("_material_tables_key", None)
         return state
 
     def __setstate__(self, state):
