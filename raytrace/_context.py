@@ -105,9 +105,14 @@ class _Sunlight:
         how many component rows come first)."""
         if "m_diff" not in s:
             return s["comp"], self.diff, self.f0, self.alpha, 0
+        cached = getattr(self, "_mats_of", None)
+        if cached is not None and cached[0] is s["m_diff"]:  # the same points as last time
+            return cached[1]
         C = len(self.diff)
-        return (C + np.arange(len(s["m_alpha"]), dtype=np.int64), np.concatenate([self.diff, s["m_diff"]]),
-                np.concatenate([self.f0, s["m_f0"]]), np.concatenate([self.alpha, s["m_alpha"]]), C)
+        out = (C + np.arange(len(s["m_alpha"]), dtype=np.int64), np.concatenate([self.diff, s["m_diff"]]),
+               np.concatenate([self.f0, s["m_f0"]]), np.concatenate([self.alpha, s["m_alpha"]]), C)
+        self._mats_of = (s["m_diff"], out)
+        return out
 
     def sunlight(self, s, *, disc=None, occluder_t=None, robust: bool = False):
         """Sunlight (shadowed) at the points ``s``: radiance (n, 3) and the Sun's visibility
@@ -302,8 +307,9 @@ class _Context(_Sunlight):
         if direct is not None:
             val = np.empty((len(idx), 3))
             v = np.empty(len(idx))
+            kc = self._mats(s)[0]
             with parallel_chunksize(_FUSED_CHUNK):
-                _paths.lobe_traced(direct.handle, idx, s["P"], s["NS"], s["NG"], s["WO"], self._mats(s)[0], n_rays, seed,
+                _paths.lobe_traced(direct.handle, idx, s["P"], s["NS"], s["NG"], s["WO"], kc, n_rays, seed,
                                    seed ^ LOBE_PATH_STREAM, np.asarray(pix, dtype=np.int64), self.eps, _GATHER_BOUNCES,
                                    np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(s), lbar, val, v)
             out[idx] = val

@@ -67,7 +67,7 @@ import numpy as np
 import trimesh
 
 from .model import MATERIALS, SEMANTIC_CLASSES, Component, TargetModel
-from .surfaces import obj_texture_names, surface_from_visual
+from .surfaces import file_texture_names, surface_from_visual
 
 __all__ = [
     "DEFAULT_CREASE_ANGLE_DEG",
@@ -583,7 +583,7 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
 
     components, parts = [], []
     n_authored = 0
-    obj_textures = obj_texture_names(p) if file_materials and file_type == "obj" else None
+    file_textures = file_texture_names(p, file_type) if file_materials else None
     for (node, geom_name, material, _, f_in, transform, n_file, visual), part_name, (v, f), (n_nan, n_deg, n_dup), \
             idx in zip(raw, names, cleaned, counts, kept):
         watertight = winding = False
@@ -607,7 +607,7 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
                 n_authored += 1
             surface = None
             if file_materials and not _pick(materials, keys):
-                surface = surface_from_visual(visual, f_in[idx], f"mesh file {p}: part {part_name!r}", obj_textures)
+                surface = surface_from_visual(visual, f_in[idx], f"mesh file {p}: part {part_name!r}", file_textures)
             components.append(Component(name=part_name, mesh=mesh, material=mat, semantic=sem,
                                         crease_angle_rad=math.radians(crease), corner_normals=normals,
                                         surface=surface))

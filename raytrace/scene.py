@@ -372,8 +372,8 @@ class Scene:
         key = bool(self.procedural_materials)
         if getattr(self, "_material_tables_key", None) != key:
             from .surfaces import material_tables
-            self._material_tables = material_tables(self.model.components, self.materials, self.faces,
-                                                    self.vertices, self.face_offset, procedural=key)
+            self._material_tables = material_tables(self.model.components, self.faces, self.vertices,
+                                                    self.face_offset, procedural=key)
             self._material_tables_key = key
         return self._material_tables
 

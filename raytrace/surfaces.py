@@ -176,7 +176,7 @@ def _principal_frame(v: np.ndarray):
     return c + lo1 * ax1 + lo2 * ax2, ax1, ax2
 
 
-def material_tables(components, materials, faces: np.ndarray, vertices: np.ndarray, face_offset: np.ndarray,
+def material_tables(components, faces: np.ndarray, vertices: np.ndarray, face_offset: np.ndarray,
                     procedural: bool = True):
     """The kernels' tables (:mod:`raytrace._texture`): (mat_par (C, NPAR), face_uv (F, FACE_COLS)
     or a (1, FACE_COLS) placeholder when every component is uniform, atlas float32) and
@@ -278,46 +278,74 @@ def _image(img, mode: str) -> np.ndarray:
     return np.asarray(img.convert(mode) if hasattr(img, "convert") else img)
 
 
-def obj_texture_names(path) -> dict:
-    """{material name: map_Kd file name} of the MTL libraries an OBJ file names (its own
-    folder), to tell a texture trimesh could not read from none at all."""
+def file_texture_names(path, file_type: str) -> dict:
+    """{material name: {trimesh attribute: texture}} of the textures a glTF/GLB or OBJ file's
+    materials name (OBJ: the MTL libraries in its folder), to tell a texture trimesh could not
+    read (it drops those silently) from none at all; {} for other formats or files it cannot
+    parse (trimesh's own errors then speak)."""
+    import json
+    import struct
     from pathlib import Path
     p = Path(path)
-    out = {}
+    out: dict = {}
     try:
-        libs = [line.split(None, 1)[1].strip() for line in p.read_text(errors="replace").splitlines()
-                if line.startswith("mtllib ") and len(line.split(None, 1)) > 1]
-    except OSError:
-        return out
-    for lib in libs:
-        try:
-            text = (p.parent / lib).read_text(errors="replace")
-        except OSError:
-            continue
-        current = None
-        for line in text.splitlines():
-            words = line.strip().split()
-            if len(words) >= 2 and words[0] == "newmtl":
-                current = words[1]
-            elif len(words) >= 2 and words[0] == "map_Kd" and current is not None:
-                out[current] = words[-1]
+        if file_type == "obj":
+            libs = [line.split(None, 1)[1].strip() for line in p.read_text(errors="replace").splitlines()
+                    if line.startswith("mtllib ") and len(line.split(None, 1)) > 1]
+            for lib in libs:
+                current = None
+                for line in (p.parent / lib).read_text(errors="replace").splitlines():
+                    words = line.strip().split()
+                    if len(words) >= 2 and words[0] == "newmtl":
+                        current = words[1]
+                    elif len(words) >= 2 and words[0] == "map_Kd" and current is not None:
+                        out.setdefault(current, {})["image"] = words[-1]
+            return out
+        if file_type == "glb":
+            raw = p.read_bytes()
+            n = struct.unpack_from("<I", raw, 12)[0]
+            doc = json.loads(raw[20:20 + n])
+        elif file_type == "gltf":
+            doc = json.loads(p.read_text())
+        else:
+            return out
+        images = doc.get("images", [])
+        textures = doc.get("textures", [])
+
+        def what(ref):
+            src = textures[ref["index"]].get("source") if ref["index"] < len(textures) else None
+            uri = images[src].get("uri", "embedded") if src is not None and src < len(images) else "embedded"
+            return uri if not uri.startswith("data:") else "an embedded image"
+
+        for m in doc.get("materials", []):
+            pbr = m.get("pbrMetallicRoughness", {})
+            slots = {"baseColorTexture": pbr.get("baseColorTexture"),
+                     "metallicRoughnessTexture": pbr.get("metallicRoughnessTexture"),
+                     "normalTexture": m.get("normalTexture")}
+            named = {k: what(v) for k, v in slots.items() if isinstance(v, dict) and "index" in v}
+            if named and m.get("name"):
+                out[m["name"]] = named
+    except (OSError, ValueError, KeyError, IndexError, TypeError, struct.error):
+        return {}
     return out
 
 
-def surface_from_visual(visual, corner_vertex: np.ndarray, where: str, obj_textures: dict | None = None):
+def surface_from_visual(visual, corner_vertex: np.ndarray, where: str, file_textures: dict | None = None):
     """A file part's textured material as a :class:`SurfaceMaterial` (None: the part has no
     texture, and the presets' rules apply): glTF's ``PBRMaterial`` (baseColorFactor and
     texture, metallic/roughness factors and texture, normal texture; TEXCOORD_0) or OBJ/MTL's
     ``SimpleMaterial`` (``Kd``, ``map_Kd``: Lambertian). ``corner_vertex`` (n_faces, 3): the
-    file's vertex of each kept corner. ``where`` names the part in messages; ``obj_textures``
-    (:func:`obj_texture_names`) lets an unreadable ``map_Kd`` raise instead of vanishing."""
+    file's vertex of each kept corner. ``where`` names the part in messages; ``file_textures``
+    (:func:`file_texture_names`) lets a texture trimesh could not read raise instead of
+    vanishing."""
     from trimesh.visual.material import PBRMaterial, SimpleMaterial
     mat = getattr(visual, "material", None)
     uv = getattr(visual, "uv", None)
     mname = getattr(mat, "name", None)
-    if obj_textures and mname in obj_textures and getattr(mat, "image", None) is None:
-        raise ValueError(f"{where}: texture {obj_textures[mname]!r} of material {mname!r} cannot be read "
-                         f"(missing or not an image)")
+    for attr, name in (file_textures or {}).get(mname, {}).items():
+        if getattr(mat, attr, None) is None:
+            raise ValueError(f"{where}: texture {name!r} of material {mname!r} cannot be read "
+                             f"(missing or not an image)")
     if isinstance(mat, PBRMaterial):
         base, mr, nrm = mat.baseColorTexture, mat.metallicRoughnessTexture, mat.normalTexture
         if base is None and mr is None and nrm is None:

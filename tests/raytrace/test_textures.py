@@ -219,6 +219,11 @@ def test_gltf_base_colour_texture_with_the_origin_at_the_top_left(tmp_path):
     dL = _render(model) - _render(white)
     want, inside, _ = _expected_diffuse(_srgb_decode(u8 / 255.0) - 1.0)
     np.testing.assert_allclose(dL[inside], want, rtol=2e-4, atol=2e-3)
+    # the same file as GLB (trimesh's writer; its JSON chunk read for the texture check too)
+    glb = tmp_path / "q.glb"
+    trimesh.load_scene(str(tmp_path / "q.gltf"), process=False).export(str(glb))
+    again, _ = load_mesh(glb, unit_scale_m=1.0)
+    np.testing.assert_array_equal(_render(again), _render(model))
 
 
 # ------------------------------------------------------------------------ glTF conversions
@@ -279,6 +284,15 @@ def test_unreadable_texture_and_missing_uvs_are_one_line_errors(tmp_path):
     obj = _write_obj(tmp_path, None, texture_name="bad.png", write_png=False)
     with pytest.raises(ValueError, match=r"texture 'bad.png' of material 'skin' cannot be read"):
         load_mesh(obj, unit_scale_m=1.0)
+    # glTF: a missing image file, an embedded one that is not an image (trimesh drops both)
+    for uri, name in (("missing.png", "missing.png"), ("data:image/png;base64,AAAA", "an embedded image")):
+        gl = _write_gltf(tmp_path / "img.gltf", base_png=_png(np.full((1, 1, 3), 200)))
+        doc = json.loads(gl.read_text())
+        doc["images"][0] = {"uri": uri}
+        gl.write_text(json.dumps(doc))
+        with pytest.raises(ValueError, match=rf"texture '{name}' of material 'skin' cannot be read") as e:
+            load_mesh(gl, unit_scale_m=1.0)
+        assert "\n" not in str(e.value)
     gl = _write_gltf(tmp_path / "nouv.gltf", base_png=_png(np.full((1, 1, 3), 200)), with_uv=False)
     with pytest.raises(ValueError, match=r"has a texture but the part has no texture coordinates") as e:
         load_mesh(gl, unit_scale_m=1.0)
