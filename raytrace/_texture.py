@@ -17,6 +17,11 @@ UVs follow trimesh's convention (origin at the image's bottom-left, v up; trimes
 top-left V on load): texel row y = (1 − v)·h − ½, column x = u·w − ½ (texel centres at
 half-integers), bilinear between the four nearest texels, wrapped (glTF's default sampler,
 REPEAT, glTF 2.0 §3.8.4: https://registry.khronos.org/glTF/specs/2.0/glTF-2.0.html).
+
+:func:`material_at` is inlined into the kernels of ``_surface``, ``_gather``, ``_paths`` and
+``pathtrace``; numba's on-disk cache checks only a kernel's own source file, so after editing
+this module delete the cached kernels (``find raytrace -name '*.nb[ic]' -delete``) or those
+kernels keep the old code.
 """
 
 from __future__ import annotations
