@@ -324,7 +324,9 @@ def _trace_subsamples(sunl: _Sunlight, scene: Scene, o_body, D, h, centre, numbe
         n_idx = np.empty(len(idx), np.int64)  # and its number there
         _rows.subsample_hits(idx, h["geomID"], h["primID"], scene.face_offset, D, np.asarray(centre, np.int64),
                              np.asarray(number, np.int64), face, Dh, c_idx, n_idx)
-        s = _surfaces(scene, np.asarray(o_body, np.float64).reshape(1, 3), Dh, face)  # one origin for all
+        # one origin for all; the procedural materials filtered over a pixel's footprint, as at
+        # the centres (and the path tracer's jittered rays): the same material in every ray
+        s = _surfaces(scene, np.asarray(o_body, np.float64).reshape(1, 3), Dh, face, sunl.px_rad)
         disc = None
         if sunl.lighting.sun_angular_diameter_rad > 0.0 and S > 1:
             # one solar-disc sample per sub-sample, stratified over the pixel's S sub-samples in
@@ -380,7 +382,7 @@ def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, se
             if len(j) and gather_rays >= _MIN_SUB_GATHER:
                 keys = c_idx[j] * S + n_idx[j]  # the samples' keys, distinct per sub-sample
                 if ctx.lobe_sampled[s["comp"][j]].any():  # the lobe replaces the mirror term
-                    sj = {k: s[k][j] for k in ("P", "NS", "NG", "WO", "comp")}
+                    sj = {k: s[k][j] for k in ("P", "NS", "NG", "WO", "comp", "m_diff", "m_f0", "m_alpha") if k in s}
                     Ls[j] += ctx.lobe(sj, gather_rays, keys, seed, lbar[j])
                 # the gathers of a pixel's sub-samples: one stratified set of its own sequence
                 # (a stream apart from its centre's gather), their paths keyed per sub-sample

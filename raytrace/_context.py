@@ -17,6 +17,7 @@ from ._threads import parallel_chunksize
 from .brdf import split_sum_table
 from .lighting import Lighting
 from .scene import Scene
+from .surfaces import point_materials
 
 
 # the traced path from a final-gather hit: at most _GATHER_BOUNCES one-sample bounces, each
@@ -54,7 +55,7 @@ LOBE_MIN_SPECULAR = 0.2
 _FUSED_CHUNK = 1
 
 
-def _surfaces(scene: Scene, O, D, face) -> dict:
+def _surfaces(scene: Scene, O, D, face, px_rad: float = 0.0) -> dict:
     """The surface points where rays O + t D hit triangles ``face`` of ``scene``: point,
     shading and geometric normals, direction to the viewer, barycentrics, side, part
     (:func:`raytrace._surface.surfaces`; ``O`` a row per ray, or one row for all)."""
@@ -66,6 +67,7 @@ def _surfaces(scene: Scene, O, D, face) -> dict:
     out["comp"] = scene.component_of_face[face]
     _surface.surfaces(O, D, face, scene.vertices, scene.faces, scene.face_normal, scene.corner_normal, out["P"],
                       out["NS"], out["NG"], out["WO"], out["B"], out["SIDE"])
+    point_materials(scene, out, O, px_rad)
     return out
 
 
@@ -93,6 +95,24 @@ class _Sunlight:
         self.prefiltered_glossy = prefiltered_glossy
         self.eps = scene.ray_eps_m
         self.p_background, self.tex = _background_params(lighting)
+        self.mat_par, self.face_uv, self.atlas, self.varying = scene.material_tables
+        self.px_rad = 0.0  # the angle a pixel spans, where the frame's camera sets it (procedural materials)
+
+    def _mats(self, s):
+        """(comp, diff, f0, alpha, rows) as the kernels index the materials of the points ``s``:
+        the components' rows, or where the points carry their own (:func:`point_materials`)
+        the components' rows followed by one row per point, point k at row n_comp + k (rows:
+        how many component rows come first)."""
+        if "m_diff" not in s:
+            return s["comp"], self.diff, self.f0, self.alpha, 0
+        cached = getattr(self, "_mats_of", None)
+        if cached is not None and cached[0] is s["m_diff"]:  # the same points as last time
+            return cached[1]
+        C = len(self.diff)
+        out = (C + np.arange(len(s["m_alpha"]), dtype=np.int64), np.concatenate([self.diff, s["m_diff"]]),
+               np.concatenate([self.f0, s["m_f0"]]), np.concatenate([self.alpha, s["m_alpha"]]), C)
+        self._mats_of = (s["m_diff"], out)
+        return out
 
     def sunlight(self, s, *, disc=None, occluder_t=None, robust: bool = False):
         """Sunlight (shadowed) at the points ``s``: radiance (n, 3) and the Sun's visibility
@@ -138,14 +158,15 @@ class _Sunlight:
                     blocked = h["geomID"] >= 0
                     occluder_t[idx[blocked]] = h["tfar"][blocked]
                 vis[idx[~blocked]] = 1.0
-            _surface.shade_sun(s["NS"], s["WO"], s["comp"], self.diff, self.f0, self.alpha, self.sun, vis, L)
+            kc, kd, kf, ka, _ = self._mats(s)
+            _surface.shade_sun(s["NS"], s["WO"], kc, kd, kf, ka, self.sun, vis, L)
         return L, vis
 
     def mirror_hits(self, s):
         """The mirror rays of the specular points of ``s`` and their closest hits, as
         :meth:`_Context.add_mirror` takes them: (rows, origins, directions, hits), or None where
         no point is specular."""
-        spec = self.specular[s["comp"]]
+        spec = self.specular[s["comp"]] if "m_f0" not in s else s["m_f0"].max(axis=1) > 0.0
         if not spec.any():
             return None
         n = len(s["P"])
@@ -160,7 +181,10 @@ class _Sunlight:
             # lobes: paint, aluminium) it needs no ray, and a miss stands in for it
             h = {"geomID": np.full(len(idx), -1, np.int32), "primID": np.zeros(len(idx), np.int32),
                  "u": np.zeros(len(idx), np.float32), "v": np.zeros(len(idx), np.float32)}
-            cast = np.flatnonzero(self.mirror_weighted[s["comp"][idx]])
+            if "m_alpha" in s:  # as mirror_weighted, per point
+                cast = np.flatnonzero(s["m_alpha"][idx] < _surface.MIRROR_BLEND_A0 + _surface.MIRROR_BLEND_WIDTH)
+            else:
+                cast = np.flatnonzero(self.mirror_weighted[s["comp"][idx]])
             if len(cast):
                 hc = self.scene.intersect(o[idx[cast]], d[idx[cast]])
                 for key in h:
@@ -205,8 +229,8 @@ class _Sunlight:
         o = np.repeat(s["P"][cand] + self.eps * s["NG"][cand], n_rays, axis=0)
         v = 1.0 - self.scene.occluded(o, d).reshape(len(cand), n_rays).mean(axis=1)
         full = np.zeros((len(cand), 3))
-        _surface.shade_sun(s["NS"][cand], s["WO"][cand], s["comp"][cand], self.diff, self.f0, self.alpha, self.sun,
-                           np.ones(len(cand)), full)
+        kc, kd, kf, ka, _ = self._mats(s)
+        _surface.shade_sun(s["NS"][cand], s["WO"][cand], kc[cand], kd, kf, ka, self.sun, np.ones(len(cand)), full)
         dL = (v - vis[cand])[:, None] * full
         vis[cand] = v
         return cand, dL
@@ -253,9 +277,12 @@ class _Context(_Sunlight):
         idx, o, d, h = hits
         M = np.zeros((n, 3))
         lbar = np.zeros((n, 3)) if lbar_out is None else lbar_out
+        kc, level = self._mats(s)[0], self.glossy_level
+        if "m_alpha" in s:
+            level = np.concatenate([level, level[s["comp"]]])
         _surface.add_mirror(idx, o, d, h["geomID"], h["primID"], h["u"].astype(np.float64),
-                            h["v"].astype(np.float64), s["NS"], s["WO"], s["comp"], E_point, *self._lookup(),
-                            self.prefiltered_glossy, self.env_irradiance, self.glossy_env, self.glossy_level, M,
+                            h["v"].astype(np.float64), s["NS"], s["WO"], kc, E_point, *self._lookup(s),
+                            self.prefiltered_glossy, self.env_irradiance, self.glossy_env, level, M,
                             lbar)
         L += M
 
@@ -280,10 +307,11 @@ class _Context(_Sunlight):
         if direct is not None:
             val = np.empty((len(idx), 3))
             v = np.empty(len(idx))
+            kc = self._mats(s)[0]
             with parallel_chunksize(_FUSED_CHUNK):
-                _paths.lobe_traced(direct.handle, idx, s["P"], s["NS"], s["NG"], s["WO"], s["comp"], n_rays, seed,
+                _paths.lobe_traced(direct.handle, idx, s["P"], s["NS"], s["NG"], s["WO"], kc, n_rays, seed,
                                    seed ^ LOBE_PATH_STREAM, np.asarray(pix, dtype=np.int64), self.eps, _GATHER_BOUNCES,
-                                   np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(), lbar, val, v)
+                                   np.float32(_NEAR_SPACINGS * self.cache.spacing_m), *self._lookup(s), lbar, val, v)
             out[idx] = val
             if var is not None:
                 var[idx] = v
@@ -295,8 +323,8 @@ class _Context(_Sunlight):
             o = np.empty((m, 3))
             d = np.empty((m, 3))
             w = np.empty((m, 3))
-            _gather.lobe_rays(part, s["P"], s["NS"], s["NG"], s["WO"], s["comp"], self.f0, self.alpha, n_rays, seed,
-                              pix, self.eps, o, d, w)
+            kc, _, kf, ka, _ = self._mats(s)
+            _gather.lobe_rays(part, s["P"], s["NS"], s["NG"], s["WO"], kc, kf, ka, n_rays, seed, pix, self.eps, o, d, w)
             h = self.scene.intersect(o, d)
             val = np.empty((len(part), 3))
             hu, hv = h["u"].astype(np.float64), h["v"].astype(np.float64)
@@ -506,15 +534,19 @@ class _Context(_Sunlight):
             vis[idx[~blocked]] = 1.0
         return vis
 
-    def _lookup(self):
-        """Arguments of :func:`raytrace._surface.incoming` after the ray."""
+    def _lookup(self, s=None):
+        """Arguments of :func:`raytrace._surface.incoming` after the ray; with points ``s``
+        that carry their own materials, the material rows of :meth:`_mats`."""
         sc, c = self.scene, self.cache
-        return (sc.face_offset, sc.face_normal, sc.corner_normal, sc.component_of_face, self.diff, self.f0,
-                self.alpha, self.glossy, self.table, self.sun, self.cf.irradiance_W_m2, self.cf.sun_irradiance_W_m2, c.valid,
-                c.face_s, c.lat_start, c.lat_ids, self.p, self.tex)
+        _, diff, f0, alpha, C = self._mats(s) if s is not None else (None, self.diff, self.f0, self.alpha, 0)
+        glossy = self.glossy if not C else np.concatenate([self.glossy, self.glossy[s["comp"]]])
+        return (sc.face_offset, sc.face_normal, sc.corner_normal, sc.component_of_face, diff, f0,
+                alpha, glossy, self.table, self.sun, self.cf.irradiance_W_m2, self.cf.sun_irradiance_W_m2, c.valid,
+                c.face_s, c.lat_start, c.lat_ids, self.p, self.tex, self.mat_par, self.face_uv, self.atlas)
 
     def add_diffuse(self, s, E, L):
-        _surface.add_diffuse(E, s["comp"], self.diff, L)
+        kc, kd, _, _, _ = self._mats(s)
+        _surface.add_diffuse(E, kc, kd, L)
 
 
 def _background_params(lighting: Lighting):

@@ -130,7 +130,8 @@ def bounce2_rays(O, D, tfar, geom, prim, hu, hv, face_offset, face_normal, corne
 
 @pjit
 def incoming_rays(O, D, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
-                  mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis, e_ind, out):
+                  mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+                  mat_par, face_uv, atlas, vis, e_ind, out):
     """:func:`raytrace._surface.incoming` along each ray (the Sun's visibility at its hit from ``vis``, its
     indirect irradiance from ``e_ind`` where ≥ 0, else from the cache)."""
     for m in numba.prange(D.shape[0]):
@@ -140,12 +141,14 @@ def incoming_rays(O, D, geom, prim, hu, hv, face_offset, face_normal, corner_nor
         out[m, 0], out[m, 1], out[m, 2] = incoming(
             geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1], D[m, 2], face_offset,
             face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun,
-            valid, face_s, lat_start, lat_ids, p, tex, vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
+            valid, face_s, lat_start, lat_ids, p, tex,
+            mat_par, face_uv, atlas, vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
 
 
 @pjit
 def gather_sum(start, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
-               mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, vis,
+               mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+               mat_par, face_uv, atlas, vis,
                e_ind, NS, E_unocc, alpha, out, out_var):
     """Irradiance estimate per point k from its N = start[k + 1] − start[k] cosine-weighted rays
     (rays start[k] … start[k + 1] − 1, about NS; rays under the geometric surface carry
@@ -197,6 +200,7 @@ def gather_sum(start, O, D, NG, geom, prim, hu, hv, face_offset, face_normal, co
                 r, g, b = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
                                    D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
                                    mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+                                   mat_par, face_uv, atlas,
                                    vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
                 sr += r
                 sg += g
@@ -310,7 +314,8 @@ def lobe_rays(idx, P, NS, NG, WO, comp, mat_f0, mat_alpha, n_rays, seed, pix, ep
 
 @pjit
 def lobe_sum(n_rays, O, D, Wt, geom, prim, hu, hv, face_offset, face_normal, corner_normal, comp_of_face,
-             mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, idx, CV,
+             mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+             mat_par, face_uv, atlas, idx, CV,
              vis, e_ind, out, out_var):
     """Each listed point's (idx[j]) sampled specular reflection minus its cheap counterpart
     L̄·A (:func:`raytrace._surface.add_mirror`, L̄ = ``CV[idx[j]]``, A the split-sum albedo): the mean over the
@@ -337,6 +342,7 @@ def lobe_sum(n_rays, O, D, Wt, geom, prim, hu, hv, face_offset, face_normal, cor
                 a, b, c = incoming(geom[m], prim[m], hu[m], hv[m], O[m, 0], O[m, 1], O[m, 2], D[m, 0], D[m, 1],
                                    D[m, 2], face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0,
                                    mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+                                   mat_par, face_uv, atlas,
                                    vis[m], e_ind[m, 0], e_ind[m, 1], e_ind[m, 2])
             sr, sg, sb, sy2 = add_lobe_term(sr, sg, sb, sy2, Wt[m, 0], Wt[m, 1], Wt[m, 2], a, b, c, CV[k, 0], CV[k, 1],
                                             CV[k, 2])

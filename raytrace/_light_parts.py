@@ -168,7 +168,7 @@ def fast_centre_parts(scene, camera, R, t, lighting, geo, cache_options: dict, s
     O = np.empty((len(pix), 3))
     D = np.empty((len(pix), 3))
     centre_rays(pix, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, *camera.lens_arrays(), O, D)
-    s = _surfaces(scene, O, D, geo.face_index.ravel()[pix].astype(np.int64))
+    s = _surfaces(scene, O, D, geo.face_index.ravel()[pix].astype(np.int64), 1.0 / camera.fx)
     ctx = _Context(scene, lighting, cache_options, prefiltered_glossy=True)
     soft = sun_rays > 1 and lighting.sun_angular_diameter_rad > 0.0
     occ_t = np.full(len(pix), np.inf) if soft else None

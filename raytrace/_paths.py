@@ -92,7 +92,7 @@ def _traced_indirect(scene, buf, path, ox, oy, oz, dx, dy, dz, g, pr, hu, hv, t,
     :meth:`raytrace._context._Context._lookup` returns (a numba-inlined call takes at most 30
     arguments: CPython passes more as one tuple, which numba's inliner does not take)."""
     (face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot,
-     E_sun, valid, face_s, lat_start, lat_ids, p, tex) = lk
+     E_sun, valid, face_s, lat_start, lat_ids, p, tex, mat_par, face_uv, atlas) = lk
     if g < 0 or levels <= 0:
         return -1.0, -1.0, -1.0
     f = face_offset[g] + pr
@@ -139,7 +139,8 @@ def _traced_indirect(scene, buf, path, ox, oy, oz, dx, dy, dz, g, pr, hu, hv, t,
             lr, lg, lb = incoming(g2, np.int32(path[i, 11]), path[i, 12], path[i, 13], path[i, 0], path[i, 1],
                                   path[i, 2], path[i, 3], path[i, 4], path[i, 5], face_offset, face_normal,
                                   corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot,
-                                  E_sun, valid, face_s, lat_start, lat_ids, p, tex, path[i, 9], er, eg, eb)
+                                  E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+                                  mat_par, face_uv, atlas, path[i, 9], er, eg, eb)
         er, eg, eb = path[i, 6] * lr, path[i, 7] * lg, path[i, 8] * lb
     return er, eg, eb
 
@@ -147,7 +148,8 @@ def _traced_indirect(scene, buf, path, ox, oy, oz, dx, dy, dz, g, pr, hu, hv, t,
 @pjit
 def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, share, kmul, eps, levels, first_near,
                   near, face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy,
-                  table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, E_unocc, alpha, out, out_var,
+                  table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+                  mat_par, face_uv, atlas, E_unocc, alpha, out, out_var,
                   out_hits):
     """Final-gather irradiance per point k (at row rows[k] of P, NS and NG; every other array is
     per point) from rays start[k] … start[k + 1] − 1, as
@@ -163,7 +165,7 @@ def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, sh
     stream = 2 * seed + 15
     a = alpha
     lk = (face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot,
-          E_sun, valid, face_s, lat_start, lat_ids, p, tex)
+          E_sun, valid, face_s, lat_start, lat_ids, p, tex, mat_par, face_uv, atlas)
     n_pts = out.shape[0]
     n_blocks = (n_pts + _BLOCK - 1) // _BLOCK
 
@@ -216,7 +218,8 @@ def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, sh
                                                      pix[k] * kmul + j, path_seed, levels, first_near, near, eps, lk)
                     r, gg, b = incoming(g, pr, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_normal, corner_normal,
                                         comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun,
-                                        valid, face_s, lat_start, lat_ids, p, tex, vis, eir, eig, eib)
+                                        valid, face_s, lat_start, lat_ids, p, tex,
+                                        mat_par, face_uv, atlas, vis, eir, eig, eib)
                     sr += r
                     sg += gg
                     sb += b
@@ -231,7 +234,7 @@ def gather_traced(scene, P, NS, NG, rows, start, first, seed, path_seed, pix, sh
 @pjit
 def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, eps, levels, near,
                 face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun,
-                E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, CV, out, out_var):
+                E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, mat_par, face_uv, atlas, CV, out, out_var):
     """Each listed point's (idx[j]) sampled specular reflection minus its control variate, as
     :meth:`raytrace._context._Context.lobe` computes it from :func:`raytrace._gather.lobe_rays`
     (n_rays lobe directions, keyed by pixel and ``seed``), the shadow rays and paths of their
@@ -241,7 +244,7 @@ def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, e
     gx = _strata(n_rays)
     gy = n_rays // gx
     lk = (face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot,
-          E_sun, valid, face_s, lat_start, lat_ids, p, tex)
+          E_sun, valid, face_s, lat_start, lat_ids, p, tex, mat_par, face_uv, atlas)
     every = np.float32(np.inf)
     n_pts = out.shape[0]
     for blk in numba.prange((n_pts + _BLOCK - 1) // _BLOCK):
@@ -280,7 +283,8 @@ def lobe_traced(scene, idx, P, NS, NG, WO, comp, n_rays, seed, path_seed, pix, e
                                                      pix[k] * n_rays + r, path_seed, levels, every, near, eps, lk)
                     a, b, cc = incoming(g, pr, hu, hv, ox, oy, oz, lx, ly, lz, face_offset, face_normal, corner_normal,
                                         comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun,
-                                        valid, face_s, lat_start, lat_ids, p, tex, vis, eir, eig, eib)
+                                        valid, face_s, lat_start, lat_ids, p, tex,
+                                        mat_par, face_uv, atlas, vis, eir, eig, eib)
                 sr, sg, sb, sy2 = add_lobe_term(sr, sg, sb, sy2, wr, wg, wb, a, b, cc, CV[k, 0], CV[k, 1], CV[k, 2])
             out[j, 0], out[j, 1], out[j, 2], out_var[j] = mean_estimate(sr, sg, sb, sy2, n_rays)
 

@@ -19,6 +19,7 @@ from ._jit import FASTMATH, inline, pjit, pjit_exact
 from ._kernels import moller_trumbore, normals_facing
 from ._lights import SUN_COS_HALF, SUN_E, SUN_X, SUN_Y, SUN_Z
 from ._sampling import _hash01, _hash32, _strata, permute
+from ._texture import material_at
 from .brdf import brdf_cos, onb, specular_albedo
 
 
@@ -191,6 +192,7 @@ def incoming_env(p, tex, ox, oy, oz, dx, dy, dz):
 @numba.njit(cache=True, fastmath=FASTMATH, nogil=True, forceinline=True)
 def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_normal, corner_normal, comp_of_face,
              mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+             mat_par, face_uv, atlas,
              vis_sun, eir, eig, eib):
     """Radiance arriving along a traced ray (o, d) that hit a surface (``geom`` ≥ 0; for a ray
     that escaped, :func:`incoming_env`): that surface's radiance towards the ray from the
@@ -241,16 +243,20 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
         eg = max(eg - es, 0.0) + ex
         eb = max(eb - es, 0.0) + ex
     es = ex
-    lr = mat_diff[c, 0] / math.pi * er
-    lg = mat_diff[c, 1] / math.pi * eg
-    lb = mat_diff[c, 2] / math.pi * eb
-    if mat_f0[c, 0] > 0.0 or mat_f0[c, 1] > 0.0 or mat_f0[c, 2] > 0.0:
+    # the hit's own material (raytrace._texture; the component's row where it is uniform): its
+    # perturbed normal shapes the specular terms, the irradiance stays the surface's
+    dr, dg, db, f0r, f0g, f0b, al, nx, ny, nz = material_at(c, f, hu, hv, nx, ny, nz, -1.0, mat_diff, mat_f0, mat_alpha,
+                                                            mat_par, face_uv, atlas)
+    lr = dr / math.pi * er
+    lg = dg / math.pi * eg
+    lb = db / math.pi * eb
+    if f0r > 0.0 or f0g > 0.0 or f0b > 0.0:
         mu = -(nx * dx + ny * dy + nz * dz)
         if mu > 0.0:
             if es > 0.0 and cs > 0.0 and sun[SUN_E] > 0.0:
                 vis = min(es / (sun[SUN_E] * cs), 1.0)
                 sr, sg, sb = brdf_cos(nx, ny, nz, -dx, -dy, -dz, sun[SUN_X], sun[SUN_Y], sun[SUN_Z], 0.0, 0.0, 0.0,
-                                      mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2], mat_alpha[c])
+                                      f0r, f0g, f0b, al)
                 lr += sr * sun[SUN_E] * vis
                 lg += sg * sun[SUN_E] * vis
                 lb += sb * sun[SUN_E] * vis
@@ -259,7 +265,7 @@ def incoming(geom, prim, hu, hv, ox, oy, oz, dx, dy, dz, face_offset, face_norma
                 lg += eig
                 lb += eib
             else:
-                ar, ag, ab = specular_albedo(table, mu, mat_alpha[c], mat_f0[c, 0], mat_f0[c, 1], mat_f0[c, 2])
+                ar, ag, ab = specular_albedo(table, mu, al, f0r, f0g, f0b)
                 lr += ar * max(er - es, 0.0) / math.pi
                 lg += ag * max(eg - es, 0.0) / math.pi
                 lb += ab * max(eb - es, 0.0) / math.pi
@@ -288,7 +294,7 @@ MIRROR_BLEND_WIDTH = 0.3
 @pjit
 def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset, face_normal, corner_normal,
                comp_of_face, mat_diff, mat_f0, mat_alpha, glossy, table, sun, E_tot, E_sun, valid, face_s, lat_start,
-               lat_ids, p, tex, prefiltered, E_unocc, glossy_env, glossy_level, out, out_lbar):
+               lat_ids, p, tex, mat_par, face_uv, atlas, prefiltered, E_unocc, glossy_env, glossy_level, out, out_lbar):
     """out += L̄_in · (F0·A + B): the specular reflection of the environment and other parts.
 
     ``prefiltered`` (``fast``, where this term is the answer): L̄_in is blended by the lobe
@@ -318,7 +324,8 @@ def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset
         else:
             r, g, b = incoming(geom[j], prim[j], hu[j], hv[j], O[j, 0], O[j, 1], O[j, 2], D[j, 0], D[j, 1], D[j, 2],
                                face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy,
-                               table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex, -1.0, -1.0, -1.0, -1.0)
+                               table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
+                               mat_par, face_uv, atlas, -1.0, -1.0, -1.0, -1.0)
         c = comp[k]
         if not prefiltered:
             t = min(max((mat_alpha[c] - MIRROR_BLEND_A0) / MIRROR_BLEND_WIDTH, 0.0), 1.0)

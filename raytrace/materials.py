@@ -96,7 +96,12 @@ def lambertian(albedo, name: str = "lambertian") -> Material:
 
 def material_of(component) -> Material:
     """The BRDF of a :class:`~raytrace.model.Component`: its ``albedo`` override (pure
-    Lambertian) when set, else its material's preset."""
+    Lambertian) when set, else the mean of its file material when it has one
+    (:func:`raytrace.surfaces.mean_material`; the per-hit values come from
+    :mod:`raytrace._texture`), else its material's preset."""
     if component.albedo is not None:
         return lambertian(component.albedo, f"{component.name}_albedo")
+    if getattr(component, "surface", None) is not None and component.surface.kind == "gltf":
+        from .surfaces import mean_material
+        return Material(f"{component.name}_file", *mean_material(component.surface))
     return MATERIAL_PRESETS[component.material]

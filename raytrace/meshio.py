@@ -67,6 +67,7 @@ import numpy as np
 import trimesh
 
 from .model import MATERIALS, SEMANTIC_CLASSES, Component, TargetModel
+from .surfaces import file_texture_names, surface_from_visual
 
 __all__ = [
     "DEFAULT_CREASE_ANGLE_DEG",
@@ -347,7 +348,8 @@ def _compact(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _scene_parts(scene: trimesh.Scene, p: Path) -> tuple[list, list]:
-    """Per triangle node: (node, geometry, material name, vertices [file units], faces, transform)."""
+    """Per triangle node: (node, geometry, material name, vertices [file units], faces, transform,
+    file normals, visual)."""
     parts, skipped = [], []
     for node in scene.graph.nodes_geometry:
         transform, geom_name = scene.graph[node]
@@ -363,7 +365,7 @@ def _scene_parts(scene: trimesh.Scene, p: Path) -> tuple[list, list]:
                              f"or malformed arrays (vertices {v.shape}, faces {f.shape})")
         material = getattr(getattr(geom.visual, "material", None), "name", None)
         parts.append((str(node), str(geom_name), material, v, f.astype(np.int64),
-                      np.asarray(transform, dtype=np.float64), _file_normals(geom, len(v))))
+                      np.asarray(transform, dtype=np.float64), _file_normals(geom, len(v)), geom.visual))
     return parts, skipped
 
 
@@ -464,7 +466,7 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
               material_map: dict | None = None, semantic_map: dict | None = None,
               default_material: str = "aluminium",
               recentre: str = "none", crease_angle_deg: float = DEFAULT_CREASE_ANGLE_DEG,
-              authored_normals: bool = True) -> tuple[TargetModel, MeshReport]:
+              authored_normals: bool = True, file_materials: bool = True) -> tuple[TargetModel, MeshReport]:
     """Load a mesh file as a target model, one component per part, validated and repaired.
 
     Parameters
@@ -493,6 +495,10 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
     authored_normals : bool, keyword-only
         Use the file's own vertex normals (glTF ``NORMAL``, OBJ ``vn``) as the shading normals
         of the parts that have them (default True); False applies the crease rule everywhere.
+    file_materials : bool, keyword-only
+        Shade the parts whose file material has a texture (glTF base colour, metallic-roughness
+        or normal texture; OBJ ``map_Kd``) from it (:func:`raytrace.surfaces.surface_from_visual`),
+        unless ``material_map`` names the part (default True); False: presets everywhere.
 
     Returns
     -------
@@ -532,6 +538,8 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
     crease = check_crease_angle_deg(crease_angle_deg)
     if not isinstance(authored_normals, (bool, np.bool_)):
         raise ValueError(f"authored_normals must be true or false, got {authored_normals!r}")
+    if not isinstance(file_materials, (bool, np.bool_)):
+        raise ValueError(f"file_materials must be true or false, got {file_materials!r}")
     materials = _check_map(material_map, MATERIALS, "material_map")
     semantics = _check_map(semantic_map, SEMANTIC_CLASSES, "semantic_map")
 
@@ -563,7 +571,7 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
                              f"parts: {', '.join(names)}")
 
     cleaned, counts, kept = [], [], []
-    for node, geom_name, material, v, f, transform, _ in raw:
+    for node, geom_name, material, v, f, transform, _, _ in raw:
         with np.errstate(all="ignore"):
             v = (v @ transform[:3, :3].T + transform[:3, 3]) * scale
         v, f, n_nan, n_deg, n_dup, idx = _clean(v, f)
@@ -575,8 +583,9 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
 
     components, parts = [], []
     n_authored = 0
-    for (node, geom_name, material, _, f_in, transform, n_file), part_name, (v, f), (n_nan, n_deg, n_dup), idx in zip(
-            raw, names, cleaned, counts, kept):
+    file_textures = file_texture_names(p, file_type) if file_materials else None
+    for (node, geom_name, material, _, f_in, transform, n_file, visual), part_name, (v, f), (n_nan, n_deg, n_dup), \
+            idx in zip(raw, names, cleaned, counts, kept):
         watertight = winding = False
         if len(f):
             v = v - offset
@@ -596,8 +605,12 @@ def load_mesh(path, *, unit_scale_m: float, name: str | None = None,
             if authored_normals and n_file is not None:
                 normals = _corner_normals(n_file, f_in[idx], transform, v, f)
                 n_authored += 1
+            surface = None
+            if file_materials and not _pick(materials, keys):
+                surface = surface_from_visual(visual, f_in[idx], f"mesh file {p}: part {part_name!r}", file_textures)
             components.append(Component(name=part_name, mesh=mesh, material=mat, semantic=sem,
-                                        crease_angle_rad=math.radians(crease), corner_normals=normals))
+                                        crease_angle_rad=math.radians(crease), corner_normals=normals,
+                                        surface=surface))
         parts.append(PartReport(name=part_name, source_node=node, source_material=material,
                                 faces_in=len(f_in), removed_nan=n_nan, removed_degenerate=n_deg,
                                 removed_duplicate=n_dup, faces_out=len(f), watertight=watertight,

@@ -77,6 +77,9 @@ class Component:
         Authored shading normals, shape (n_faces, 3, 3): the unit normal at each corner of
         each face (on the side of the face's geometric normal), NaN where the file gave none
         usable; those corners, and every corner when None, get the crease-angle normal [-].
+    surface : raytrace.surfaces.SurfaceMaterial or None
+        A material that varies over the surface (a file's textured material), used instead of
+        the preset unless ``albedo`` is set (docs/shading.md, "Materials").
     """
 
     name: str
@@ -87,6 +90,7 @@ class Component:
     crease_angle_rad: float = DEFAULT_CREASE_ANGLE_RAD
     albedo: tuple | None = None
     corner_normals: np.ndarray | None = None
+    surface: object = None
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
@@ -120,6 +124,10 @@ class Component:
                 raise ValueError(f"component {self.name}: corner_normals must have shape (n_faces, 3, 3) = "
                                  f"({len(self.mesh.faces)}, 3, 3), got {n.shape}")
             object.__setattr__(self, "corner_normals", n)
+        uv = getattr(self.surface, "corner_uv", None)
+        if uv is not None and np.shape(uv) != (len(self.mesh.faces), 3, 2):
+            raise ValueError(f"component {self.name}: surface.corner_uv must have shape (n_faces, 3, 2) = "
+                             f"({len(self.mesh.faces)}, 3, 2), got {np.shape(uv)}")
 
     @property
     def semantic_id(self) -> int:
@@ -207,5 +215,5 @@ def centre_on_mass(components) -> tuple:
         mesh.apply_translation(-com)
         out.append(Component(name=c.name, mesh=mesh, material=c.material, semantic=c.semantic,
                              mass_kg=c.mass_kg, crease_angle_rad=c.crease_angle_rad, albedo=c.albedo,
-                             corner_normals=c.corner_normals))
+                             corner_normals=c.corner_normals, surface=c.surface))
     return tuple(out)

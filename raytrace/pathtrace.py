@@ -32,6 +32,7 @@ from ._lens import ray_xy
 from ._lights import SUN_COS_HALF, SUN_E, SUN_X, SUN_Y, SUN_Z
 from ._surface import surfaces
 from .brdf import brdf_cos, onb, sample_brdf
+from .surfaces import point_materials
 
 _PHI2 = 1.324717957244746
 _A1 = 1.0 / _PHI2
@@ -237,6 +238,19 @@ def render_reference(scene, camera, R, t, lighting, geo, *, spp: int, seed: int)
             surfaces(O, D, face, scene.vertices, scene.faces, scene.face_normal, scene.corner_normal,
                      P, NS, NG, WO, B, SIDE)
             comp = scene.component_of_face[face]
+            # each vertex's own material where materials vary (raytrace.surfaces): rows
+            # n_comp + k of the material arrays, the components' rows before them; at the
+            # camera's hits filtered over a pixel's footprint as the presets filter it (the
+            # procedural patterns' level of detail is part of the material, as a texture's
+            # mipmap is), deeper vertices with the patterns' mean, as the presets' secondary hits
+            vx = {"face": face, "comp": comp, "B": B, "NS": NS, "WO": WO, "P": P}
+            point_materials(scene, vx, O, 1.0 / camera.fx if depth == 0 else -1.0)
+            k_comp, k_diff, k_f0, k_alpha = comp, diff, f0, alpha
+            if "m_diff" in vx:
+                k_comp = len(diff) + np.arange(m, dtype=np.int64)
+                k_diff = np.concatenate([diff, vx["m_diff"]])
+                k_f0 = np.concatenate([f0, vx["m_f0"]])
+                k_alpha = np.concatenate([alpha, vx["m_alpha"]])
             sh_o = np.empty((m, 3))
             sh_d = np.empty((m, 3))
             sh_c = np.empty((m, 3))
@@ -244,8 +258,8 @@ def render_reference(scene, camera, R, t, lighting, geo, *, spp: int, seed: int)
             nx_o = np.empty((m, 3))
             nx_d = np.empty((m, 3))
             alive = np.empty(m, dtype=bool)
-            _vertex(pix_of, s, seed, depth, P, NS, NG, WO, comp, diff, f0, alpha, thr, sun, eps, sh_o, sh_d, sh_c,
-                    sh_ok, nx_o, nx_d, alive)
+            _vertex(pix_of, s, seed, depth, P, NS, NG, WO, k_comp, k_diff, k_f0, k_alpha, thr, sun, eps, sh_o, sh_d,
+                    sh_c, sh_ok, nx_o, nx_d, alive)
             sidx = np.flatnonzero(sh_ok)
             if len(sidx):
                 blocked = scene.occluded(sh_o[sidx], sh_d[sidx], robust=True)

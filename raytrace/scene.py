@@ -360,6 +360,23 @@ class Scene:
             self._materials = tuple(material_of(c) for c in self.model.components)
         return self._materials
 
+    procedural_materials = True
+    """Whether the presets with a procedural material (gold/silver MLI's crinkle, the solar
+    cells' grid: :mod:`raytrace.surfaces`) use it; False shades them uniform (set before the
+    first frame)."""
+
+    @property
+    def material_tables(self) -> tuple:
+        """(mat_par, face_uv, atlas, varying): the per-hit materials' tables
+        (:func:`raytrace.surfaces.material_tables`), made once."""
+        key = bool(self.procedural_materials)
+        if getattr(self, "_material_tables_key", None) != key:
+            from .surfaces import material_tables
+            self._material_tables = material_tables(self.model.components, self.faces, self.vertices,
+                                                    self.face_offset, procedural=key)
+            self._material_tables_key = key
+        return self._material_tables
+
     @property
     def two_sided(self) -> np.ndarray:
         """Per component: False when its mesh is a closed shell wound outwards (only the
@@ -394,6 +411,8 @@ class Scene:
         state["_direct"] = None
         state["_direct_fast"] = None
         state["_caches"] = {}
+        state.pop("_material_tables", None)  # rebuilt on first use (per-face, MBs on big meshes)
+        state.pop("_material_tables_key", None)
         return state
 
     def __setstate__(self, state):

@@ -6,7 +6,8 @@ Schema (version 1; lengths in metres, directions unit vectors in the target's bo
       "meshes": [                                   # or "target": "cassini" (a built-in)
         {"path": "parts/bus.ply", "unit_scale_m": 1.0, "albedo": [0.6, 0.6, 0.6]},
         {"path": "parts/panel.obj", "unit_scale_m": 0.001, "material": "solar_cell",
-         "crease_angle_deg": 30.0, "authored_normals": true}          # optional, as here
+         "crease_angle_deg": 30.0, "authored_normals": true,          # optional, as here
+         "materials": "presets"}                                     # or "file"
       ],
       "camera": {"K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], "width": 1280, "height": 960,
                  "R_cam_from_body": [9 numbers, row-major] or 3×3, "t_cam_m": [x, y, z]},
@@ -23,7 +24,9 @@ Schema (version 1; lengths in metres, directions unit vectors in the target's bo
 Mesh paths are relative to the JSON file's folder. Each mesh file becomes one or more
 components (one per part, :func:`raytrace.meshio.load_mesh`), all shaded with the entry's
 ``material`` (a preset of :data:`raytrace.materials.MATERIAL_PRESETS`) or its Lambertian
-``albedo`` (linear RGB, or one number for grey). Shading normals: the file's own vertex
+``albedo`` (linear RGB, or one number for grey); with ``"materials": "file"`` the parts whose
+file material has a texture (glTF base colour / metallic-roughness / normal texture, OBJ
+``map_Kd``) are shaded from it instead (docs/shading.md, "Materials"). Shading normals: the file's own vertex
 normals where it has them, unless ``authored_normals`` is false; elsewhere the crease rule
 with ``crease_angle_deg`` in [0, 180] (0 flat, 180 smooth everywhere; default 30). Camera pixel coordinates follow OpenCV: x
 right, y down, z forward, integer coordinates at pixel centres.
@@ -200,10 +203,13 @@ def _model(data: dict, folder: str, notes: list | None = None) -> TargetModel:
         if not isinstance(m, dict) or "path" not in m:
             raise _err(f"meshes[{i}] must be an object with a 'path'")
         unknown = set(m) - {"path", "unit_scale_m", "material", "albedo", "name", "crease_angle_deg",
-                            "authored_normals"}
+                            "authored_normals", "materials"}
         if unknown:
             raise _err(f"meshes[{i}]: unknown keys {sorted(unknown)} (allowed: path, unit_scale_m, material, "
-                       "albedo, name, crease_angle_deg, authored_normals)")
+                       "albedo, name, crease_angle_deg, authored_normals, materials)")
+        use_file = m.get("materials", "presets")
+        if use_file not in ("presets", "file"):
+            raise _err(f"meshes[{i}].materials must be 'presets' or 'file', got {use_file!r}")
         crease = m.get("crease_angle_deg", DEFAULT_CREASE_ANGLE_DEG)
         try:
             crease = check_crease_angle_deg(crease, f"meshes[{i}].crease_angle_deg")
@@ -237,14 +243,16 @@ def _model(data: dict, folder: str, notes: list | None = None) -> TargetModel:
         path = path if os.path.isabs(path) else os.path.join(folder, path)
         try:
             part, report = load_mesh(path, unit_scale_m=m.get("unit_scale_m", 1.0), default_material=material,
-                                     name=m.get("name"), crease_angle_deg=crease, authored_normals=authored)
+                                     name=m.get("name"), crease_angle_deg=crease, authored_normals=authored,
+                                     file_materials=use_file == "file")
         except ValueError as exc:
             raise _err(f"meshes[{i}]: {exc}") from None
         if notes is not None and report.non_finite_note():
             notes.append(f"meshes[{i}]: {report.non_finite_note()}")
         for c in part.components:
             name = c.name if len(meshes) == 1 else f"m{i}_{c.name}"
-            comps.append(replace(c, name=name, material=material, albedo=albedo))
+            # "file": a part with a textured file material keeps it, the others take the entry's
+            comps.append(replace(c, name=name, material=material, albedo=None if c.surface is not None else albedo))
     return TargetModel(os.path.basename(folder) or "scene", tuple(comps), "scene file")
 
 

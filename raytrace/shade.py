@@ -385,12 +385,13 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     # shadows) and their mirror rays
     t0 = time.perf_counter()
     sunl = _Sunlight(scene, lighting, prefiltered_glossy=q.gather_rays == 0)
+    sunl.px_rad = 1.0 / camera.fx
     pix = np.flatnonzero(geo.instance.ravel() > 0)
     O = np.empty((len(pix), 3))
     D = np.empty((len(pix), 3))
     centre_rays(pix, W, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy, *camera.lens_arrays(), O, D)
     face = geo.face_index.ravel()[pix].astype(np.int64)
-    s = _surfaces(scene, O, D, face)
+    s = _surfaces(scene, O, D, face, sunl.px_rad)
     soft = q.sun_rays > 1 and lighting.sun_angular_diameter_rad > 0.0
     occ_t = np.full(len(pix), np.inf) if soft else None  # occluder distances cost a closest-hit query
     L, vis = sunl.sunlight(s, occluder_t=occ_t, robust=True)
@@ -426,6 +427,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     t0 = time.perf_counter()
     ctx = pending.result() if pending is not None else \
         _Context(scene, lighting, cache_options, prefiltered_glossy=q.gather_rays == 0)
+    ctx.px_rad = sunl.px_rad
     timings["cache"] = time.perf_counter() - t0
     t0 = time.perf_counter() - t_direct  # the Sun at the centres counts in "direct"
     lbar = np.zeros((len(pix), 3))
