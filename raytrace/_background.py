@@ -9,6 +9,7 @@ import math
 import numba
 import numpy as np
 
+from . import _earth
 from . import environment as env
 from ._jit import inline, jit, pjit
 from ._lens import ray_xy
@@ -43,18 +44,26 @@ def background(pix, W, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table, n_g
         out[k, 2] = sb / S
 
 
+NS = 8  # per cell corner: albedo RGB (procedural) or the Blue Marble's coarse state (raytrace._earth)
+
+
 @jit
-def _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, mu_min):
-    """Where the unit ray (o, d) meets Earth: (True, albedo RGB, outward normal), or False
-    first on a miss or where the Sun's cosine is ≤ mu_min."""
+def _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, mu_min, out):
+    """Where the unit ray (o, d) meets Earth: True, writing into ``out`` the albedo RGB
+    (procedural) or :func:`raytrace._earth.coarse_state` (``bluemarble``), and returning the
+    outward normal; or False first on a miss or where the Sun's cosine is ≤ mu_min."""
     t = env.earth_hit(p, ox, oy, oz, dx, dy, dz)
     if t < 0.0:
-        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0
     mx, my, mz = env.earth_normal(p, ox, oy, oz, dx, dy, dz, t)
     if mx * p[env.P_SX] + my * p[env.P_SY] + mz * p[env.P_SZ] <= mu_min:
-        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    a0, a1, a2 = env.earth_albedo(p, tex, mx, my, mz)
-    return True, a0, a1, a2, mx, my, mz
+        return False, 0.0, 0.0, 0.0
+    if p[env.P_TEXTURE] == env.TEX_BLUEMARBLE:
+        ex, ey, ez = _earth.to_earth(p, mx, my, mz)
+        out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7] = _earth.coarse_state(p, tex, ex, ey, ez)
+    else:
+        out[0], out[1], out[2] = env.earth_albedo(p, tex, mx, my, mz)
+    return True, mx, my, mz
 
 
 @inline
@@ -75,6 +84,8 @@ def _cell_trusted(A, M, C, ok, ok_c, i, j, chord2, tol):
         return False
     if _chord2(M, i, j, i + 1, j + 1) > chord2 or _chord2(M, i, j + 1, i + 1, j) > chord2:
         return False
+    if tol < 0.0:  # band-limited by construction (the Blue Marble's coarse state)
+        return True
     for c in range(3):
         mid = 0.25 * (A[i, j, c] + A[i, j + 1, c] + A[i + 1, j, c] + A[i + 1, j + 1, c])
         if abs(mid - C[i, j, c]) > tol * C[i, j, c]:
@@ -118,13 +129,16 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
     (BENCHMARKS.md, "Earth behind the target, per pixel in half the time")."""
     H, W = inst.shape
     ox, oy, oz = o_body[0], o_body[1], o_body[2]
-    interp = step > 1 and int(p[env.P_TEXTURE]) == env.TEX_PROCEDURAL
+    kind = int(p[env.P_TEXTURE])
+    blue = kind == env.TEX_BLUEMARBLE
+    interp = step > 1 and (kind == env.TEX_PROCEDURAL or blue)
     s = step if interp else 1
     nv = (H - 1) // s + 2 if interp else 1
     nu = (W - 1) // s + 2 if interp else 1
-    A = np.empty((nv, nu, 3))  # albedo at the cells' corners,
+    A = np.empty((nv, nu, NS))  # albedo (or coarse state) at the cells' corners,
     M = np.empty((nv, nu, 3))  # Earth's normal there,
-    C = np.empty((nv, nu, 3))  # the albedo at the cells' centres
+    C = np.empty((nv, nu, NS))  # the albedo at the cells' centres
+    tol_cells = -1.0 if blue else tol
     # cleared by plain loops, not np.zeros or a slice assignment: under parallel=True numba
     # turns each of those into a parallel loop of its own, compiled like the kernel's own loops
     # (LLVM's work four libraries over), for arrays that take microseconds to clear (the kernel
@@ -144,21 +158,23 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
                 if math.isnan(dx):  # beyond the lens's invertible region: no cell here
                     ok[i, j] = False
                     continue
-                hit, A[i, j, 0], A[i, j, 1], A[i, j, 2], M[i, j, 0], M[i, j, 1], M[i, j, 2] = \
-                    _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -max_chord)
+                hit, M[i, j, 0], M[i, j, 1], M[i, j, 2] = \
+                    _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -max_chord, A[i, j])
                 ok[i, j] = hit
                 if hit:
+                    if blue:  # band-limited: no centre to compare, only that it sees Earth
+                        ok_c[i, j] = True
+                        continue
                     dx, dy, dz = _pixel_ray(R_body_from_cam, fx, fy, cx, cy, lens, table, (j + 0.5) * s,
                                             (i + 0.5) * s)
-                    hit, C[i, j, 0], C[i, j, 1], C[i, j, 2], _, _, _ = \
-                        _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -2.0)
+                    hit, _, _, _ = _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -2.0, C[i, j])
                     ok_c[i, j] = hit
     chord2 = max_chord * max_chord
     # whether each cell interpolates, decided once per cell (not at each of its pixels)
     if interp:
         for i in numba.prange(nv - 1):
             for j in range(nu - 1):
-                trusted[i, j] = _cell_trusted(A, M, C, ok, ok_c, i, j, chord2, tol)
+                trusted[i, j] = _cell_trusted(A, M, C, ok, ok_c, i, j, chord2, tol_cells)
     if p[env.P_HAS_EARTH] == 0.0:
         for v in range(H):
             for u in range(W):
@@ -179,7 +195,9 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
     sx, sy, sz = p[env.P_SX], p[env.P_SY], p[env.P_SZ]
     ifx = 1.0 / fx
     distorted = lens.shape[0] > 0
+    pix_rad = p[env.P_PIX_RAD]
     for v in numba.prange(H):
+        st = np.empty(NS)
         i = v // s
         fv = (v - i * s) * inv
         y = (v - cy) / fy
@@ -210,13 +228,33 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
             disc = r2 * d2 - q2
             hit = b > 0.0 and disc > 0.0
             earth_px[v, u] = hit
-            if not hit or inst[v, u] != 0:
+            if inst[v, u] != 0:
+                continue
+            if not hit:
+                if blue:  # the atmosphere's limb
+                    dn = 1.0 / math.sqrt(d2)
+                    rad[v, u, 0], rad[v, u, 1], rad[v, u, 2] = _earth.limb_glow(p, ox, oy, oz, dx * dn, dy * dn,
+                                                                                dz * dn)
                 continue
             t = (b - math.sqrt(disc)) / d2
             mx = (t * dx - ccx) * inv_r
             my = (t * dy - ccy) * inv_r
             mz = (t * dz - ccz) * inv_r
             mu = mx * sx + my * sy + mz * sz
+            if blue:
+                dn = 1.0 / math.sqrt(d2)
+                j = u // s
+                if interp and trusted[i, j]:
+                    fu = (u - j * s) * inv
+                    for c in range(NS):
+                        st[c] = (1.0 - fv) * ((1.0 - fu) * A[i, j, c] + fu * A[i, j + 1, c]) + \
+                            fv * ((1.0 - fu) * A[i + 1, j, c] + fu * A[i + 1, j + 1, c])
+                    rad[v, u, 0], rad[v, u, 1], rad[v, u, 2] = _earth.pixel_radiance(
+                        p, st, mx, my, mz, dx * dn, dy * dn, dz * dn, t * pix_rad / dn)
+                else:
+                    rad[v, u, 0], rad[v, u, 1], rad[v, u, 2] = _earth.point_radiance(
+                        p, tex, mx, my, mz, dx * dn, dy * dn, dz * dn, t / dn)
+                continue
             if mu <= 0.0:
                 rad[v, u, 0] = 0.0
                 rad[v, u, 1] = 0.0

