@@ -44,13 +44,13 @@ def background(pix, W, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table, n_g
         out[k, 2] = sb / S
 
 
-NS = 8  # per cell corner: albedo RGB (procedural) or the Blue Marble's coarse state (raytrace._earth)
+NS = _earth.N_STATE  # per cell corner: albedo RGB (procedural) or the Blue Marble's state (raytrace._earth)
 
 
 @jit
 def _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, mu_min, out):
     """Where the unit ray (o, d) meets Earth: True, writing into ``out`` the albedo RGB
-    (procedural) or :func:`raytrace._earth.coarse_state` (``bluemarble``), and returning the
+    (procedural) or :func:`raytrace._earth.fill_state` (``bluemarble``), and returning the
     outward normal; or False first on a miss or where the Sun's cosine is ≤ mu_min."""
     t = env.earth_hit(p, ox, oy, oz, dx, dy, dz)
     if t < 0.0:
@@ -59,11 +59,20 @@ def _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, mu_min, out):
     if mx * p[env.P_SX] + my * p[env.P_SY] + mz * p[env.P_SZ] <= mu_min:
         return False, 0.0, 0.0, 0.0
     if p[env.P_TEXTURE] == env.TEX_BLUEMARBLE:
-        ex, ey, ez = _earth.to_earth(p, mx, my, mz)
-        out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7] = _earth.coarse_state(p, tex, ex, ey, ez)
+        _earth.fill_state(p, tex, mx, my, mz, dx, dy, dz, out)
     else:
         out[0], out[1], out[2] = env.earth_albedo(p, tex, mx, my, mz)
     return True, mx, my, mz
+
+
+@inline
+def _fine_at(p, st, mx, my, mz, dx, dy, dz, foot_m):
+    """The Blue Marble's fine cloud octaves and land detail at the ground point of normal m seen
+    along the unit ray d, given its state ``st`` and the footprint across the view ``foot_m``."""
+    ex, ey, ez = _earth.to_earth(p, mx, my, mz)
+    mu_v = max(-(mx * dx + my * dy + mz * dz), 0.05)
+    return _earth.fine_octaves(ex, ey, ez, st[5], st[6], st[7], max(foot_m / mu_v, 100.0), p[env.P_RADIUS], st[4],
+                               st[3], p[env.P_CLOUD_THRESHOLD])
 
 
 @inline
@@ -132,13 +141,14 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
     kind = int(p[env.P_TEXTURE])
     blue = kind == env.TEX_BLUEMARBLE
     interp = step > 1 and (kind == env.TEX_PROCEDURAL or blue)
-    s = step if interp else 1
+    s = (2 * step if blue else step) if interp else 1  # the Blue Marble's state: 8 × 8 cells
     nv = (H - 1) // s + 2 if interp else 1
     nu = (W - 1) // s + 2 if interp else 1
     A = np.empty((nv, nu, NS))  # albedo (or coarse state) at the cells' corners,
     M = np.empty((nv, nu, 3))  # Earth's normal there,
     C = np.empty((nv, nu, NS))  # the albedo at the cells' centres
     tol_cells = -1.0 if blue else tol
+    mu_corner = _earth.MU_NIGHT if blue else -max_chord  # the Blue Marble's twilight is drawn
     # cleared by plain loops, not np.zeros or a slice assignment: under parallel=True numba
     # turns each of those into a parallel loop of its own, compiled like the kernel's own loops
     # (LLVM's work four libraries over), for arrays that take microseconds to clear (the kernel
@@ -159,7 +169,7 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
                     ok[i, j] = False
                     continue
                 hit, M[i, j, 0], M[i, j, 1], M[i, j, 2] = \
-                    _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -max_chord, A[i, j])
+                    _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, mu_corner, A[i, j])
                 ok[i, j] = hit
                 if hit:
                     if blue:  # band-limited: no centre to compare, only that it sees Earth
@@ -169,7 +179,9 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
                                             (i + 0.5) * s)
                     hit, _, _, _ = _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -2.0, C[i, j])
                     ok_c[i, j] = hit
-    chord2 = max_chord * max_chord
+    # the Blue Marble's state is band-limited (≥ 12.5 km) but for the view's (the limb's air mass):
+    # its cells (twice as wide) interpolate it up to 8 × the chord
+    chord2 = max_chord * max_chord * (64.0 if blue else 1.0)
     # whether each cell interpolates, decided once per cell (not at each of its pixels)
     if interp:
         for i in numba.prange(nv - 1):
@@ -181,6 +193,8 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
                 earth_px[v, u] = False
         return
     inv = 1.0 / s
+    pix_rad = p[env.P_PIX_RAD]
+    sx, sy, sz = p[env.P_SX], p[env.P_SY], p[env.P_SZ]
     k_sun = p[env.P_ESUN] / math.pi
     r = p[env.P_RADIUS]
     r2 = r * r
@@ -192,10 +206,9 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
     ccx = p[env.P_DIST] * p[env.P_EX] - ox
     ccy = p[env.P_DIST] * p[env.P_EY] - oy
     ccz = p[env.P_DIST] * p[env.P_EZ] - oz
-    sx, sy, sz = p[env.P_SX], p[env.P_SY], p[env.P_SZ]
     ifx = 1.0 / fx
     distorted = lens.shape[0] > 0
-    pix_rad = p[env.P_PIX_RAD]
+    r_shell2 = (r + _earth.SHELL_M) ** 2
     for v in numba.prange(H):
         st = np.empty(NS)
         i = v // s
@@ -231,7 +244,7 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
             if inst[v, u] != 0:
                 continue
             if not hit:
-                if blue:  # the atmosphere's limb
+                if blue and b > 0.0 and r_shell2 * d2 - q2 > 0.0:  # the atmosphere's limb
                     dn = 1.0 / math.sqrt(d2)
                     rad[v, u, 0], rad[v, u, 1], rad[v, u, 2] = _earth.limb_glow(p, ox, oy, oz, dx * dn, dy * dn,
                                                                                 dz * dn)
@@ -241,19 +254,24 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
             my = (t * dy - ccy) * inv_r
             mz = (t * dz - ccz) * inv_r
             mu = mx * sx + my * sy + mz * sz
-            if blue:
+            if blue and mu > _earth.MU_NIGHT:
                 dn = 1.0 / math.sqrt(d2)
+                ux, uy, uz = dx * dn, dy * dn, dz * dn
                 j = u // s
                 if interp and trusted[i, j]:
                     fu = (u - j * s) * inv
+                    w00 = (1.0 - fv) * (1.0 - fu)
+                    w01 = (1.0 - fv) * fu
+                    w10 = fv * (1.0 - fu)
+                    w11 = fv * fu
                     for c in range(NS):
-                        st[c] = (1.0 - fv) * ((1.0 - fu) * A[i, j, c] + fu * A[i, j + 1, c]) + \
-                            fv * ((1.0 - fu) * A[i + 1, j, c] + fu * A[i + 1, j + 1, c])
-                    rad[v, u, 0], rad[v, u, 1], rad[v, u, 2] = _earth.pixel_radiance(
-                        p, st, mx, my, mz, dx * dn, dy * dn, dz * dn, t * pix_rad / dn)
+                        st[c] = w00 * A[i, j, c] + w01 * A[i, j + 1, c] + w10 * A[i + 1, j, c] + w11 * A[i + 1, j + 1, c]
                 else:
-                    rad[v, u, 0], rad[v, u, 1], rad[v, u, 2] = _earth.point_radiance(
-                        p, tex, mx, my, mz, dx * dn, dy * dn, dz * dn, t / dn)
+                    _earth.fill_state(p, tex, mx, my, mz, ux, uy, uz, st)
+                cf, land = _fine_at(p, st, mx, my, mz, ux, uy, uz, pix_rad * t / dn)
+                rad[v, u, 0], rad[v, u, 1], rad[v, u, 2] = _earth.combine(
+                    p, st[0], st[1], st[2], st[3], st[9], st[10], st[11], st[12], st[13], st[14], st[15], st[16], st[17],
+                    st[4] + cf, st[8] + land, mu)
                 continue
             if mu <= 0.0:
                 rad[v, u, 0] = 0.0

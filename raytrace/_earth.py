@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import math
 
-from ._jit import jit
+from ._jit import inline, jit
 
 # parameter-vector entries past raytrace.environment's first 23 (there: N_PARAMS)
 P_PIX_RAD = 23  # angle of one pixel [rad]: the ground footprint of a ray, for the octaves
@@ -64,17 +64,20 @@ WATER_SCALE = 1.0
 TAU_R = (0.05, 0.09, 0.24)  # Rayleigh vertical optical depth R, G, B (Bucholtz 1995)
 SCALE_HEIGHT_M = 8000.0
 SHELL_M = 100_000.0
+MU_NIGHT = -0.15  # the Sun's cosine below which the ground and the air above it are dark (twilight
+# lights the column to exp(−R μ²/(2H)): 1e-4 there)
 WIND_M_S = 6.0
 SIGMA2 = 0.003 + 0.00512 * WIND_M_S  # Cox & Munk 1954, isotropic (clean surface)
 N_WATER = 1.34
 CLOUD_F0 = 8.0  # base frequency on the unit sphere: wavelength ~800 km
 CLOUD_GAIN = 0.62  # amplitude ratio of successive coarse octaves
 FINE_GAIN = 0.75  # and of the fine ones (~2^(-1/3): a k^(-5/3) spectrum, as clouds' radiance has)
-N_COARSE = 6  # octaves of wavelength >= 25 km: smooth over a 4.5 km cell (interpolated there)
+N_SMOOTH = 6  # octaves of wavelength >= 25 km: the large-scale cloud field (gain CLOUD_GAIN)
+N_COARSE = 7  # octaves of wavelength >= 12.5 km: in the coarse state (a background cell interpolates it)
 N_OCTAVES = 14  # down to 0.1 km
 LAND_FIRST = 7  # first octave of the land detail (6.2 km)
 LAND_LOG_AMP = 0.17 / 0.185  # value noise's octave rms (0.185) to the image's 0.17 in log
-CLOUD_THRESHOLD = -0.1063  # the 33rd percentile of the cloud density: 67 % cover
+CLOUD_THRESHOLD = -0.0956  # the 33rd percentile of the cloud density: 67 % cover
 CLOUD_R_MAX = 0.8
 CLOUD_SOFT = 0.35
 
@@ -83,8 +86,7 @@ CLOUD_SOFT = 0.35
 def _hash3(i, j, k):
     h = (i * 73856093) ^ (j * 19349663) ^ (k * 83492791)
     h = (h ^ (h >> 13)) * 1274126177
-    h = h ^ (h >> 16)
-    return (h & 0xFFFFFF) / 16777215.0
+    return ((h >> 16) & 0xFFFFFF) * (1.0 / 16777215.0)
 
 
 @jit
@@ -170,47 +172,61 @@ def texel(p, tex, ex, ey, ez):
 
 @jit
 def coarse_state(p, tex, ex, ey, ez):
-    """What varies slowly over the ground at the Earth-fixed unit vector e (wavelengths ≥ 50 km,
-    so a background cell of ≤ 4.5 km interpolates it): the image's linear RGB, its water
-    fraction and the cloud field's coarse octaves, plus the noise coordinates' warp (x, y, z) the
-    fine octaves continue from."""
+    """What varies slowly over the ground at the Earth-fixed unit vector e (wavelengths ≥ 12.5 km,
+    what a background cell interpolates): the image's linear RGB, its water fraction, the cloud
+    field's coarse octaves, the noise coordinates' warp (x, y, z) the fine octaves continue from
+    and the land's coarse log-detail (9 values)."""
     r, g, b = texel(p, tex, ex, ey, ez)
     wf = water_fraction(r, g, b)
     qx, qy, qz = _warped(p, ex, ey, ez)
     c = 0.0
+    land = 0.0
     a = 1.0
     f = CLOUD_F0
     for i in range(N_COARSE):
-        c += a * (_noise(f * qx + 7.3 * i, f * qy, f * qz) - 0.5)
-        a *= CLOUD_GAIN
+        v = _noise(f * qx + 7.3 * i, f * qy, f * qz) - 0.5
+        c += a * v
+        if i >= LAND_FIRST:
+            land += LAND_LOG_AMP * v
+        a *= CLOUD_GAIN if i < N_SMOOTH else FINE_GAIN
         f *= 2.0
-    return r, g, b, wf, c, qx - ex, qy - ey, qz - ez
+    return r, g, b, wf, c, qx - ex, qy - ey, qz - ez, land
 
 
-@jit
-def fine_octaves(ex, ey, ez, wx, wy, wz, footprint_m, radius_m):
-    """The cloud field's octaves finer than 50 km down to the footprint (≥ 0.1 km; the last one
-    faded in over an octave) and the land's log-detail (its octaves finer than 6.25 km), at the
-    Earth-fixed unit vector e warped by w."""
+@inline
+def fine_octaves(ex, ey, ez, wx, wy, wz, footprint_m, radius_m, c_coarse, wf, threshold):
+    """The cloud field's octaves finer than 25 km down to the footprint (≥ 0.1 km; the last one
+    faded in between 2 and 1 footprints) and the land's log-detail (its octaves finer than
+    6.2 km), at the Earth-fixed unit vector e warped by w. Skipped where they cannot show: the
+    cloud octaves where the coarse density ``c_coarse`` is below the ``threshold`` by more than
+    they can add (:data:`FINE_MAX`), everything over open water (``wf`` ≈ 1) without clouds."""
+    cloudy = c_coarse > threshold - FINE_MAX
+    if not cloudy and wf > 0.999:
+        return 0.0, 0.0
     qx = ex + wx
     qy = ey + wy
     qz = ez + wz
+    n = math.log2(radius_m * (1.0 / F_FINE) / footprint_m)  # octaves the footprint resolves
     c = 0.0
     land = 0.0
-    a = CLOUD_GAIN ** N_COARSE
-    f = CLOUD_F0 * 2.0 ** N_COARSE
+    a = A_FINE
+    f = F_FINE
     for i in range(N_COARSE, N_OCTAVES):
-        lam = radius_m / f
-        fade = min(max(math.log2(lam / footprint_m), 0.0), 1.0)  # faded in between 1 and 2 footprints
+        fade = min(max(n - (i - N_COARSE), 0.0), 1.0)
         if fade <= 0.0:
             break
         v = _noise(f * qx + 7.3 * i, f * qy, f * qz) - 0.5
         c += fade * a * v
-        if i >= LAND_FIRST:
-            land += fade * LAND_LOG_AMP * v
+        land += fade * LAND_LOG_AMP * v
         a *= FINE_GAIN
         f *= 2.0
     return c, land
+
+
+A_FINE = CLOUD_GAIN ** N_SMOOTH * FINE_GAIN ** (N_COARSE - N_SMOOTH)  # the first fine octave's amplitude
+F_FINE = CLOUD_F0 * 2.0 ** N_COARSE  # and frequency
+FINE_MAX = 0.5 * A_FINE / (1.0 - FINE_GAIN)
+"""The most the fine cloud octaves can add to the density (each |v − 0.5| ≤ 0.5)."""
 
 
 @jit
@@ -254,52 +270,55 @@ def glint(mx, my, mz, vx, vy, vz, sx, sy, sz, mu_s, mu_v):
 
 
 @jit
-def shade_point(p, r, g, b, wf, cloud, land, mx, my, mz, dx, dy, dz):
-    """Top-of-atmosphere radiance (RGB) leaving the ground point of body-frame normal m towards a
-    ray of unit direction d (from the observer), given its state (image RGB, water fraction, cloud
-    density, land log-detail)."""
+def view_state(p, mx, my, mz, dx, dy, dz):
+    """What the atmosphere and the glint do at the ground point of body-frame normal m seen along
+    the unit ray d, smooth over the ground (so a background cell interpolates it): per channel
+    the surface's two-way transmittance exp(−τ (m_s + m_v)/2), the path radiance and the glint's
+    radiance of open water through the atmosphere (9 values)."""
     sx, sy, sz = p[7], p[8], p[9]
     e_sun = p[10]
     mu_s = mx * sx + my * sy + mz * sz
     mu_v = max(-(mx * dx + my * dy + mz * dz), 1e-4)
-    if mu_s <= -0.1:
-        return 0.0, 0.0, 0.0
-    k = p[P_SURF_SCALE]
-    # clouds
-    x = cloud - p[P_CLOUD_THRESHOLD]
-    rc = CLOUD_R_MAX * (1.0 - math.exp(-(x / CLOUD_SOFT) ** 2)) if x > 0.0 else 0.0
-    rc = min(rc * k, 0.98)
-    # ground: land with its detail, water as imaged
-    detail = math.exp(land)
-    kl = LAND_SCALE * k * (1.0 - wf) * detail + WATER_SCALE * k * wf
     m_v = air_mass(mu_v)
     cos_t = sx * dx + sy * dy + sz * dz
-    phase = 0.75 * (1.0 + cos_t * cos_t)
+    kp = e_sun * 0.75 * (1.0 + cos_t * cos_t) / (4.0 * math.pi)  # Rayleigh phase function / 4π
     if mu_s > 0.0:
         m_s = air_mass(mu_s)
         lit = 1.0
-    else:
+        gl = e_sun * glint(mx, my, mz, -dx, -dy, -dz, sx, sy, sz, mu_s, mu_v)
+    else:  # twilight: the column above lit to exp(−R μ_s²/(2H))
         m_s = air_mass(0.0)
         lit = math.exp(-p[5] * mu_s * mu_s / (2.0 * SCALE_HEIGHT_M))
-    gl = glint(mx, my, mz, -dx, -dy, -dz, sx, sy, sz, mu_s, mu_v) * wf * (1.0 - rc) if mu_s > 0.0 else 0.0
-    ks = e_sun * max(mu_s, 0.0) / math.pi
-    out0 = 0.0
-    out1 = 0.0
-    out2 = 0.0
-    for c in range(3):
-        tau = TAU_R[c]
-        rg = min((r if c == 0 else (g if c == 1 else b)) * kl, 1.0)
-        rho = rc + (1.0 - rc) * (1.0 - rc) * rg / (1.0 - rc * rg)
-        att = math.exp(-tau * (m_s + m_v))
-        path = e_sun * phase / (4.0 * math.pi) * m_v / (m_s + m_v) * (1.0 - att) * lit
-        val = ks * rho * math.exp(-0.5 * tau * (m_s + m_v)) + e_sun * gl * att + path
-        if c == 0:
-            out0 = val
-        elif c == 1:
-            out1 = val
-        else:
-            out2 = val
-    return out0, out1, out2
+        gl = 0.0
+    m = m_s + m_v
+    a0 = math.exp(-TAU_R[0] * m)
+    a1 = math.exp(-TAU_R[1] * m)
+    a2 = math.exp(-TAU_R[2] * m)
+    kp *= m_v / m * lit
+    return (math.sqrt(a0), math.sqrt(a1), math.sqrt(a2), kp * (1.0 - a0), kp * (1.0 - a1), kp * (1.0 - a2),
+            gl * a0, gl * a1, gl * a2)
+
+
+@inline
+def combine(p, r, g, b, wf, t0, t1, t2, p0, p1, p2, g0, g1, g2, cloud, land, mu_s):
+    """Top-of-atmosphere radiance (RGB) from a point's state (the image's linear RGB and water
+    fraction, :func:`view_state`'s transmittances, path radiances and glint), its cloud density,
+    land log-detail and the Sun's cosine there."""
+    k = p[P_SURF_SCALE]
+    x = cloud - p[P_CLOUD_THRESHOLD]
+    rc = CLOUD_R_MAX * (1.0 - math.exp(-(x / CLOUD_SOFT) ** 2)) if x > 0.0 else 0.0
+    rc = min(rc * k, 0.98)
+    kl = LAND_SCALE * k * (1.0 - wf) * math.exp(land) + WATER_SCALE * k * wf
+    ks = p[10] * max(mu_s, 0.0) / math.pi
+    gw = wf * (1.0 - rc)
+    t = 1.0 - rc
+    rg = min(r * kl, 1.0)
+    o0 = ks * t0 * (rc + t * t * rg / (1.0 - rc * rg)) + gw * g0 + p0
+    rg = min(g * kl, 1.0)
+    o1 = ks * t1 * (rc + t * t * rg / (1.0 - rc * rg)) + gw * g1 + p1
+    rg = min(b * kl, 1.0)
+    o2 = ks * t2 * (rc + t * t * rg / (1.0 - rc * rg)) + gw * g2 + p2
+    return o0, o1, o2
 
 
 @jit
@@ -345,30 +364,52 @@ def limb_glow(p, ox, oy, oz, dx, dy, dz):
             k * (1.0 - math.exp(-t2 * col)) * math.exp(-t2 * dens * m_s))
 
 
-@jit
+@inline
 def to_earth(p, mx, my, mz):
     """Earth-fixed coordinates of the body-frame vector m."""
     return (p[14] * mx + p[15] * my + p[16] * mz, p[17] * mx + p[18] * my + p[19] * mz,
             p[20] * mx + p[21] * my + p[22] * mz)
 
 
+N_STATE = 18
+"""Values of a ground point's state: :func:`coarse_state` (9) then :func:`view_state` (9)."""
+
+
 @jit
+def fill_state(p, tex, mx, my, mz, dx, dy, dz, st):
+    """Write into ``st`` the state of the ground point of body-frame normal m seen along the unit
+    ray d."""
+    ex, ey, ez = to_earth(p, mx, my, mz)
+    st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], st[8] = coarse_state(p, tex, ex, ey, ez)
+    st[9], st[10], st[11], st[12], st[13], st[14], st[15], st[16], st[17] = view_state(p, mx, my, mz, dx, dy, dz)
+
+
+@inline
 def pixel_radiance(p, st, mx, my, mz, dx, dy, dz, foot_m):
     """Radiance (RGB) of the ground point of body-frame normal m reached along the unit ray d,
-    from its :func:`coarse_state` ``st`` (8 values) and the ray's footprint across the view
-    ``foot_m`` (distance × pixel angle) [m]: the fine octaves the footprint resolves added."""
+    from its state ``st`` (:func:`fill_state`, possibly interpolated) and the ray's footprint
+    across the view ``foot_m`` (distance × pixel angle) [m]: the fine octaves the footprint
+    resolves added, the Sun's cosine exact."""
     ex, ey, ez = to_earth(p, mx, my, mz)
     mu_v = max(-(mx * dx + my * dy + mz * dz), 0.05)
-    cf, land = fine_octaves(ex, ey, ez, st[5], st[6], st[7], max(foot_m / mu_v, 100.0), p[5])
-    return shade_point(p, st[0], st[1], st[2], st[3], st[4] + cf, land, mx, my, mz, dx, dy, dz)
+    cf, land = fine_octaves(ex, ey, ez, st[5], st[6], st[7], max(foot_m / mu_v, 100.0), p[5], st[4], st[3],
+                            p[P_CLOUD_THRESHOLD])
+    return combine(p, st[0], st[1], st[2], st[3], st[9], st[10], st[11], st[12], st[13], st[14], st[15], st[16],
+                   st[17], st[4] + cf, st[8] + land, mx * p[7] + my * p[8] + mz * p[9])
 
 
 @jit
 def point_radiance(p, tex, mx, my, mz, dx, dy, dz, t):
     """Radiance (RGB) of the ground point of body-frame normal m reached along the unit ray d at
-    distance t [m] (:func:`pixel_radiance` of its state, the pixel's angle ``p[P_PIX_RAD]``)."""
+    distance t [m] (as :func:`pixel_radiance` with its exact state; the pixel's angle
+    ``p[P_PIX_RAD]``)."""
+    mu_s = mx * p[7] + my * p[8] + mz * p[9]
+    if mu_s <= MU_NIGHT:
+        return 0.0, 0.0, 0.0
     ex, ey, ez = to_earth(p, mx, my, mz)
-    r, g, b, wf, c, wx, wy, wz = coarse_state(p, tex, ex, ey, ez)
+    r, g, b, wf, c, wx, wy, wz, lc = coarse_state(p, tex, ex, ey, ez)
+    t0, t1, t2, p0, p1, p2, g0, g1, g2 = view_state(p, mx, my, mz, dx, dy, dz)
     mu_v = max(-(mx * dx + my * dy + mz * dz), 0.05)
-    cf, land = fine_octaves(ex, ey, ez, wx, wy, wz, max(t * p[P_PIX_RAD] / mu_v, 100.0), p[5])
-    return shade_point(p, r, g, b, wf, c + cf, land, mx, my, mz, dx, dy, dz)
+    cf, land = fine_octaves(ex, ey, ez, wx, wy, wz, max(t * p[P_PIX_RAD] / mu_v, 100.0), p[5], c, wf,
+                            p[P_CLOUD_THRESHOLD])
+    return combine(p, r, g, b, wf, t0, t1, t2, p0, p1, p2, g0, g1, g2, c + cf, lc + land, mu_s)
