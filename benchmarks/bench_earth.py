@@ -6,8 +6,8 @@
 Runs the main job as a user types it (``python cli.py --target cassini --pattern spiral``, its
 default modalities, workers and camera) once per texture per repeat, the order of the textures
 swapped every repeat (a shared machine's speed drifts), numba's cache warmed by one untimed
-short run of each first; prints each run's wall time, then per texture the median and its ratio
-to the first texture's. ``--decode`` also times the Blue Marble's decode in fresh processes
+short run of each first; prints each run's wall time, then per texture the median and the
+median over repeats of its ratio to the first texture (the two ran side by side). ``--decode`` also times the Blue Marble's decode in fresh processes
 (:func:`raytrace.lighting.bluemarble_texture`, what each worker process pays once).
 """
 
@@ -57,10 +57,11 @@ def main() -> None:
                 dt = _run(tex, args.frames, f"{tmp}/{tex}-{r}")
                 times[tex].append(dt)
                 print(f"repeat {r}: --earth-texture {tex}: {dt:.1f} s", flush=True)
-    base = statistics.median(times[textures[0]])
+    base = times[textures[0]]
     for tex in textures:
-        m = statistics.median(times[tex])
-        print(f"{tex}: median {m:.1f} s over {len(times[tex])} runs ({m / base:.3f}x {textures[0]})")
+        ratio = statistics.median(a / b for a, b in zip(times[tex], base))
+        print(f"{tex}: median {statistics.median(times[tex]):.1f} s over {len(times[tex])} runs; median of the "
+              f"repeats' ratios to {textures[0]} {ratio:.3f}x")
 
 
 if __name__ == "__main__":

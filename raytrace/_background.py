@@ -135,7 +135,13 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
     pixel. Whether a cell interpolates is decided once per cell, and the per-pixel hit test and
     normal work on the unnormalised ray (one square root and one division a pixel); with them
     the kernel takes ~0.55× the time on one thread where Earth fills the view, the same bytes
-    (BENCHMARKS.md, "Earth behind the target, per pixel in half the time")."""
+    (BENCHMARKS.md, "Earth behind the target, per pixel in half the time").
+
+    The ``bluemarble`` Earth (:mod:`raytrace._earth`): its smooth state (image, water, clouds
+    coarser than 12.5 km, air masses, path radiance, glint) on the corners of 2·step-pixel cells
+    that span up to 8 × ``max_chord`` and whose corners all see Earth above μ_s = −0.15, bilinear
+    inside; per pixel its fine octaves and the Sun's cosine, and the atmosphere's limb glow on
+    rays that miss the ground (``earth_px`` stays False there)."""
     H, W = inst.shape
     ox, oy, oz = o_body[0], o_body[1], o_body[2]
     kind = int(p[env.P_TEXTURE])

@@ -37,10 +37,10 @@ octaves (:func:`fine_octaves`) and the Sun's cosine (:func:`combine`). The model
   point dips into the ground (a soft terminator; the column above a point in twilight lit to
   ``exp(−R μ_s²/(2H))``, nothing below μ_s = −0.15).
 
-Octaves finer than a ray's ground footprint are left out (faded in between two footprints and
-one): the footprint is the distance to the ground times ``p[P_PIX_RAD]`` (the angle of one
+Octaves finer than twice a ray's ground footprint are left out (faded in between four footprints
+and two): the footprint is the distance to the ground times ``p[P_PIX_RAD]`` (the angle of one
 pixel) over the cosine of the view, so wide lighting samples cost a few octaves and a pixel at
-nadir of the main job's camera (0.35 km) four fine ones; the fine cloud octaves are skipped where
+nadir of the main job's camera (0.35 km) three fine ones; the fine cloud octaves are skipped where
 the coarse density is too far below the threshold for them to make a cloud, and everything fine
 over open water there.
 
@@ -179,11 +179,12 @@ def texel(p, tex, ex, ey, ez):
 
 
 @jit
-def coarse_state(p, tex, ex, ey, ez):
+def coarse_state(p, tex, ex, ey, ez, footprint_m):
     """What varies slowly over the ground at the Earth-fixed unit vector e (wavelengths ≥ 12.5 km,
     what a background cell interpolates): the image's linear RGB, its water fraction, the cloud
     field's coarse octaves, the noise coordinates' warp (x, y, z) the fine octaves continue from
-    and the land's coarse log-detail (9 values)."""
+    and the land's coarse log-detail (9 values). Octaves finer than ``footprint_m`` are left
+    out (faded as in :func:`fine_octaves`; 0: none)."""
     r, g, b = texel(p, tex, ex, ey, ez)
     wf = water_fraction(r, g, b)
     qx, qy, qz = _warped(p, ex, ey, ez)
@@ -191,11 +192,15 @@ def coarse_state(p, tex, ex, ey, ez):
     land = 0.0
     a = 1.0
     f = CLOUD_F0
+    n = math.log2(p[5] / CLOUD_F0 / footprint_m) - 1.0 if footprint_m > 0.0 else 99.0
     for i in range(N_COARSE):
+        fade = min(max(n - i, 0.0), 1.0)
+        if fade <= 0.0:
+            break
         v = _noise(f * qx + 7.3 * i, f * qy, f * qz) - 0.5
-        c += a * v
+        c += fade * a * v
         if i >= LAND_FIRST:
-            land += LAND_LOG_AMP * v
+            land += fade * LAND_LOG_AMP * v
         a *= CLOUD_GAIN if i < N_SMOOTH else FINE_GAIN
         f *= 2.0
     return r, g, b, wf, c, qx - ex, qy - ey, qz - ez, land
@@ -203,8 +208,8 @@ def coarse_state(p, tex, ex, ey, ez):
 
 @inline
 def fine_octaves(ex, ey, ez, wx, wy, wz, footprint_m, radius_m, c_coarse, wf, threshold):
-    """The cloud field's octaves finer than 25 km down to the footprint (≥ 0.1 km; the last one
-    faded in between 2 and 1 footprints) and the land's log-detail (its octaves finer than
+    """The cloud field's octaves finer than 12.5 km down to twice the footprint (≥ 0.1 km; the
+    last one faded in between 4 and 2 footprints) and the land's log-detail (its octaves finer than
     6.2 km), at the Earth-fixed unit vector e warped by w. Skipped where they cannot show: the
     cloud octaves where the coarse density ``c_coarse`` is below the ``threshold`` by more than
     they can add (:data:`FINE_MAX`), everything over open water (``wf`` ≈ 1) without clouds."""
@@ -214,7 +219,7 @@ def fine_octaves(ex, ey, ez, wx, wy, wz, footprint_m, radius_m, c_coarse, wf, th
     qx = ex + wx
     qy = ey + wy
     qz = ez + wz
-    n = math.log2(radius_m * (1.0 / F_FINE) / footprint_m)  # octaves the footprint resolves
+    n = math.log2(radius_m * (1.0 / F_FINE) / footprint_m) - 1.0  # octaves of ≥ 2 footprints
     c = 0.0
     land = 0.0
     a = A_FINE
@@ -388,7 +393,7 @@ def fill_state(p, tex, mx, my, mz, dx, dy, dz, st):
     """Write into ``st`` the state of the ground point of body-frame normal m seen along the unit
     ray d."""
     ex, ey, ez = to_earth(p, mx, my, mz)
-    st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], st[8] = coarse_state(p, tex, ex, ey, ez)
+    st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], st[8] = coarse_state(p, tex, ex, ey, ez, 0.0)
     st[9], st[10], st[11], st[12], st[13], st[14], st[15], st[16], st[17] = view_state(p, mx, my, mz, dx, dy, dz)
 
 
@@ -415,9 +420,9 @@ def point_radiance(p, tex, mx, my, mz, dx, dy, dz, t):
     if mu_s <= MU_NIGHT:
         return 0.0, 0.0, 0.0
     ex, ey, ez = to_earth(p, mx, my, mz)
-    r, g, b, wf, c, wx, wy, wz, lc = coarse_state(p, tex, ex, ey, ez)
-    t0, t1, t2, p0, p1, p2, g0, g1, g2 = view_state(p, mx, my, mz, dx, dy, dz)
     mu_v = max(-(mx * dx + my * dy + mz * dz), 0.05)
-    cf, land = fine_octaves(ex, ey, ez, wx, wy, wz, max(t * p[P_PIX_RAD] / mu_v, 100.0), p[5], c, wf,
-                            p[P_CLOUD_THRESHOLD])
+    foot = max(t * p[P_PIX_RAD] / mu_v, 100.0)
+    r, g, b, wf, c, wx, wy, wz, lc = coarse_state(p, tex, ex, ey, ez, foot)
+    t0, t1, t2, p0, p1, p2, g0, g1, g2 = view_state(p, mx, my, mz, dx, dy, dz)
+    cf, land = fine_octaves(ex, ey, ez, wx, wy, wz, foot, p[5], c, wf, p[P_CLOUD_THRESHOLD])
     return combine(p, r, g, b, wf, t0, t1, t2, p0, p1, p2, g0, g1, g2, c + cf, lc + land, mu_s)

@@ -197,10 +197,10 @@ class Lighting:
         return p, texture
 
 
-LIGHTING_PIXEL_RAD = 0.01
+LIGHTING_PIXEL_RAD = 0.025
 """The ``bluemarble`` Earth's footprint angle where it lights the target (the lighting tables
-sample directions ~0.02–0.05 rad apart): octaves finer than that are left out there. The
-background sets the camera's pixel instead."""
+sample directions ~0.025–0.05 rad apart): octaves finer than twice that footprint are left out
+there. The background sets the camera's pixel instead."""
 
 
 @functools.cache

@@ -79,7 +79,7 @@ def _state(p, tex, E, foot_m):
     """Water fraction and cloud density (every octave down to foot_m) at Earth-fixed unit vectors."""
     out = np.empty((E.shape[0], 2))
     for k in range(E.shape[0]):
-        st = _earth.coarse_state(p, tex, E[k, 0], E[k, 1], E[k, 2])
+        st = _earth.coarse_state(p, tex, E[k, 0], E[k, 1], E[k, 2], 0.0)
         cf, _ = _earth.fine_octaves(E[k, 0], E[k, 1], E[k, 2], st[5], st[6], st[7], foot_m, R_E, 1.0, 0.0, 0.0)
         out[k, 0] = st[3]
         out[k, 1] = st[4] + cf
