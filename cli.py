@@ -171,8 +171,8 @@ def _options() -> tuple:
         O("--samples", "render", opt.int_in(1, 1 << 20), None, "overrides the preset's sample count"),
         O("--exposure", "render", opt.choice(EXPOSURE_MODES), "fixed",
           "clean RGB exposure: fixed (a white Lambertian surface facing the Sun = 1.0) or auto (per frame)"),
-        O("--earth-texture", "render", opt.choice(EARTH_TEXTURES), "procedural", "Earth as light and backdrop"),
-        O("--earth-albedo", "render", opt.float_in(0.0, 1.0), 0.3, "Earth's mean albedo"),
+        O("--earth-texture", "render", opt.choice(EARTH_TEXTURES), "bluemarble", "Earth as light and backdrop"),
+        O("--earth-albedo", "render", opt.float_in(0.0, 1.0), 0.3, "Earth's mean albedo (bluemarble: x albedo/0.3)"),
         O("--ambient-W-m2-sr", "render", opt.float_in(0.0, 1e4, unit="W/(m2 sr)"), 0.0, "constant sky radiance"),
         O("--star-limit-mag", "render", opt.float_in(-1.5, 9.0, unit="mag"), None,
           "draw the stars brighter than this visual magnitude in the background (procedural sky from --seed, or "
@@ -413,7 +413,7 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
     images, info = {}, {}
     if need_radiance:
         r = cfg["render"]
-        lighting = scenes.lighting_of(task["light"], r, scenes.star_field(cfg))
+        lighting = scenes.lighting_of(task["light"], r, scenes.star_field(cfg), cfg["sequence"]["seed"])
         frame = render(scene, camera, R, t, lighting, quality=r["quality"], samples=r["samples"], seed=render_seed,
                        parts=any(MODALITY[m].light_parts for m in mods))
         geo, radiance = frame.geometry, frame.radiance

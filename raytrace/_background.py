@@ -9,6 +9,7 @@ import math
 import numba
 import numpy as np
 
+from . import _earth
 from . import environment as env
 from ._jit import inline, jit, pjit
 from ._lens import ray_xy
@@ -43,18 +44,35 @@ def background(pix, W, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table, n_g
         out[k, 2] = sb / S
 
 
+NS = _earth.N_STATE  # per cell corner: albedo RGB (procedural) or the Blue Marble's state (raytrace._earth)
+
+
 @jit
-def _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, mu_min):
-    """Where the unit ray (o, d) meets Earth: (True, albedo RGB, outward normal), or False
-    first on a miss or where the Sun's cosine is ≤ mu_min."""
+def _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, mu_min, out):
+    """Where the unit ray (o, d) meets Earth: True, writing into ``out`` the albedo RGB
+    (procedural) or :func:`raytrace._earth.fill_state` (``bluemarble``), and returning the
+    outward normal; or False first on a miss or where the Sun's cosine is ≤ mu_min."""
     t = env.earth_hit(p, ox, oy, oz, dx, dy, dz)
     if t < 0.0:
-        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0
     mx, my, mz = env.earth_normal(p, ox, oy, oz, dx, dy, dz, t)
     if mx * p[env.P_SX] + my * p[env.P_SY] + mz * p[env.P_SZ] <= mu_min:
-        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    a0, a1, a2 = env.earth_albedo(p, tex, mx, my, mz)
-    return True, a0, a1, a2, mx, my, mz
+        return False, 0.0, 0.0, 0.0
+    if p[env.P_TEXTURE] == env.TEX_BLUEMARBLE:
+        _earth.fill_state(p, tex, mx, my, mz, dx, dy, dz, out)
+    else:
+        out[0], out[1], out[2] = env.earth_albedo(p, tex, mx, my, mz)
+    return True, mx, my, mz
+
+
+@inline
+def _fine_at(p, st, mx, my, mz, dx, dy, dz, foot_m):
+    """The Blue Marble's fine cloud octaves and land detail at the ground point of normal m seen
+    along the unit ray d, given its state ``st`` and the footprint across the view ``foot_m``."""
+    ex, ey, ez = _earth.to_earth(p, mx, my, mz)
+    mu_v = max(-(mx * dx + my * dy + mz * dz), 0.05)
+    return _earth.fine_octaves(ex, ey, ez, st[5], st[6], st[7], max(foot_m / mu_v, 100.0), p[env.P_RADIUS], st[4],
+                               st[3], p[env.P_CLOUD_THRESHOLD])
 
 
 @inline
@@ -75,6 +93,8 @@ def _cell_trusted(A, M, C, ok, ok_c, i, j, chord2, tol):
         return False
     if _chord2(M, i, j, i + 1, j + 1) > chord2 or _chord2(M, i, j + 1, i + 1, j) > chord2:
         return False
+    if tol < 0.0:  # band-limited by construction (the Blue Marble's coarse state)
+        return True
     for c in range(3):
         mid = 0.25 * (A[i, j, c] + A[i, j + 1, c] + A[i + 1, j, c] + A[i + 1, j + 1, c])
         if abs(mid - C[i, j, c]) > tol * C[i, j, c]:
@@ -115,16 +135,26 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
     pixel. Whether a cell interpolates is decided once per cell, and the per-pixel hit test and
     normal work on the unnormalised ray (one square root and one division a pixel); with them
     the kernel takes ~0.55× the time on one thread where Earth fills the view, the same bytes
-    (BENCHMARKS.md, "Earth behind the target, per pixel in half the time")."""
+    (BENCHMARKS.md, "Earth behind the target, per pixel in half the time").
+
+    The ``bluemarble`` Earth (:mod:`raytrace._earth`): its smooth state (image, water, clouds
+    coarser than 12.5 km, air masses, path radiance, glint) on the corners of 2·step-pixel cells
+    that span up to 8 × ``max_chord`` and whose corners all see Earth above μ_s = −0.15, bilinear
+    inside; per pixel its fine octaves and the Sun's cosine, and the atmosphere's limb glow on
+    rays that miss the ground (``earth_px`` stays False there)."""
     H, W = inst.shape
     ox, oy, oz = o_body[0], o_body[1], o_body[2]
-    interp = step > 1 and int(p[env.P_TEXTURE]) == env.TEX_PROCEDURAL
-    s = step if interp else 1
+    kind = int(p[env.P_TEXTURE])
+    blue = kind == env.TEX_BLUEMARBLE
+    interp = step > 1 and (kind == env.TEX_PROCEDURAL or blue)
+    s = (2 * step if blue else step) if interp else 1  # the Blue Marble's state: 8 × 8 cells
     nv = (H - 1) // s + 2 if interp else 1
     nu = (W - 1) // s + 2 if interp else 1
-    A = np.empty((nv, nu, 3))  # albedo at the cells' corners,
+    A = np.empty((nv, nu, NS))  # albedo (or coarse state) at the cells' corners,
     M = np.empty((nv, nu, 3))  # Earth's normal there,
-    C = np.empty((nv, nu, 3))  # the albedo at the cells' centres
+    C = np.empty((nv, nu, NS))  # the albedo at the cells' centres
+    tol_cells = -1.0 if blue else tol
+    mu_corner = _earth.MU_NIGHT if blue else -max_chord  # the Blue Marble's twilight is drawn
     # cleared by plain loops, not np.zeros or a slice assignment: under parallel=True numba
     # turns each of those into a parallel loop of its own, compiled like the kernel's own loops
     # (LLVM's work four libraries over), for arrays that take microseconds to clear (the kernel
@@ -144,27 +174,33 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
                 if math.isnan(dx):  # beyond the lens's invertible region: no cell here
                     ok[i, j] = False
                     continue
-                hit, A[i, j, 0], A[i, j, 1], A[i, j, 2], M[i, j, 0], M[i, j, 1], M[i, j, 2] = \
-                    _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -max_chord)
+                hit, M[i, j, 0], M[i, j, 1], M[i, j, 2] = \
+                    _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, mu_corner, A[i, j])
                 ok[i, j] = hit
                 if hit:
+                    if blue:  # band-limited: no centre to compare, only that it sees Earth
+                        ok_c[i, j] = True
+                        continue
                     dx, dy, dz = _pixel_ray(R_body_from_cam, fx, fy, cx, cy, lens, table, (j + 0.5) * s,
                                             (i + 0.5) * s)
-                    hit, C[i, j, 0], C[i, j, 1], C[i, j, 2], _, _, _ = \
-                        _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -2.0)
+                    hit, _, _, _ = _earth_albedo_along(p, tex, ox, oy, oz, dx, dy, dz, -2.0, C[i, j])
                     ok_c[i, j] = hit
-    chord2 = max_chord * max_chord
+    # the Blue Marble's state is band-limited (≥ 12.5 km) but for the view's (the limb's air mass):
+    # its cells (twice as wide) interpolate it up to 8 × the chord
+    chord2 = max_chord * max_chord * (64.0 if blue else 1.0)
     # whether each cell interpolates, decided once per cell (not at each of its pixels)
     if interp:
         for i in numba.prange(nv - 1):
             for j in range(nu - 1):
-                trusted[i, j] = _cell_trusted(A, M, C, ok, ok_c, i, j, chord2, tol)
+                trusted[i, j] = _cell_trusted(A, M, C, ok, ok_c, i, j, chord2, tol_cells)
     if p[env.P_HAS_EARTH] == 0.0:
         for v in range(H):
             for u in range(W):
                 earth_px[v, u] = False
         return
     inv = 1.0 / s
+    pix_rad = p[env.P_PIX_RAD]
+    sx, sy, sz = p[env.P_SX], p[env.P_SY], p[env.P_SZ]
     k_sun = p[env.P_ESUN] / math.pi
     r = p[env.P_RADIUS]
     r2 = r * r
@@ -176,10 +212,11 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
     ccx = p[env.P_DIST] * p[env.P_EX] - ox
     ccy = p[env.P_DIST] * p[env.P_EY] - oy
     ccz = p[env.P_DIST] * p[env.P_EZ] - oz
-    sx, sy, sz = p[env.P_SX], p[env.P_SY], p[env.P_SZ]
     ifx = 1.0 / fx
     distorted = lens.shape[0] > 0
+    r_shell2 = (r + _earth.SHELL_M) ** 2
     for v in numba.prange(H):
+        st = np.empty(NS)
         i = v // s
         fv = (v - i * s) * inv
         y = (v - cy) / fy
@@ -210,13 +247,38 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
             disc = r2 * d2 - q2
             hit = b > 0.0 and disc > 0.0
             earth_px[v, u] = hit
-            if not hit or inst[v, u] != 0:
+            if inst[v, u] != 0:
+                continue
+            if not hit:
+                if blue and b > 0.0 and r_shell2 * d2 - q2 > 0.0:  # the atmosphere's limb
+                    dn = 1.0 / math.sqrt(d2)
+                    rad[v, u, 0], rad[v, u, 1], rad[v, u, 2] = _earth.limb_glow(p, ox, oy, oz, dx * dn, dy * dn,
+                                                                                dz * dn)
                 continue
             t = (b - math.sqrt(disc)) / d2
             mx = (t * dx - ccx) * inv_r
             my = (t * dy - ccy) * inv_r
             mz = (t * dz - ccz) * inv_r
             mu = mx * sx + my * sy + mz * sz
+            if blue and mu > _earth.MU_NIGHT:
+                dn = 1.0 / math.sqrt(d2)
+                ux, uy, uz = dx * dn, dy * dn, dz * dn
+                j = u // s
+                if interp and trusted[i, j]:
+                    fu = (u - j * s) * inv
+                    w00 = (1.0 - fv) * (1.0 - fu)
+                    w01 = (1.0 - fv) * fu
+                    w10 = fv * (1.0 - fu)
+                    w11 = fv * fu
+                    for c in range(NS):
+                        st[c] = w00 * A[i, j, c] + w01 * A[i, j + 1, c] + w10 * A[i + 1, j, c] + w11 * A[i + 1, j + 1, c]
+                else:
+                    _earth.fill_state(p, tex, mx, my, mz, ux, uy, uz, st)
+                cf, land = _fine_at(p, st, mx, my, mz, ux, uy, uz, pix_rad * t / dn)
+                rad[v, u, 0], rad[v, u, 1], rad[v, u, 2] = _earth.combine(
+                    p, st[0], st[1], st[2], st[3], st[9], st[10], st[11], st[12], st[13], st[14], st[15], st[16], st[17],
+                    st[4] + cf, st[8] + land, mu)
+                continue
             if mu <= 0.0:
                 rad[v, u, 0] = 0.0
                 rad[v, u, 1] = 0.0

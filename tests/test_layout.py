@@ -12,7 +12,7 @@ MAX_LINES = {"cli.py": 1000, "raytrace": 900}
 """Largest file [lines]: ``cli.py`` (the face and the composition root), any module of ``raytrace``."""
 KERNELS = {f"raytrace.{m}" for m in ("_sampling", "_surface", "_rows", "_gather", "_filter", "_edges", "_background",
                                      "_paths", "_cache_kernels", "_kernels", "_embree", "_lights", "_lens",
-                                     "_texture")}
+                                     "_texture", "_earth")}
 """The modules of ``raytrace`` that hold numba kernels (and their constants) and nothing that drives them."""
 KERNEL_DEPENDENCIES = {"raytrace._jit", "raytrace.environment", "raytrace.brdf"}
 """What a kernel module may import besides the other kernel modules: numba's policy and the

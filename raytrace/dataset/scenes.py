@@ -152,16 +152,17 @@ def mesh_unit_warning(radius_m: float, path: str) -> str | None:
     return None
 
 
-def lighting_of(light: dict, r: dict, stars=None):
+def lighting_of(light: dict, r: dict, stars=None, seed: int = 0):
     """The :class:`raytrace.lighting.Lighting` of a frame: its ``light`` (Sun, Earth and ν in the
-    body frame, from the plan) with the ``render`` table ``r`` (Earth texture and albedo, sky) and
-    the sequence's ``stars``."""
+    body frame, from the plan) with the ``render`` table ``r`` (Earth texture and albedo, sky),
+    the sequence's ``stars`` and its ``seed`` (the ``bluemarble`` clouds': the same for every
+    frame of a sequence)."""
     from ..constants import SOLAR_CONSTANT_W_M2
     from ..lighting import Earth, Lighting
     earth = None
     if r["earth_texture"] != "none":
         earth = Earth(light["earth_dir_body"], light["earth_distance_m"], albedo=r["earth_albedo"],
-                      texture=r["earth_texture"], R_body_from_earth=light["R_body_from_earth"])
+                      texture=r["earth_texture"], R_body_from_earth=light["R_body_from_earth"], cloud_seed=int(seed))
     return Lighting(sun_dir_body=light["sun_dir_body"], sun_irradiance_W_m2=SOLAR_CONSTANT_W_M2,
                     shadow_fraction=light["shadow_fraction"], earth=earth,
                     ambient_radiance_W_m2_sr=r["ambient_W_m2_sr"], stars=stars,
