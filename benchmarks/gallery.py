@@ -7,7 +7,7 @@
 For each built-in target it plans the main job's sequence (``cli.plan_sequence``, 12 frames,
 320×240 with the default 3.45 µm pixels and a 2 mm lens: half the default field of view), picks the
 visible frame against black space where the target covers the most pixels without touching
-the border, renders it through the pipeline (``cli.render_frame_images``, preset ``fast``,
+the border (and for Cassini also such a frame with Earth behind it), renders it through the pipeline (``cli.render_frame_images``, preset ``fast``,
 ``physical`` degradation) and writes one PNG: clean RGB | degraded RGB | instance mask |
 depth | normals, captioned. It also writes the preview of one sequence (``cli.py preview``). Everything
 stays small (the whole folder well under 2 MB).
@@ -45,11 +45,11 @@ def _cfg(target: str, pattern: str, seed: int) -> tuple:
     return cli.resolve_config(ns)
 
 
-def _best_frame(plan: dict) -> int:
-    """The visible frame against black space (else any visible frame) with the most target
-    pixels whose mask stays off the border."""
+def _best_frame(plan: dict, earth: bool = False) -> int:
+    """The visible frame against black space (``earth``: with Earth behind the target; else any
+    visible frame) with the most target pixels whose mask stays off the border."""
     frames = plan["result"]["frames"]
-    visible = ([f["frame"] for f in frames if f["visible"] and not f["earth_in_background"]]
+    visible = ([f["frame"] for f in frames if f["visible"] and f["earth_in_background"] == earth]
                or [f["frame"] for f in frames if f["visible"]] or [0])
     tasks, _ = folder.tasks_for(plan, "", None, write=False, frames=visible)
     best, best_px = visible[0], -1
@@ -86,11 +86,11 @@ def _captioned(tiles: list) -> np.ndarray:
     return np.asarray(strip)
 
 
-def gallery_image(target: str, pattern: str, seed: int) -> tuple:
-    """(captioned image, label of the frame shown)."""
+def gallery_image(target: str, pattern: str, seed: int, earth: bool = False) -> tuple:
+    """(captioned image, label of the frame shown); ``earth``: a frame with Earth behind the target."""
     cfg, given = _cfg(target, pattern, seed)
     plan = cli.plan_sequence(cfg, given)
-    frame = _best_frame(plan)
+    frame = _best_frame(plan, earth)
     (task,), _ = folder.tasks_for(plan, "", None, write=False, frames=[frame])
     task["modalities"] = ["rgb", "rgb_degraded", "mask", "depth", "normal"]
     images, _info = cli.render_frame_images(task)
@@ -108,11 +108,12 @@ def main(argv=None) -> int:
     os.makedirs(args.out, exist_ok=True)
     t0 = time.perf_counter()
     shown = {}
-    for target in cli.TARGETS:
-        img, label = gallery_image(target, args.pattern, args.seed)
-        path = os.path.join(args.out, f"{target}.png")
+    for target, earth in [(t, False) for t in cli.TARGETS] + [("cassini", True)]:
+        img, label = gallery_image(target, args.pattern, args.seed, earth)
+        name = f"{target}_earth" if earth else target
+        path = os.path.join(args.out, f"{name}.png")
         F.write_image(path, img)
-        shown[target] = {"pattern": args.pattern, "seed": args.seed, "frame": label["frame"],
+        shown[name] = {"pattern": args.pattern, "seed": args.seed, "frame": label["frame"],
                          "range_m": round(label["range_m"], 2)}
         print(f"{path}: frame {label['frame']} at {label['range_m']:.1f} m")
     preview = os.path.join(args.out, f"preview_cassini_{args.pattern}.png")
