@@ -41,45 +41,12 @@ TEX_UNIFORM, TEX_PROCEDURAL, TEX_IMAGE, TEX_BLUEMARBLE = 0, 1, 2, 3
 
 
 @jit
-def _hash3(i, j, k):
-    h = (i * 73856093) ^ (j * 19349663) ^ (k * 83492791)
-    h = (h ^ (h >> 13)) * 1274126177
-    h = h ^ (h >> 16)
-    return (h & 0xFFFFFF) / 16777215.0
-
-
-@jit
-def _value_noise(x, y, z):
-    ix = math.floor(x)
-    iy = math.floor(y)
-    iz = math.floor(z)
-    fx = x - ix
-    fy = y - iy
-    fz = z - iz
-    ux = fx * fx * (3.0 - 2.0 * fx)
-    uy = fy * fy * (3.0 - 2.0 * fy)
-    uz = fz * fz * (3.0 - 2.0 * fz)
-    i = int(ix)
-    j = int(iy)
-    k = int(iz)
-    acc = 0.0
-    for a in range(2):
-        wa = ux if a else 1.0 - ux
-        for b in range(2):
-            wb = uy if b else 1.0 - uy
-            for c in range(2):
-                wc = uz if c else 1.0 - uz
-                acc += wa * wb * wc * _hash3(i + a, j + b, k + c)
-    return acc
-
-
-@jit
 def _fbm(x, y, z, octaves):
     s = 0.0
     amp = 0.5
     norm = 0.0
     for _ in range(octaves):
-        s += amp * _value_noise(x, y, z)
+        s += amp * _earth._noise(x, y, z)  # value noise in [0, 1]
         norm += amp
         x *= 2.03
         y *= 2.03
