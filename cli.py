@@ -847,23 +847,19 @@ def _with_preset(cfg: dict, preset: str) -> dict:
 def render_snapshot(name: str) -> dict:
     """Render the snapshot ``TARGET_PATTERN`` with :func:`plan_sequence` and
     :func:`render_frame_images`: modality → the kept frames side by side (one strip), and
-    ``radiance``, the linear radiance the physical degradation starts from."""
+    ``radiance`` (:func:`raytrace.dataset.snapshots.snapshot_radiance`), from which
+    :func:`degrade_snapshot` makes the degraded strips."""
     cfg, tasks = _snapshot_plan(name)
-    presets = snapshots.SNAPSHOT_SETTINGS["degrade_presets"]
-    out = {m: [] for m in snapshots.SNAPSHOT_MODALITIES + ("radiance",)}
+    out = {m: [] for m in ("rgb", "mask", "depth", "normal", "radiance")}
     for task in tasks:
-        for preset in presets:
-            t = dict(task)
-            t["cfg"] = _with_preset(cfg, preset)
-            first = preset == presets[0]
-            t["modalities"] = ["rgb", "rgb_degraded", "mask", "depth", "normal", "hdr"] if first else ["rgb_degraded"]
-            images, _info = render_frame_images(t)
-            out[f"rgb_{preset}"].append(images["rgb_degraded"])
-            if first:
-                for m in ("rgb", "mask", "depth", "normal"):
-                    out[m].append(images[m])
-                out["radiance"].append(images["hdr"])
-    return {m: np.concatenate(v, axis=1) for m, v in out.items()}
+        t = dict(task, cfg=_with_preset(cfg, snapshots.SNAPSHOT_SETTINGS["degrade_presets"][0]),
+                 modalities=["rgb", "mask", "depth", "normal", "hdr"])
+        images, _info = render_frame_images(t)
+        for m in ("rgb", "mask", "depth", "normal"):
+            out[m].append(images[m])
+        out["radiance"].append(snapshots.snapshot_radiance(images["hdr"]))
+    strips = {m: np.concatenate(v, axis=1) for m, v in out.items()}
+    return {**strips, **degrade_snapshot(name, strips)}
 
 
 def degrade_snapshot(name: str, images: dict) -> dict:

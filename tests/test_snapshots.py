@@ -34,8 +34,7 @@ def test_every_target_and_pattern_has_small_references():
                                                       "mask.png", "geometry.npz")] + ["settings.json"])
     assert files == want
     total = sum(p.stat().st_size for p in SNAPS.iterdir())
-    # lossless, so the textured Earth behind the targets is most of it
-    assert total < 6_500_000, f"references take {total / 1e6:.2f} MB, the budget is 6.5 MB"
+    assert total < 5_000_000, f"references take {total / 1e6:.2f} MB, the budget is 5 MB"
     assert S.snapshot_settings_message(str(SNAPS)) is None
     ref = S.read_snapshot(str(SNAPS), CASES[0])
     w = S.SNAPSHOT_SETTINGS["width"] * len(S.SNAPSHOT_SETTINGS["kept_frames"])

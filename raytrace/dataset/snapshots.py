@@ -77,6 +77,15 @@ def _write_lossless_webp(path: str, rgb: np.ndarray) -> None:
     os.replace(tmp, path)
 
 
+def snapshot_radiance(radiance: np.ndarray) -> np.ndarray:
+    """The linear radiance a snapshot keeps and degrades: float32 with the lowest 8 of its 23
+    mantissa bits cleared (relative resolution 2⁻¹⁵). That byte is noise that no lossless coder
+    compresses, a third of the references' size; the physical copy is made from this radiance,
+    so the references still reproduce bit for bit."""
+    bits = np.ascontiguousarray(radiance, dtype=np.float32).view(np.uint32)
+    return (bits & np.uint32(0xFFFFFF00)).view(np.float32)
+
+
 def _byte_planes(a: np.ndarray) -> np.ndarray:
     """float32 → its four little-endian byte planes, shape (4, *a.shape): zlib finds the
     runs in the sign/exponent bytes (a sixth smaller than plain float32)."""
