@@ -316,39 +316,26 @@ def _lobe_kernel(c, a2):
 
 
 @pjit
-def _glossy_nodes(n_t, n_p, amb, alphas, norms, c_mins, L, W, D, out):
-    """Table nodes of every level a (out[a], n_t × n_p × 3): amb plus the cells' radiance L
-    weighted by solid angle W and :func:`_lobe_kernel` of width alphas[a] about the node's
-    direction, over norms[a], cells with r·d ≤ c_mins[a] skipped; the levels in one pass over the
-    cells (r·d once per cell; each level's sum in the same order as alone)."""
-    na = alphas.shape[0]
-    c_low = 2.0
-    for a in range(na):
-        c_low = min(c_low, c_mins[a])
+def _glossy_nodes(n_t, n_p, amb, alpha, norm, c_min, L, W, D, out):
+    a2 = alpha * alpha
     for m in numba.prange(n_t * n_p):
         i = m // n_p
         j = m % n_p
         rx, ry, rz = _node_direction(m, n_t, n_p)
-        acc = np.empty((na, 3))
-        for a in range(na):  # not np.zeros: under parallel=True a parallel loop of its own to compile
-            acc[a, 0] = 0.0
-            acc[a, 1] = 0.0
-            acc[a, 2] = 0.0
+        sr = 0.0
+        sg = 0.0
+        sb = 0.0
         for c in range(L.shape[0]):
             cs = rx * D[c, 0] + ry * D[c, 1] + rz * D[c, 2]
-            if cs <= c_low:
+            if cs <= c_min:
                 continue
-            for a in range(na):
-                if cs <= c_mins[a]:
-                    continue
-                w = _lobe_kernel(cs, alphas[a] * alphas[a]) * W[c]
-                acc[a, 0] += w * L[c, 0]
-                acc[a, 1] += w * L[c, 1]
-                acc[a, 2] += w * L[c, 2]
-        for a in range(na):
-            out[a, i, j, 0] = amb + acc[a, 0] / norms[a]
-            out[a, i, j, 1] = amb + acc[a, 1] / norms[a]
-            out[a, i, j, 2] = amb + acc[a, 2] / norms[a]
+            w = _lobe_kernel(cs, a2) * W[c]
+            sr += w * L[c, 0]
+            sg += w * L[c, 1]
+            sb += w * L[c, 2]
+        out[i, j, 0] = amb + sr / norm
+        out[i, j, 1] = amb + sg / norm
+        out[i, j, 2] = amb + sb / norm
 
 
 @functools.lru_cache(maxsize=64)
@@ -377,8 +364,9 @@ def glossy_table(p, alphas, cells, n_t: int = 17, n_p: int = 32):
     alphas = np.asarray(alphas, dtype=np.float64)
     L, W, D = cells
     out = np.empty((len(alphas), n_t, n_p, 3))
-    norms, c_mins = np.array([_lobe_norm(float(alpha)) for alpha in alphas]).reshape(-1, 2).T.copy()
-    _glossy_nodes(n_t, n_p, float(p[P_AMBIENT]), alphas, norms, c_mins, L, W, D, out)
+    for a, alpha in enumerate(alphas):
+        norm, c_min = _lobe_norm(float(alpha))
+        _glossy_nodes(n_t, n_p, float(p[P_AMBIENT]), float(alpha), norm, c_min, L, W, D, out[a])
     return out
 
 

@@ -335,18 +335,3 @@ def test_glossy_environment_table_of_a_uniform_sky_is_the_sky():
     p, tex = light.packed()
     table = env.glossy_table(p, [0.1, 0.5, 1.0], env.environment_cells(p, tex))
     np.testing.assert_allclose(table, 3.0, rtol=1e-12)
-
-
-def test_glossy_environment_table_levels_do_not_depend_on_each_other():
-    """The levels of :func:`raytrace.environment.glossy_table` (summed in one pass over the
-    cells) are each the table of that roughness alone, bit for bit."""
-    light = Lighting(sun_dir_body=(0.0, 0.6, 0.8), sun_irradiance_W_m2=1361.0,
-                     earth=Earth((1.0, 0.0, 0.0), 6.778e6, albedo=0.3, texture="procedural"),
-                     ambient_radiance_W_m2_sr=2.0)
-    p, tex = light.packed()
-    cells = env.environment_cells(p, tex)
-    alphas = [0.6, 0.2, 0.35, 1.0]
-    table = env.glossy_table(p, alphas, cells)
-    for a, alpha in enumerate(alphas):
-        assert np.array_equal(table[a], env.glossy_table(p, [alpha], cells)[0])
-    assert np.ptp(table[:, 5, 3, 0]) > 0.0  # the widths differ where Earth fills part of the lobe
