@@ -274,6 +274,11 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
                         st[c] = w00 * A[i, j, c] + w01 * A[i, j + 1, c] + w10 * A[i + 1, j, c] + w11 * A[i + 1, j + 1, c]
                 else:
                     _earth.fill_state(p, tex, mx, my, mz, ux, uy, uz, st)
+                if mu <= 0.0 and st[15] == 0.0 and st[16] == 0.0 and st[17] == 0.0:
+                    # night without glint: combine() is the path radiance alone, whatever the
+                    # clouds and the land (the same bits without their fine octaves)
+                    rad[v, u, 0], rad[v, u, 1], rad[v, u, 2] = st[12], st[13], st[14]
+                    continue
                 cf, land = _fine_at(p, st, mx, my, mz, ux, uy, uz, pix_rad * t / dn)
                 rad[v, u, 0], rad[v, u, 1], rad[v, u, 2] = _earth.combine(
                     p, st[0], st[1], st[2], st[3], st[9], st[10], st[11], st[12], st[13], st[14], st[15], st[16], st[17],

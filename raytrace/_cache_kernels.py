@@ -191,26 +191,31 @@ def _glossy_bounce(idx, o, d, tfar, geom, prim, hu, hv, face_offset, face_normal
 
 
 @pjit
-def _glints(ptr, rec_face, rec_u, rec_v, rec_side, rec_n, rec_wo, comp_of_face, f0, alpha, valid, face_s, lat_start,
-            lat_ids, E_sun, sun, scale, out):
+def _glint_lattice(rec_face, rec_u, rec_v, rec_side, valid, face_s, lat_start, lat_ids, rows, weights):
+    """The lattice rows around each glossy-hit record and their weights (:func:`lattice_rows`),
+    which do not depend on the lighting: :func:`_glints` reads them every frame."""
+    for k in numba.prange(rec_face.shape[0]):
+        rows[k, 0], rows[k, 1], rows[k, 2], weights[k, 0], weights[k, 1], weights[k, 2] = lattice_rows(
+            valid, face_s, lat_start, lat_ids, rec_face[k], rec_u[k], rec_v[k], rec_side[k])
+
+
+@pjit
+def _glints(ptr, rec_face, rows, weights, rec_n, rec_wo, comp_of_face, f0, alpha, E_sun, sun, scale, out):
     """out[row] += scale × Σ over the row's glossy-hit records of the Sun's specular reflection
     at the hit towards the row: f_s(sun, wo)·cosθ_sun·ν·E_sun·V, V the hit's sunlit fraction
-    interpolated from the lattice (the cache's own shadow rays); ``sun`` the Sun record
-    (:mod:`raytrace._lights`)."""
+    interpolated from the lattice (the cache's own shadow rays) at the record's lattice rows and
+    weights (:func:`_glint_lattice`); ``sun`` the Sun record (:mod:`raytrace._lights`)."""
     sx, sy, sz, e_sun = sun[SUN_X], sun[SUN_Y], sun[SUN_Z], sun[SUN_E]
     for r in numba.prange(ptr.shape[0] - 1):
         acc0 = 0.0
         acc1 = 0.0
         acc2 = 0.0
         for k in range(ptr[r], ptr[r + 1]):
-            f = rec_face[k]
-            r0, r1, r2, w0, w1, w2 = lattice_rows(valid, face_s, lat_start, lat_ids, f, rec_u[k], rec_v[k],
-                                                  rec_side[k])
-            vis = (w0 if E_sun[r0] > 0.0 else 0.0) + (w1 if E_sun[r1] > 0.0 else 0.0) + \
-                (w2 if E_sun[r2] > 0.0 else 0.0)
+            vis = (weights[k, 0] if E_sun[rows[k, 0]] > 0.0 else 0.0) + \
+                (weights[k, 1] if E_sun[rows[k, 1]] > 0.0 else 0.0) + (weights[k, 2] if E_sun[rows[k, 2]] > 0.0 else 0.0)
             if vis <= 0.0:
                 continue
-            c = comp_of_face[f]
+            c = comp_of_face[rec_face[k]]
             a, b, cc = brdf_cos(rec_n[k, 0], rec_n[k, 1], rec_n[k, 2], rec_wo[k, 0], rec_wo[k, 1], rec_wo[k, 2],
                                 sx, sy, sz, 0.0, 0.0, 0.0, f0[c, 0], f0[c, 1], f0[c, 2], alpha[c])
             acc0 += a * vis

@@ -82,7 +82,8 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from . import environment as env, presets
-from ._cache_kernels import (_bin_hits, _cache_rays, _csr_sum, _gauss_seidel_sweep, _glints, _glossy_bounce,
+from ._cache_kernels import (_bin_hits, _cache_rays, _csr_sum, _gauss_seidel_sweep, _glint_lattice, _glints,
+                             _glossy_bounce,
                              _interp_rows, _jacobi_step, _lattice_points, _lookup_rows, _oct_cells, _ray_cells,
                              _rows_irradiance, _sun_rays, _zero_rows)
 from ._threads import submit
@@ -826,7 +827,13 @@ class RadianceCache:
             if e_sun > 0.0:
                 gl = mats["glint"]
                 hits = E_sun[self._c_alias] if E_sun_hits is None else E_sun_hits
-                _glints(gl["ptr"], gl["face"], gl["u"], gl["v"], gl["side"], gl["n"], gl["wo"],
-                        self.scene.component_of_face, self.f0, self.alpha, self._c_valid, self._c_face_s,
-                        self._c_lat_start, self._c_lat_ids, hits, lighting.sun_record(), math.pi / self.G, E0)
+                if "lattice_rows" not in gl:  # the records' lattice rows, the same every frame: found once
+                    rows, w = np.empty((len(gl["face"]), 3), np.int32), np.empty((len(gl["face"]), 3))
+                    _glint_lattice(gl["face"], gl["u"], gl["v"], gl["side"], self._c_valid, self._c_face_s,
+                                   self._c_lat_start, self._c_lat_ids, rows, w)
+                    gl["lattice_w"] = w
+                    gl["lattice_rows"] = rows  # last: another thread's frame tests for it
+                _glints(gl["ptr"], gl["face"], gl["lattice_rows"], gl["lattice_w"], gl["n"], gl["wo"],
+                        self.scene.component_of_face, self.f0, self.alpha, hits, lighting.sun_record(),
+                        math.pi / self.G, E0)
         return E_sun, E0

@@ -282,3 +282,28 @@ def test_main_job_earth_has_texture_ocean_and_clouds(main_job_frames):
     # thick cloud: bright and near-white (channels within 20 % of their mean)
     cm = np.median(cloud, 0)
     assert cm.mean() > 0.5 and np.all(np.abs(cm / cm.mean() - 1) < 0.2), cm
+
+
+def test_night_side_is_the_twilight_sky_whatever_the_clouds():
+    """Beyond the terminator (μ_s ≤ 0) neither the ground nor the clouds are lit: a pixel there is
+    the path radiance of the twilit air column alone, the same bits with clouds or without (the
+    background skips the fine octaves there), and per pixel what the exact per-point evaluation
+    (:func:`raytrace._earth.point_radiance`, the state not interpolated) gives."""
+    W, H, f = 160, 120, 100.0
+    args = (_above(20.0, -30.0), R_E + 400e3, (1.0, 0.0, 0.0), W, H, f)  # the terminator through nadir
+    rad, mask, D, m, mu_s, p, tex = _view(*args)
+    rad_clear, *_ = _view(*args, clouds=False)
+    # night: beyond the terminator by more than a background cell (8 pixels, Δμ_s ≈ 0.005 here),
+    # whose interpolated glint would carry the day side's into it
+    night = mask & (mu_s <= -0.01) & (mu_s > _earth.MU_NIGHT + 0.01)
+    day = mask & (mu_s > 0.02)
+    assert night.sum() > 2000 and day.sum() > 2000
+    assert np.array_equal(rad[night], rad_clear[night])
+    assert not np.array_equal(rad[day], rad_clear[day])  # the clouds show on the day side
+    dist = R_E + 400e3
+    exact = np.array([_earth.point_radiance(p, tex, *m[v, u], *D[v, u],
+                                            float(D[v, u] @ np.array([0.0, 0.0, dist])
+                                                  - math.sqrt(R_E ** 2 - dist ** 2 + (D[v, u, 2] * dist) ** 2)))
+                      for v, u in zip(*np.nonzero(night), strict=True)])
+    assert exact.max() > 0.0  # twilight: the air above is lit
+    np.testing.assert_allclose(rad[night], exact, rtol=1e-2, atol=1e-3 * exact.max())

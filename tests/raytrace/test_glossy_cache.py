@@ -80,3 +80,54 @@ def test_wall_irradiance_from_a_glossy_plate(sun, rtol):
     # 24 rows spread over the face, the same for both estimates
     got24 = frame.indirect_W_m2[rows[on]][np.linspace(0, on.sum() - 1, 24).astype(int)].mean(axis=0)
     np.testing.assert_allclose(got24, want, rtol=rtol)
+
+
+def _glints_per_record(cache, gl, E_sun_hits, lighting):
+    """The glint source term of every row summed record by record in Python (the lattice rows
+    around each record's hit from :func:`lattice_weights` and the lattice tables, the Sun's
+    specular reflection from :func:`brdf_cos`): a second evaluation of
+    :func:`raytrace._cache_kernels._glints`."""
+    from raytrace._cache_kernels import _lattice_local, lattice_weights
+    sun = np.asarray(lighting.sun_dir_body, float)
+    e_sun = lighting.sun_irradiance_at_target_W_m2
+    out = np.zeros((len(gl["ptr"]) - 1, 3))
+    for r in range(len(out)):
+        for k in range(gl["ptr"][r], gl["ptr"][r + 1]):
+            f = int(gl["face"][k])
+            s = int(cache._c_face_s[f])
+            a0, c0, a1, c1, a2, c2, *w = lattice_weights(s, gl["u"][k], gl["v"][k])
+            rows = [2 * int(cache._c_lat_ids[cache._c_lat_start[f] + _lattice_local(s, a, c)]) + int(gl["side"][k])
+                    for a, c in ((a0, c0), (a1, c1), (a2, c2))]
+            w = [wi if cache._c_valid[ri] else 0.0 for wi, ri in zip(w, rows, strict=True)]
+            vis = sum(wi for wi, ri in zip(w, rows, strict=True) if E_sun_hits[ri] > 0.0) / max(sum(w), 1e-300)
+            if vis <= 0.0:
+                continue
+            c = cache.scene.component_of_face[f]
+            fs = brdf_cos(*gl["n"][k], *gl["wo"][k], *sun, 0.0, 0.0, 0.0, *cache.f0[c], cache.alpha[c])
+            out[r] += np.asarray(fs) * vis
+    return out * np.pi / cache.G * e_sun
+
+
+def test_glints_from_lattice_rows_found_once_match_a_per_record_sum():
+    """The glints' lattice rows are found on the first solve and kept: under a second Sun the
+    term is still the per-record sum (the rows do not depend on the lighting)."""
+    from raytrace import environment as env
+    from raytrace._cache_kernels import _glints
+    scene = _scene()
+    cache = scene.radiance_cache()
+    gl = cache._c["glint"]
+    assert gl is not None and gl["ptr"][-1] > 100  # the plate's reflections reach the wall
+    for sun in ((-0.6, 0.0, 0.8), (0.3, 0.5, 0.8)):
+        light = Lighting(sun_dir_body=tuple(np.asarray(sun) / np.linalg.norm(sun)))
+        cache.solve(light)
+        assert "lattice_rows" in gl
+        p, tex = light.packed()
+        E_sun, _ = cache._sources(cache._c_ray_pos, cache._c_nrm, cache._c_solved, cache._c, light,
+                                  env.irradiance_table(p, tex), env.env_cells(p, tex, cache.n_cells, 4), None)
+        hits = E_sun[cache._c_alias]
+        got = np.zeros((cache.n_coarse_rows, 3))
+        _glints(gl["ptr"], gl["face"], gl["lattice_rows"], gl["lattice_w"], gl["n"], gl["wo"],
+                scene.component_of_face, cache.f0, cache.alpha, hits, light.sun_record(), np.pi / cache.G, got)
+        ref = _glints_per_record(cache, gl, hits, light)
+        assert np.abs(ref).max() > 0.0
+        np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
