@@ -18,8 +18,18 @@ import numpy as np
 
 from .. import _light_parts
 
-__all__ = ["Modality", "MODALITIES", "NAMES", "DEFAULT", "PICTURES", "CAMERA", "needs_radiance", "preset_error",
-           "relpath"]
+__all__ = [
+    "CAMERA",
+    "DEFAULT",
+    "MODALITIES",
+    "NAMES",
+    "PICTURES",
+    "Modality",
+    "needs_radiance",
+    "preset_error",
+    "relpath",
+    "write_options",
+]
 
 
 @dataclass(frozen=True)
@@ -59,6 +69,9 @@ class Modality:
         The file's channel names (None: the writer's default).
     presets : tuple of str or None
         The degradation presets (``--degrade``) that make it; None: made without one.
+    half_option : str or None
+        The ``[output]`` option that stores it as half floats when set to ``"half"``
+        (``normal_format``); None: always as made.
     """
 
     name: str
@@ -73,6 +86,7 @@ class Modality:
     light_parts: bool = False
     channels: tuple | None = None
     presets: tuple | None = None
+    half_option: str | None = None
 
 
 MODALITIES = {m.name: m for m in (
@@ -83,8 +97,8 @@ MODALITIES = {m.name: m for m in (
              produce=lambda geo, radiance: geo.instance.astype(np.uint16)),
     Modality("depth", ".exr", "z-depth along the optical axis, float32 m (inf on background)",
              produce=lambda geo, radiance: geo.depth_m.astype(np.float32)),
-    Modality("normal", ".exr", "unit surface normal in the camera frame, float32 (0 on background)",
-             produce=lambda geo, radiance: geo.normal_cam.astype(np.float32)),
+    Modality("normal", ".exr", "unit surface normal in the camera frame, float32, or half with --normal-format "
+             "half (0 on background)", half_option="normal_format", produce=lambda geo, radiance: geo.normal_cam.astype(np.float32)),
     Modality("semantic", ".png", "part class, 8 bit (raytrace.model.SEMANTIC_CLASSES index + 1; 0 background)",
              default=False, produce=lambda geo, radiance: geo.semantic),
     Modality("hdr", ".exr", "linear radiance, float32 W/(m²·sr)", shaded=True, default=False,
@@ -134,3 +148,12 @@ def relpath(name: str, frame: int | str) -> str:
     folder: ``mask/000012.png``."""
     stem = f"{frame:06d}" if isinstance(frame, int) else frame
     return f"{name}/{stem}{MODALITIES[name].ext}"
+
+
+def write_options(name: str, output: dict) -> dict:
+    """The keyword options of :func:`raytrace.files.write_image` for modality ``name`` with the
+    ``[output]`` configuration ``output`` (``compression``, ``normal_format``; missing: the
+    defaults, fast and float32)."""
+    m = MODALITIES[name]
+    return {"noisy": m.noisy, "channel_names": m.channels, "compression": output.get("compression", "fast"),
+            "half": m.half_option is not None and output.get(m.half_option) == "half"}
