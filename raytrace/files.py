@@ -1,5 +1,6 @@
-"""Files of a rendered sequence: images through OpenImageIO, atomic writes, the model as PLY,
-and the per-frame manifest that makes an interrupted run resumable.
+"""Files of a rendered sequence: images (PNG and EXR encoded in memory by :mod:`.imagecodec`,
+other layouts through OpenImageIO), atomic writes, the model as PLY, and the per-frame manifest
+that makes an interrupted run resumable.
 
 Atomicity
     Every file is written under a hidden temporary name in its destination folder
@@ -93,15 +94,17 @@ _TMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<host>[A-Za-z0-9_-]+)\.(?P<pid>\d+)\.
 # are lossless. PNG: one filter for every row (PNG spec §9.2), zlib's level and strategy; EXR:
 # ZIP (16 scan lines a chunk) at a zlib level. Each file is encoded here in memory (numpy and
 # zlib: :func:`png_bytes`, :func:`exr_bytes`), written in one call and hashed from memory.
-# "fast", per 1280×960 frame against OpenImageIO's writers (CPU time on a loaded machine):
-# * rgb (the Earth fills the background): Up, level 1, Z_RLE: 40 → 17 ms, 445 → 327 kB (median);
-# * rgb_degraded (noise): Up, level 1, Huffman only: 45 → 28 ms, 1458 → 1300 kB; no setting
-#   measured was smaller (libpng's default, every filter tried per row at level 6: 1304 kB);
-# * mask (data): Up, level 1, Z_RLE: 9 → 5 ms, 4 → 7 kB;
-# * depth, normal (EXR): ZIP at level 1: 23 → 7 ms and 66 → 26 ms, 31 → 48 kB and 80 → 133 kB.
-# "compact" trades time for bytes where that buys some: EXR ZIP at level 6 (the size of
-# OpenEXR's own ZIP, ~1.3× fast's time), rgb Up at level 6 (−3 % bytes, ~5× the time), masks
-# unfiltered at level 6 (−40 % of a few kB); the degraded frames as fast.
+# "fast", medians per 1280×960 frame against OpenImageIO's writers before (CPU ms on a loaded
+# 2-core machine, kB):
+# * rgb (the Earth fills the background): Up, level 1, Z_RLE: 40.5 → 16.3 ms, 445 → 327 kB;
+# * rgb_degraded (noise): Up, level 1, Huffman only: 43.9 → 28.2 ms, 1458 → 1300 kB; no setting
+#   measured was smaller (libpng's default, every filter tried per row at level 6: 1304 kB, 17×
+#   the time);
+# * mask (data): Up, level 1, Z_RLE: 8.7 → 5.0 ms, 4 → 7 kB;
+# * depth, normal (EXR ZIP at level 1): 20.3 → 3.9 ms, 31 → 48 kB; 59.0 → 13.7 ms, 80 → 132 kB.
+# "compact" trades time for bytes where that buys some: EXR ZIP at level 6 (OpenEXR's own ZIP
+# size, ~1.5× fast's time), masks unfiltered at level 6; rgb and rgb_degraded as fast (level 6
+# saved 3 % of rgb at 5.6× the time, and nothing on the degraded frames).
 COMPRESSIONS = ("fast", "compact")
 """The ``--compression`` choices: how a frame's files are compressed (both lossless)."""
 # kind -> compression -> ("png" or "exr", filter (PNG), zlib level, zlib strategy)

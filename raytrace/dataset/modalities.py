@@ -97,8 +97,9 @@ MODALITIES = {m.name: m for m in (
              produce=lambda geo, radiance: geo.instance.astype(np.uint16)),
     Modality("depth", ".exr", "z-depth along the optical axis, float32 m (inf on background)",
              produce=lambda geo, radiance: geo.depth_m.astype(np.float32)),
-    Modality("normal", ".exr", "unit surface normal in the camera frame, float32, or half with --normal-format "
-             "half (0 on background)", half_option="normal_format", produce=lambda geo, radiance: geo.normal_cam.astype(np.float32)),
+    Modality("normal", ".exr", "unit surface normal in the camera frame, float32 (half with --normal-format half; "
+             "0 on background)", half_option="normal_format",
+             produce=lambda geo, radiance: geo.normal_cam.astype(np.float32)),
     Modality("semantic", ".png", "part class, 8 bit (raytrace.model.SEMANTIC_CLASSES index + 1; 0 background)",
              default=False, produce=lambda geo, radiance: geo.semantic),
     Modality("hdr", ".exr", "linear radiance, float32 W/(m²·sr)", shaded=True, default=False,
