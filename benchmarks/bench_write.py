@@ -22,7 +22,7 @@ frames, and checks that every file reads back (OpenImageIO ``ImageBuf``) to the 
 checksums, manifest record) with ``--compression fast`` and ``compact``, and fast with
 ``--normal-format half``; with ``--old REF``
 also by the writer of the git revision ``REF`` (a worktree of it, imported in a child
-process), interleaved with the new one frame by frame. Prints medians and ratios.
+process), interleaved with the new one frame by frame. Prints medians (wall and CPU time) and ratios.
 """
 
 from __future__ import annotations
@@ -185,9 +185,9 @@ for line in sys.stdin:
         images = {k: z[k] for k in z.files}
     task = {"out": job["out"], "frame": job["frame"], "modalities": job["modalities"], "label": {},
             "cfg": {"output": {"modalities": job["modalities"]}}}
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     folder.write_frame(task, images, {})
-    print(json.dumps(time.perf_counter() - t0), flush=True)
+    print(json.dumps([time.perf_counter() - t0, time.process_time() - c0]), flush=True)
 """
 
 
@@ -205,6 +205,7 @@ def frame(a) -> None:
                                text=True)
     variants = ["fast", "compact", "fast+half"] + (["old"] if old else [])
     times = {v: [] for v in variants}
+    cpus = {v: [] for v in variants}
     sizes = {v: [] for v in variants}
     try:
         with tempfile.TemporaryDirectory() as tmp:
@@ -219,15 +220,18 @@ def frame(a) -> None:
                         old.stdin.write(json.dumps({"npz": npz, "out": out, "frame": task["frame"],
                                                     "modalities": task["modalities"]}) + "\n")
                         old.stdin.flush()
-                        times[v].append(json.loads(old.stdout.readline()))
+                        wall, cpu = json.loads(old.stdout.readline())
+                        times[v].append(wall)
+                        cpus[v].append(cpu)
                     else:
                         cfg = {"output": {"modalities": task["modalities"], "compression": v.split("+")[0],
                                           "normal_format": "half" if v.endswith("+half") else "float32"}}
                         t = {"out": out, "frame": task["frame"], "modalities": task["modalities"], "label": {},
                              "cfg": cfg}
-                        t0 = time.perf_counter()
+                        t0, c0 = time.perf_counter(), time.process_time()
                         folder.write_frame(t, images, {})
                         times[v].append(time.perf_counter() - t0)
+                        cpus[v].append(time.process_time() - c0)
                     sizes[v].append(sum(os.path.getsize(os.path.join(out, m, f)) for m in task["modalities"]
                                         for f in os.listdir(os.path.join(out, m))))
                 print(f"frame {task['frame']}: " + ", ".join(f"{v} {times[v][-1] * 1e3:.1f} ms" for v in variants),
@@ -239,11 +243,14 @@ def frame(a) -> None:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", wt], capture_output=True,
                            check=False)
     ref = statistics.median(times["old"]) if old else None
-    print(f"\n{' '.join(MAIN_JOB)}, {len(times['fast'])} frames, 1 thread: write_frame (files, checksums, record)")
+    ref_cpu = statistics.median(cpus["old"]) if old else None
+    print(f"\n{' '.join(MAIN_JOB)}, {len(times['fast'])} frames, 1 thread: write_frame (files, checksums, record), "
+          "medians")
     for v in variants:
-        med = statistics.median(times[v])
-        ratio = f"  x{med / ref:.2f} of old" if ref else ""
-        print(f"  {v:8s} median {med * 1e3:6.1f} ms  bytes {statistics.median(sizes[v]) / 1e6:.2f} MB{ratio}")
+        med, cpu = statistics.median(times[v]), statistics.median(cpus[v])
+        ratio = f"  x{med / ref:.2f} (CPU x{cpu / ref_cpu:.2f}) of old" if ref else ""
+        print(f"  {v:9s} wall {med * 1e3:6.1f} ms  CPU {cpu * 1e3:6.1f} ms  bytes {statistics.median(sizes[v]) / 1e6:.2f} "
+              f"MB{ratio}")
 
 
 def main() -> None:
