@@ -249,8 +249,8 @@ def frame(a) -> None:
     for v in variants:
         med, cpu = statistics.median(times[v]), statistics.median(cpus[v])
         ratio = f"  x{med / ref:.2f} (CPU x{cpu / ref_cpu:.2f}) of old" if ref else ""
-        print(f"  {v:9s} wall {med * 1e3:6.1f} ms  CPU {cpu * 1e3:6.1f} ms  bytes {statistics.median(sizes[v]) / 1e6:.2f} "
-              f"MB{ratio}")
+        size = statistics.median(sizes[v]) / 1e6
+        print(f"  {v:9s} wall {med * 1e3:6.1f} ms  CPU {cpu * 1e3:6.1f} ms  bytes {size:.2f} MB{ratio}")
 
 
 def main() -> None:
