@@ -101,7 +101,9 @@ _TMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<host>[A-Za-z0-9_-]+)\.(?P<pid>\d+)\.
 #   measured was smaller (libpng's default, every filter tried per row at level 6: 1304 kB, 17×
 #   the time);
 # * mask (data): Up, level 1, Z_RLE: 8.7 → 5.0 ms, 4 → 7 kB;
-# * depth, normal (EXR ZIP at level 1): 20.3 → 3.9 ms, 31 → 48 kB; 59.0 → 13.7 ms, 80 → 132 kB.
+# * depth (EXR ZIP at level 1): 20.3 → 3.9 ms, 31 → 48 kB;
+# * normal (zero on the background: ZIP at level 1 with Z_RLE): 59.0 → 13.3 ms, 80 → 87 kB (the
+#   default strategy: 13.7 ms, 132 kB; on depth, whose background is inf, Z_RLE gave 495 kB).
 # "compact" trades time for bytes where that buys some: EXR ZIP at level 6 (OpenEXR's own ZIP
 # size, ~1.5× fast's time), masks unfiltered at level 6; rgb and rgb_degraded as fast (level 6
 # saved 3 % of rgb at 5.6× the time, and nothing on the degraded frames).
@@ -113,22 +115,24 @@ _SETTINGS = {
     "noisy": {"fast": ("png", "up", 1, "huffman"), "compact": ("png", "up", 1, "huffman")},
     "data": {"fast": ("png", "up", 1, "rle"), "compact": ("png", "none", 6, "default")},
     "float": {"fast": ("exr", "zip", 1, "default"), "compact": ("exr", "zip", 6, "default")},
+    "sparse": {"fast": ("exr", "zip", 1, "rle"), "compact": ("exr", "zip", 6, "default")},
 }
 
 
-def image_settings(pixels: np.ndarray, ext: str, *, noisy: bool = False, compression: str = "fast") -> tuple:
+def image_settings(pixels: np.ndarray, ext: str, *, noisy: bool = False, sparse: bool = False,
+                   compression: str = "fast") -> tuple:
     """How :func:`write_image` stores ``pixels`` in a ``ext`` file with ``compression``:
     ``("png", filter, level, strategy)`` (see :func:`png_bytes`) or ``("exr", compression,
     level, strategy)`` (see :func:`exr_bytes`)."""
     if compression not in COMPRESSIONS:
         raise ValueError(f"compression must be one of {', '.join(COMPRESSIONS)}, got {compression!r}")
     if ext == ".exr":
-        return _SETTINGS["float"][compression]
+        return _SETTINGS["sparse" if sparse else "float"][compression]
     kind = "noisy" if noisy else ("picture" if np.ndim(pixels) == 3 and np.shape(pixels)[2] == 3 else "data")
     return _SETTINGS[kind][compression]
 
 
-def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False, channel_names=None,
+def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False, sparse: bool = False, channel_names=None,
                 compression: str = "fast", half: bool = False) -> str | None:
     """Write an image, format from the extension: PNG (8/16 bit, grey or RGB) with
     :func:`png_bytes`, anything else (EXR: float32 or half) with OpenImageIO.
@@ -143,6 +147,9 @@ def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False, channel_n
     noisy : bool, keyword-only
         The image is mostly noise (a degraded camera frame): a PNG is deflated with settings
         for noise (:func:`image_settings`). The pixels are the same.
+    sparse : bool, keyword-only
+        The image is zero on most pixels (the normals' background): an EXR is deflated with
+        zlib's Z_RLE strategy, fewer bytes in the same time. The pixels are the same.
     channel_names : sequence of str, optional, keyword-only
         The channels' names (one per channel; OpenEXR layers as ``layer.R``); default
         OpenImageIO's (R, G, B, A, …).
@@ -180,7 +187,7 @@ def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False, channel_n
     if pixels.dtype not in (np.uint8, np.uint16, np.float32):
         raise ValueError(f"pixels must be uint8, uint16 or float32, got {pixels.dtype}")
     ext = os.path.splitext(path)[1].lower()
-    settings = image_settings(pixels, ext, noisy=noisy, compression=compression)
+    settings = image_settings(pixels, ext, noisy=noisy, sparse=sparse, compression=compression)
     if half and (ext != ".exr" or pixels.dtype != np.float32):
         raise ValueError(f"half floats are for float32 pixels in an EXR file, got {pixels.dtype} in {ext or path}")
     data = None

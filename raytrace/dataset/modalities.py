@@ -49,6 +49,9 @@ class Modality:
     noisy : bool
         Mostly noise (a degraded camera frame): written with the fast PNG settings
         (:func:`raytrace.files.write_image`).
+    sparse : bool
+        Zero on most pixels (the background): written with the EXR settings for that
+        (:func:`raytrace.files.write_image`).
     picture : bool
         An 8-bit sRGB colour image: what the exports (:mod:`raytrace.export`) take as a frame's
         picture.
@@ -79,6 +82,7 @@ class Modality:
     holds: str
     shaded: bool = False
     noisy: bool = False
+    sparse: bool = False
     picture: bool = False
     default: bool = True
     produce: object = None
@@ -98,7 +102,7 @@ MODALITIES = {m.name: m for m in (
     Modality("depth", ".exr", "z-depth along the optical axis, float32 m (inf on background)",
              produce=lambda geo, radiance: geo.depth_m.astype(np.float32)),
     Modality("normal", ".exr", "unit surface normal in the camera frame, float32 (half with --normal-format half; "
-             "0 on background)", half_option="normal_format",
+             "0 on background)", sparse=True, half_option="normal_format",
              produce=lambda geo, radiance: geo.normal_cam.astype(np.float32)),
     Modality("semantic", ".png", "part class, 8 bit (raytrace.model.SEMANTIC_CLASSES index + 1; 0 background)",
              default=False, produce=lambda geo, radiance: geo.semantic),
@@ -156,5 +160,6 @@ def write_options(name: str, output: dict) -> dict:
     ``[output]`` configuration ``output`` (``compression``, ``normal_format``; missing: the
     defaults, fast and float32)."""
     m = MODALITIES[name]
-    return {"noisy": m.noisy, "channel_names": m.channels, "compression": output.get("compression", "fast"),
+    return {"noisy": m.noisy, "sparse": m.sparse, "channel_names": m.channels,
+            "compression": output.get("compression", "fast"),
             "half": m.half_option is not None and output.get(m.half_option) == "half"}
