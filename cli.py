@@ -225,6 +225,7 @@ def _options() -> tuple:
         O("--only-visible", "output", opt.boolean, False,
           "drop frames whose flags say the target cannot be seen (default: render them, flags in labels)",
           switch=True),
+        *opt.OUTPUT_FILE_OPTIONS,
     )
 
 

@@ -1,5 +1,6 @@
-"""Files of a rendered sequence: images through OpenImageIO, atomic writes, the model as PLY,
-and the per-frame manifest that makes an interrupted run resumable.
+"""Files of a rendered sequence: images (PNG and EXR encoded in memory by :mod:`.imagecodec`,
+other layouts through OpenImageIO), atomic writes, the model as PLY, and the per-frame manifest
+that makes an interrupted run resumable.
 
 Atomicity
     Every file is written under a hidden temporary name in its destination folder
@@ -44,9 +45,13 @@ import threading
 
 import numpy as np
 
+from .imagecodec import PNG_FILTERS, exr_bytes, png_bytes  # encoders; re-exported
+
 __all__ = [
+    "COMPRESSIONS",
     "LOCK_NAME",
     "MANIFEST_DIR",
+    "PNG_FILTERS",
     "FolderLock",
     "FolderLockBusy",
     "atomic_write_bytes",
@@ -54,14 +59,17 @@ __all__ = [
     "atomic_write_text",
     "check_regular_file",
     "create_new_text",
+    "exr_bytes",
     "frame_complete",
+    "image_settings",
     "is_temporary",
     "model_ply_bytes",
+    "png_bytes",
+    "process_folder",
     "read_frame_record",
     "read_image",
-    "read_regular_file",
     "read_model_ply",
-    "process_folder",
+    "read_regular_file",
     "remove_stale_process_folders",
     "remove_stale_temporaries",
     "sha256_file",
@@ -81,21 +89,53 @@ _TMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<host>[A-Za-z0-9_-]+)\.(?P<pid>\d+)\.
 
 
 # --------------------------------------------------------------------------- images
-# How PNGs are filtered (libpng's PNG_FILTER_* bits) and deflated (zlib level), chosen on the
-# main job's 1280×960 frames (BENCHMARKS.md, "Writing the frames"). libpng's default, each row's
-# filter picked among all five at level 6, spends its time trying filters:
-# * a rendered frame or mask (black space around the target, flat parts): no filter, level 6,
-#   2–2.5× faster than the default (RGB 0.07–0.08 → 0.03–0.04 s), −20 % to +5 % bytes;
-# * a noisy image (``write_image(..., noisy=True)``: the degraded frames): the average
-#   predictor at level 1, 0.44–0.64 → 0.05–0.08 s (the frame's render takes 0.13 s), 12–20 % more
-#   bytes than the default on noise that does not compress.
-_PNG = {"png:filter": 8}
-_PNG_NOISY = {"png:filter": 64, "png:compressionLevel": 1}
+# How each kind of image is stored, chosen by measurement on the main job's 48 frames
+# (1280×960, one thread; benchmarks/bench_write.py, docs/formats.md "Compression"). Both choices
+# are lossless. PNG: one filter for every row (PNG spec §9.2), zlib's level and strategy; EXR:
+# ZIP (16 scan lines a chunk) at a zlib level. Each file is encoded here in memory (numpy and
+# zlib: :func:`png_bytes`, :func:`exr_bytes`), written in one call and hashed from memory.
+# "fast", medians per 1280×960 frame against OpenImageIO's writers before (CPU ms on a loaded
+# 2-core machine, kB):
+# * rgb (the Earth fills the background): Up, level 1, Z_RLE: 40.5 → 16.3 ms, 445 → 327 kB;
+# * rgb_degraded (noise): Up, level 1, Huffman only: 43.9 → 28.2 ms, 1458 → 1300 kB; no setting
+#   measured was smaller (libpng's default, every filter tried per row at level 6: 1304 kB, 17×
+#   the time);
+# * mask (data): Up, level 1, Z_RLE: 8.7 → 5.0 ms, 4 → 7 kB;
+# * depth (EXR ZIP at level 1): 20.3 → 3.9 ms, 31 → 48 kB;
+# * normal (zero on the background: ZIP at level 1 with Z_RLE): 59.0 → 13.3 ms, 80 → 87 kB (the
+#   default strategy: 13.7 ms, 132 kB; on depth, whose background is inf, Z_RLE gave 495 kB).
+# "compact" trades time for bytes where that buys some: EXR ZIP at level 6 (OpenEXR's own ZIP
+# size, ~1.5× fast's time), masks unfiltered at level 6; rgb and rgb_degraded as fast (level 6
+# saved 3 % of rgb at 5.6× the time, and nothing on the degraded frames).
+COMPRESSIONS = ("fast", "compact")
+"""The ``--compression`` choices: how a frame's files are compressed (both lossless)."""
+# kind -> compression -> ("png" or "exr", filter (PNG), zlib level, zlib strategy)
+_SETTINGS = {
+    "picture": {"fast": ("png", "up", 1, "rle"), "compact": ("png", "up", 1, "rle")},
+    "noisy": {"fast": ("png", "up", 1, "huffman"), "compact": ("png", "up", 1, "huffman")},
+    "data": {"fast": ("png", "up", 1, "rle"), "compact": ("png", "none", 6, "default")},
+    "float": {"fast": ("exr", "zip", 1, "default"), "compact": ("exr", "zip", 6, "default")},
+    "sparse": {"fast": ("exr", "zip", 1, "rle"), "compact": ("exr", "zip", 6, "default")},
+}
 
 
-def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False, channel_names=None) -> None:
-    """Write an image with OpenImageIO, format from the extension (PNG: 8/16 bit, EXR: float32
-    with zip compression).
+def image_settings(pixels: np.ndarray, ext: str, *, noisy: bool = False, sparse: bool = False,
+                   compression: str = "fast") -> tuple:
+    """How :func:`write_image` stores ``pixels`` in a ``ext`` file with ``compression``:
+    ``("png", filter, level, strategy)`` (see :func:`png_bytes`) or ``("exr", compression,
+    level, strategy)`` (see :func:`exr_bytes`)."""
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"compression must be one of {', '.join(COMPRESSIONS)}, got {compression!r}")
+    if ext == ".exr":
+        return _SETTINGS["sparse" if sparse else "float"][compression]
+    kind = "noisy" if noisy else ("picture" if np.ndim(pixels) == 3 and np.shape(pixels)[2] == 3 else "data")
+    return _SETTINGS[kind][compression]
+
+
+def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False, sparse: bool = False, channel_names=None,
+                compression: str = "fast", half: bool = False) -> str | None:
+    """Write an image, format from the extension: PNG (8/16 bit, grey or RGB) with
+    :func:`png_bytes`, anything else (EXR: float32 or half) with OpenImageIO.
 
     Parameters
     ----------
@@ -105,12 +145,27 @@ def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False, channel_n
         Pixel values, row 0 at the top. A one-channel PNG is data (instance ids) and is written
         without colour-space chunks; a three-channel one is sRGB.
     noisy : bool, keyword-only
-        The image is mostly noise (a degraded camera frame): a PNG is filtered and deflated
-        for speed (:data:`_PNG_NOISY`), not for the last bytes; otherwise :data:`_PNG`. The
-        pixels are the same.
+        The image is mostly noise (a degraded camera frame): a PNG is deflated with settings
+        for noise (:func:`image_settings`). The pixels are the same.
+    sparse : bool, keyword-only
+        The image is zero on most pixels (the normals' background): an EXR is deflated with
+        zlib's Z_RLE strategy, fewer bytes in the same time. The pixels are the same.
     channel_names : sequence of str, optional, keyword-only
         The channels' names (one per channel; OpenEXR layers as ``layer.R``); default
         OpenImageIO's (R, G, B, A, …).
+    compression : {"fast", "compact"}, keyword-only
+        Both lossless: ``fast`` for the time of a frame, ``compact`` for bytes
+        (:func:`image_settings`; docs/formats.md, "Compression").
+    half : bool, keyword-only
+        Store float32 pixels as 16-bit half floats (EXR only): each value rounded to the
+        nearest half, a relative error of at most 2⁻¹¹ in the normal range of half (magnitudes
+        6.1e-5 … 65504; below, an absolute error of at most 2⁻²⁵).
+
+    Returns
+    -------
+    str or None
+        The SHA-256 of the file's bytes where they were made in memory (PNG, float EXR), else
+        None (the others are written by OpenImageIO).
 
     Notes
     -----
@@ -120,36 +175,57 @@ def write_image(path: str, pixels: np.ndarray, *, noisy: bool = False, channel_n
     Raises
     ------
     OSError
-        If OpenImageIO cannot create or write the file.
+        If the file cannot be created or written.
     ValueError
-        If ``pixels`` has another dtype or shape.
+        If ``pixels`` has another dtype or shape, or an option another value.
     """
-    import OpenImageIO as oiio
     pixels = np.asarray(pixels)
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
     if pixels.ndim != 3:
         raise ValueError(f"pixels must have shape (H, W) or (H, W, C), got {pixels.shape}")
-    formats = {np.dtype(np.uint8): oiio.UINT8, np.dtype(np.uint16): oiio.UINT16, np.dtype(np.float32): oiio.FLOAT}
-    if pixels.dtype not in formats:
+    if pixels.dtype not in (np.uint8, np.uint16, np.float32):
         raise ValueError(f"pixels must be uint8, uint16 or float32, got {pixels.dtype}")
+    ext = os.path.splitext(path)[1].lower()
+    settings = image_settings(pixels, ext, noisy=noisy, sparse=sparse, compression=compression)
+    if half and (ext != ".exr" or pixels.dtype != np.float32):
+        raise ValueError(f"half floats are for float32 pixels in an EXR file, got {pixels.dtype} in {ext or path}")
+    data = None
+    if ext == ".png" and pixels.dtype != np.float32 and pixels.shape[2] in (1, 3):
+        _, filt, level, strategy = settings
+        data = png_bytes(pixels, srgb=pixels.shape[2] == 3, filter=filt, level=level, strategy=strategy)
+    elif ext == ".exr" and pixels.dtype == np.float32:
+        _, comp, level, strategy = settings
+        data = exr_bytes(pixels, channel_names=channel_names, half=half, compression=comp, level=level,
+                         strategy=strategy)
+    if data is not None:
+        try:
+            with open(path, "wb") as fh:
+                fh.write(data)
+        except OSError as exc:
+            raise OSError(f"cannot write {path}: {exc.strerror or exc}") from None
+        return hashlib.sha256(data).hexdigest()
+    _write_oiio(path, pixels, settings, channel_names, half)
+    return None
+
+
+def _write_oiio(path: str, pixels: np.ndarray, settings: tuple, channel_names, half: bool) -> None:
+    import OpenImageIO as oiio
+    formats = {np.dtype(np.uint8): oiio.UINT8, np.dtype(np.uint16): oiio.UINT16, np.dtype(np.float32): oiio.FLOAT}
     out = oiio.ImageOutput.create(path)
     if out is None:
         raise OSError(f"cannot create {path}: {oiio.geterror()}")
     h, w, c = pixels.shape
-    spec = oiio.ImageSpec(w, h, c, formats[pixels.dtype])
+    spec = oiio.ImageSpec(w, h, c, oiio.HALF if half else formats[pixels.dtype])
     if channel_names is not None:
         names = [str(n) for n in channel_names]
         if len(names) != c:
             raise ValueError(f"channel_names must name the {c} channels, got {len(names)} names")
         spec.channelnames = names
-    if path.endswith(".png"):
-        for key, value in (_PNG_NOISY if noisy else _PNG).items():
-            spec.attribute(key, value)
-        if c == 1:  # a one-channel PNG holds data (instance ids): no sRGB/gAMA/cHRM chunks a viewer would apply
-            spec.attribute("oiio:ColorSpace", "Raw")
-    if path.endswith(".exr"):
-        spec.attribute("compression", "zip")
+    if path.endswith(".png") and c == 1:  # data (instance ids): no sRGB/gAMA/cHRM chunks a viewer would apply
+        spec.attribute("oiio:ColorSpace", "Raw")
+    if settings[0] == "exr":
+        spec.attribute("compression", f"{settings[1]}:{settings[2]}")
         spec.attribute("DateTime", "")  # no capture date: the same pixels give the same bytes
     pixels = np.ascontiguousarray(pixels)
     with _signals_deferred():
@@ -226,15 +302,19 @@ def _unlink(path: str) -> None:
         pass
 
 
-def atomic_write_image(path: str, pixels: np.ndarray, *, noisy: bool = False, channel_names=None) -> None:
-    """:func:`write_image` to a temporary name in the same folder, then rename into place."""
+def atomic_write_image(path: str, pixels: np.ndarray, **options) -> str:
+    """:func:`write_image` (with its keyword ``options``) to a temporary name in the same folder,
+    then rename into place; returns the SHA-256 of the file's bytes."""
     tmp = _temporary(path)
     try:
-        write_image(tmp, pixels, noisy=noisy, channel_names=channel_names)
+        digest = write_image(tmp, pixels, **options)
+        if digest is None:
+            digest = sha256_file(tmp)
     except BaseException:
         _unlink(tmp)
         raise
     _replace(tmp, path)
+    return digest
 
 
 def _write_synced(fh, data: bytes) -> None:

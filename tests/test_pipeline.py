@@ -787,7 +787,7 @@ def test_signal_during_an_image_write_is_raised_after_the_file_is_closed(tmp_pat
     monkeypatch.setattr(oiio.ImageOutput, "create", staticmethod(SignalledAfterOpen))
     previous = signal.signal(signal.SIGTERM, stop)
     try:
-        pixels = np.arange(12, dtype=np.uint8).reshape(2, 2, 3)
+        pixels = np.arange(16, dtype=np.uint8).reshape(2, 2, 4)  # RGBA: written by OpenImageIO
         with pytest.raises(KeyboardInterrupt):
             F.write_image(str(tmp_path / "a.png"), pixels)
         with pytest.raises(KeyboardInterrupt):

@@ -24,7 +24,7 @@ import numpy as np
 
 from .. import files as F
 from . import UsageError, warn
-from .modalities import MODALITIES, relpath
+from .modalities import MODALITIES, relpath, write_options
 
 def _versions() -> dict:
     import platform
@@ -453,11 +453,9 @@ def write_frame(task: dict, images: dict, info: dict) -> dict:
     frame's label (the plan's, with ``info``: the image-derived fields, and its files)."""
     seq_dir, stem = task["out"], f"{task['frame']:06d}"
     rel = {m: relpath(m, stem) for m in task["modalities"]}
-    digests = {}
-    for m in task["modalities"]:
-        path = os.path.join(seq_dir, rel[m])
-        F.atomic_write_image(path, images[m], noisy=MODALITIES[m].noisy, channel_names=MODALITIES[m].channels)
-        digests[rel[m]] = F.sha256_file(path)
+    output = task["cfg"]["output"]
+    digests = {rel[m]: F.atomic_write_image(os.path.join(seq_dir, rel[m]), images[m], **write_options(m, output))
+               for m in task["modalities"]}
     label = dict(task["label"])
     label.update(info)
     label["files"] = rel

@@ -18,8 +18,18 @@ import numpy as np
 
 from .. import _light_parts
 
-__all__ = ["Modality", "MODALITIES", "NAMES", "DEFAULT", "PICTURES", "CAMERA", "needs_radiance", "preset_error",
-           "relpath"]
+__all__ = [
+    "CAMERA",
+    "DEFAULT",
+    "MODALITIES",
+    "NAMES",
+    "PICTURES",
+    "Modality",
+    "needs_radiance",
+    "preset_error",
+    "relpath",
+    "write_options",
+]
 
 
 @dataclass(frozen=True)
@@ -38,6 +48,9 @@ class Modality:
         Making it needs the shaded radiance (not the geometry alone).
     noisy : bool
         Mostly noise (a degraded camera frame): written with the fast PNG settings
+        (:func:`raytrace.files.write_image`).
+    sparse : bool
+        Zero on most pixels (the background): written with the EXR settings for that
         (:func:`raytrace.files.write_image`).
     picture : bool
         An 8-bit sRGB colour image: what the exports (:mod:`raytrace.export`) take as a frame's
@@ -59,6 +72,9 @@ class Modality:
         The file's channel names (None: the writer's default).
     presets : tuple of str or None
         The degradation presets (``--degrade``) that make it; None: made without one.
+    half_option : str or None
+        The ``[output]`` option that stores it as half floats when set to ``"half"``
+        (``normal_format``); None: always as made.
     """
 
     name: str
@@ -66,6 +82,7 @@ class Modality:
     holds: str
     shaded: bool = False
     noisy: bool = False
+    sparse: bool = False
     picture: bool = False
     default: bool = True
     produce: object = None
@@ -73,6 +90,7 @@ class Modality:
     light_parts: bool = False
     channels: tuple | None = None
     presets: tuple | None = None
+    half_option: str | None = None
 
 
 MODALITIES = {m.name: m for m in (
@@ -83,7 +101,8 @@ MODALITIES = {m.name: m for m in (
              produce=lambda geo, radiance: geo.instance.astype(np.uint16)),
     Modality("depth", ".exr", "z-depth along the optical axis, float32 m (inf on background)",
              produce=lambda geo, radiance: geo.depth_m.astype(np.float32)),
-    Modality("normal", ".exr", "unit surface normal in the camera frame, float32 (0 on background)",
+    Modality("normal", ".exr", "unit surface normal in the camera frame, float32 (half with --normal-format half; "
+             "0 on background)", sparse=True, half_option="normal_format",
              produce=lambda geo, radiance: geo.normal_cam.astype(np.float32)),
     Modality("semantic", ".png", "part class, 8 bit (raytrace.model.SEMANTIC_CLASSES index + 1; 0 background)",
              default=False, produce=lambda geo, radiance: geo.semantic),
@@ -134,3 +153,13 @@ def relpath(name: str, frame: int | str) -> str:
     folder: ``mask/000012.png``."""
     stem = f"{frame:06d}" if isinstance(frame, int) else frame
     return f"{name}/{stem}{MODALITIES[name].ext}"
+
+
+def write_options(name: str, output: dict) -> dict:
+    """The keyword options of :func:`raytrace.files.write_image` for modality ``name`` with the
+    ``[output]`` configuration ``output`` (``compression``, ``normal_format``; missing: the
+    defaults, fast and float32)."""
+    m = MODALITIES[name]
+    return {"noisy": m.noisy, "sparse": m.sparse, "channel_names": m.channels,
+            "compression": output.get("compression", "fast"),
+            "half": m.half_option is not None and output.get(m.half_option) == "half"}

@@ -313,3 +313,23 @@ def add_options(p: argparse.ArgumentParser, options, defaults: dict, skip=()) ->
             metavar = o.metavar if o.metavar and getattr(o.parse, "choices", None) is None else (
                 choices_metavar(o.parse, many=o.metavar == "LIST") or o.metavar)
             g.add_argument(o.flag, dest=o.key, type=o.parse, default=None, metavar=metavar, help=o.help + shown)
+
+
+NORMAL_FORMATS = ("float32", "half")
+"""The ``--normal-format`` choices: the normal maps' floats."""
+
+
+def _output_file_options() -> tuple:
+    from ..files import COMPRESSIONS
+    return (
+        Option("--compression", "output", choice(COMPRESSIONS), "fast",
+               "how the frame's files are compressed, both lossless (the same pixels): fast (zlib level 1) or "
+               "compact (float maps and masks at zlib level 6: fewer bytes, more time); docs/formats.md"),
+        Option("--normal-format", "output", choice(NORMAL_FORMATS), "float32",
+               "the normal maps' floats: float32, or half (16-bit, each component within 2^-11 relative of "
+               "float32's)"),
+    )
+
+
+OUTPUT_FILE_OPTIONS = _output_file_options()
+"""The ``[output]`` options of how a frame's files are stored (raytrace.files.write_image)."""
