@@ -117,7 +117,8 @@ def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *
                             gaussian_var=d["paper_gaussian_var"])
         out = paper_degrade(np.asarray(rgb8).astype(np.float32) / np.float32(255.0), d["paper_group"], paper, rng=rng)
         return {"rgb_degraded": quantise(out, 8)}
-    from .chain import simulate_frame
+    from . import _checks
+    from .chain import _simulate_frame
     from .exposure import physical_exposure
     signal = physical_exposure(radiance, f_number=d["f_number"], exposure_s=d["exposure_us"] * 1e-6,
                                pixel_pitch_m=cam["pixel_pitch_um"] * 1e-6,
@@ -125,8 +126,13 @@ def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *
                                wavelengths_m=(WHITE_BALANCE_M,) * 3)
     sun = None if label is None else label.get("sun_dir_cam")
     visible = 1.0 if label is None else float(label.get("shadow_fraction", 1.0))
-    res = simulate_frame(signal, physical_config(d, cam, motion), rng=rng, sun_dir_cam=sun if visible > 0 else None,
-                         sun_fraction=visible, camera_seed=camera_seed(d, sequence_seed))
-    out = {"rgb_degraded": quantise(res.image, 8), "signal_e": res.signal_e,
-           "saturation": np.where(res.saturation, np.uint8(255), np.uint8(0))}
-    return {w: out[w] for w in want}
+    visible = _checks.finite_scalar("sun_fraction", visible, nonnegative=True)
+    if visible > 1.0:
+        raise ValueError(f"sun_fraction must be in [0, 1], got {visible!r}")
+    # simulate_frame without re-checking the signal the camera equation just made; the codes
+    # straight from the demosaiced image (quantise(simulate_frame(...).image, 8) byte for byte)
+    res = _simulate_frame(signal, physical_config(d, cam, motion), rng, sun if visible > 0 else None, visible,
+                          camera_seed(d, sequence_seed), codes8=True)
+    out = {"rgb_degraded": lambda: res.image, "signal_e": lambda: res.signal_e,
+           "saturation": lambda: np.where(res.saturation, np.uint8(255), np.uint8(0))}
+    return {w: out[w]() for w in want}
