@@ -242,7 +242,7 @@ def _load_base(base: Path):
     mod = importlib.util.module_from_spec(spec)
     sys.modules["degrade_base"] = mod
     spec.loader.exec_module(mod)
-    import degrade_base.encode  # noqa: F401
+    import degrade_base.encode
     import degrade_base.presets  # noqa: F401
     return mod
 
@@ -250,17 +250,17 @@ def _load_base(base: Path):
 def _main_job_inputs(n_frames: int) -> list[dict]:
     """The degrade_outputs arguments of ``n_frames`` frames of the main job, rendered here."""
     import cli
+    from degrade import presets
     from raytrace.dataset import folder
     from raytrace.dataset.modalities import DEFAULT
-    import degrade.presets as presets
     cfg, given = cli.resolve_config(cli.build_parser().parse_args(["--target", "cassini", "--pattern", "spiral"]))
     tasks, _ = folder.tasks_for(cli.plan_sequence(cfg, given), "", None, write=False)
     picks = sorted({round(k * (len(tasks) - 1) / max(1, n_frames - 1)) for k in range(n_frames)})
     captured, real = [], presets.degrade_outputs
 
     def spy(d, cam, rgb8, radiance, seed_seq, motion=None, **kw):
-        captured.append(dict(d=d, cam=cam, radiance=np.array(radiance), seed=(seed_seq.entropy, seed_seq.spawn_key),
-                             motion=motion, kw=kw))
+        captured.append({"d": d, "cam": cam, "radiance": np.array(radiance), "motion": motion, "kw": kw,
+                         "seed": (seed_seq.entropy, seed_seq.spawn_key)})
         return real(d, cam, rgb8, radiance, seed_seq, motion, **kw)
 
     presets.degrade_outputs = spy

@@ -302,8 +302,8 @@ def _simulate_frame(img: np.ndarray, config: DegradeConfig, rng, sun_dir_cam, su
     elif config.sensor is not None:
         img = _simulate(img, config.sensor, rng)
     if codes8:
-        from .encode import _encode_srgb8
         from .artefacts import jpeg_roundtrip
+        from .encode import _encode_srgb8
         codes = _encode_srgb8(np.ascontiguousarray(img, dtype=np.float32))
         return FrameOutput(jpeg_roundtrip(codes, jpeg) if jpeg else codes, signal_e, saturation)
     if config.encoding == "linear":

@@ -163,7 +163,7 @@ def test_mhc_is_the_published_filters():
     f = {name: ndimage.correlate(raw.astype(np.float64), k, mode="mirror")
          for name, k in (("g", _G_AT_RB), ("row", _ROW_AT_G), ("col", _COL_AT_G), ("rb", _RB_AT_BR))}
     ref = np.empty((*raw.shape, 3))
-    r, g, b = (slice(0, None, 2), slice(0, None, 2)), None, (slice(1, None, 2), slice(1, None, 2))
+    r, b = (slice(0, None, 2), slice(0, None, 2)), (slice(1, None, 2), slice(1, None, 2))
     gr, gb = (slice(0, None, 2), slice(1, None, 2)), (slice(1, None, 2), slice(0, None, 2))
     ref[r] = np.stack([raw[r], f["g"][r], f["rb"][r]], -1)
     ref[b] = np.stack([f["rb"][b], f["g"][b], raw[b]], -1)
