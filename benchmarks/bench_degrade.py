@@ -235,10 +235,19 @@ def artefacts_table(repeats: int) -> list[str]:
 
 
 def _load_base(base: Path):
-    """The ``degrade`` package of the checkout ``base``, imported as ``degrade_base``."""
+    """The ``degrade`` package of the checkout ``base``, imported as ``degrade_base`` from a
+    temporary copy: numba caches its kernels next to their source under the module's name, and
+    a cache entry written as ``degrade_base`` would break that checkout's own runs."""
+    import atexit
     import importlib.util
-    spec = importlib.util.spec_from_file_location("degrade_base", base / "degrade" / "__init__.py",
-                                                  submodule_search_locations=[str(base / "degrade")])
+    import shutil
+    import tempfile
+    tmp = tempfile.mkdtemp(prefix="bench-degrade-base-")
+    atexit.register(shutil.rmtree, tmp, True)
+    copy = Path(tmp) / "degrade_base"
+    shutil.copytree(base / "degrade", copy, ignore=shutil.ignore_patterns("__pycache__"))
+    spec = importlib.util.spec_from_file_location("degrade_base", copy / "__init__.py",
+                                                  submodule_search_locations=[str(copy)])
     mod = importlib.util.module_from_spec(spec)
     sys.modules["degrade_base"] = mod
     spec.loader.exec_module(mod)

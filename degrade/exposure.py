@@ -122,22 +122,28 @@ def physical_exposure(radiance, *, f_number: float, exposure_s: float, pixel_pit
     lam = np.array([_checks.finite_scalar(f"wavelengths_m[{i}]", v, positive=True)
                     for i, v in enumerate(wavelengths_m)])
     out = np.empty(img.shape, np.float32)
-    _camera_equation(img, math.pi / (4.0 * n * n), p, t, lam, PLANCK_J_S * LIGHT_SPEED_M_S, qe, fw, out)
+    _camera_equation(img, math.pi / (4.0 * n * n), p, t, np.tile(lam, img.shape[1]), PLANCK_J_S * LIGHT_SPEED_M_S,
+                     qe, fw, out)
     return out
 
 
 @pjit_exact
-def _camera_equation(img, a, p, t, lam, hc, qe, fw, out):  # pragma: no cover - compiled
-    """out = float32(qe·(((((L·a)·p)·p)·t)·λ_c/hc)/fw), one pass, the float64 operations in the
-    order NumPy would run ``qe * (img * a * p * p * t * lam / hc) / fw`` (the same bits)."""
-    h, w, nc = img.shape
+def _camera_equation(img, a, p, t, lam_row, hc, qe, fw, out):  # pragma: no cover - compiled
+    """out = float32(qe·(((((L·a)·p)·p)·t)·λ/hc)/fw), one pass, the float64 operations in the
+    order NumPy runs ``qe * (img * a * p * p * t * lam / hc) / fw`` (the same bits); rows of
+    W·3 interleaved values, ``lam_row`` the wavelengths repeated W times (a loop that vectorises)."""
+    h = img.shape[0]
+    n = lam_row.size
+    src = img.reshape(h, n)
+    dst = out.reshape(h, n)
     for i in numba.prange(h):
-        for j in range(w):
-            for c in range(nc):
-                x = np.float64(img[i, j, c]) * a
-                x = x * p
-                x = x * p
-                x = x * t
-                x = x * lam[c]
-                x = x / hc
-                out[i, j, c] = np.float32(qe * x / fw)
+        s = src[i]
+        d = dst[i]
+        for k in range(n):
+            x = np.float64(s[k]) * a
+            x = x * p
+            x = x * p
+            x = x * t
+            x = x * lam_row[k]
+            x = x / hc
+            d[k] = np.float32(qe * x / fw)

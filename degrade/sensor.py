@@ -493,15 +493,16 @@ def _dsnu_clip(charge, offset, fw):  # pragma: no cover - compiled
 
 
 @jit_exact
-def _read_adc(charge, noise, fw, gain, offset_dn, max_dn, rounding, signal, dn):  # pragma: no cover - compiled
-    """signal = float32(min(min(charge, fw) + noise, fw)); dn = float32(clip(rint(s/gain +
-    offset_dn), 0, max_dn)/max_dn) (rint only if ``rounding``), the float64 steps of NumPy's
-    general path; ``noise`` empty: none."""
-    cf, nf, sf, df = charge.ravel(), noise.ravel(), signal.ravel(), dn.ravel()
+def _read_adc(charge, z, sigma, fw, gain, offset_dn, max_dn, rounding, signal, dn):  # pragma: no cover - compiled
+    """signal = float32(min(min(charge, fw) + (0 + sigma·z), fw)); dn = float32(clip(rint(s/gain
+    + offset_dn), 0, max_dn)/max_dn) (rint only if ``rounding``): the float64 steps of NumPy's
+    general path, its read noise ``Generator.normal(0, sigma)`` being 0 + sigma·z of the
+    standard normal draws z; ``z`` empty: no read noise."""
+    cf, nf, sf, df = charge.ravel(), z.ravel(), signal.ravel(), dn.ravel()
     for k in range(cf.size):
         s = min(cf[k], fw)
         if nf.size:
-            s = s + nf[k]
+            s = s + (0.0 + sigma * nf[k])
         s = min(s, fw)
         sf[k] = np.float32(s)
         d = s / gain + offset_dn
@@ -539,7 +540,7 @@ def _signal_from_mean(mean_e: np.ndarray, c: SensorConfig, art, maps, rng: np.ra
         if step == "shot":
             charge[lo:hi] = _poisson_sparse(streams[k], mean_flat[lo:hi]) if c.shot_noise else mean_flat[lo:hi]
         else:
-            noise[lo:hi] = streams[k].normal(0.0, c.read_noise_e, hi - lo)
+            noise[lo:hi] = streams[k].standard_normal(hi - lo)  # normal(0, σ)'s draws z: 0 + σ·z below
 
     for step in ("shot", "read") if c.read_noise_e > 0.0 else ("shot",):
         if n_blocks == 1:
@@ -555,6 +556,6 @@ def _signal_from_mean(mean_e: np.ndarray, c: SensorConfig, art, maps, rng: np.ra
         charge = bloom(charge, fw, art.blooming_spill)
     signal = np.empty(shape, np.float32)
     dn = np.empty(shape, np.float32)
-    _read_adc(charge.reshape(-1), noise, fw, float(c.gain), float(c.offset_dn), float(c.max_dn), c.quantise,
-              signal.reshape(-1), dn.reshape(-1))
+    _read_adc(charge.reshape(-1), noise, float(c.read_noise_e), fw, float(c.gain), float(c.offset_dn),
+              float(c.max_dn), c.quantise, signal.reshape(-1), dn.reshape(-1))
     return signal, dn

@@ -214,3 +214,19 @@ def test_sparse_poisson_draws_what_numpy_draws():
     a, b = np.random.default_rng(4), np.random.default_rng(4)
     assert_array_equal(_poisson_sparse(a, mean), b.poisson(mean))
     assert a.random() == b.random()  # and leaves the stream where NumPy leaves it
+
+
+def test_read_noise_is_generator_normal_and_adc_is_the_formula():
+    """The fused read-out (standard normal draws z, 0 + σ·z in the kernel) against
+    ``Generator.normal(0, σ)`` of the same child stream and the ADC formula in NumPy."""
+    from degrade.artefacts import ARTEFACTS_OFF, CameraMaps
+    from degrade.sensor import _signal_from_mean
+    c = SensorConfig(shot_noise=False, read_noise_e=7.5, offset_dn=3.0)
+    mean = np.random.default_rng(1).uniform(0.0, 1.1 * c.full_well_e, (40, 56))
+    signal, dn_out = _signal_from_mean(mean, c, ARTEFACTS_OFF, CameraMaps(None, None, None), np.random.default_rng(3))
+    (child,) = np.random.default_rng(3).spawn(1)  # 2240 photosites: one block
+    s = np.minimum(np.minimum(mean, c.full_well_e) + child.normal(0.0, 7.5, mean.size).reshape(mean.shape),
+                   c.full_well_e)
+    assert_array_equal(signal, s.astype(np.float32))
+    ref = np.clip(np.rint(s / c.gain + 3.0), 0.0, c.max_dn) / c.max_dn
+    assert_array_equal(dn_out, ref.astype(np.float32))
