@@ -526,7 +526,7 @@ def _poisson_sparse(stream: np.random.Generator, mean: np.ndarray) -> np.ndarray
 def _signal_from_mean(mean_e: np.ndarray, c: SensorConfig, art, maps, rng: np.random.Generator):
     """Shot noise, DSNU, blooming, read noise and ADC of the mean electrons ``mean_e`` (float64,
     the photosite array): see :func:`_signal_e`."""
-    from .artefacts import bloom
+    from .artefacts import _bloom
     shape = mean_e.shape
     mean_flat = mean_e.ravel()
     n_blocks = max(1, min(_MAX_BLOCKS, mean_flat.size // _MIN_BLOCK))
@@ -553,7 +553,7 @@ def _signal_from_mean(mean_e: np.ndarray, c: SensorConfig, art, maps, rng: np.ra
     over = _dsnu_clip(charge, offset.reshape(-1), fw)
     charge = charge.reshape(shape)
     if over and art.blooming:
-        charge = bloom(charge, fw, art.blooming_spill)
+        charge = _bloom(charge, fw, float(art.blooming_spill))  # in place: charge is ours
     signal = np.empty(shape, np.float32)
     dn = np.empty(shape, np.float32)
     _read_adc(charge.reshape(-1), noise, float(c.read_noise_e), fw, float(c.gain), float(c.offset_dn),
