@@ -40,6 +40,10 @@ _CAMERA_SEED_TAG = 0x5EED
 """Mixed into the sequence's seed when the ``degrade`` table sets no ``camera_seed``."""
 
 
+_LEVELS8 = np.arange(256, dtype=np.float32) / np.float32(255.0)
+"""float32(code)/255 in float32 for each 8-bit code: the paper preset's input, by look-up."""
+
+
 def artefact_config(d: dict):
     """The :class:`degrade.artefacts.ArtefactConfig` of the ``degrade`` table ``d`` (keys as
     the option table's; missing keys keep the defaults)."""
@@ -106,7 +110,6 @@ def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *
     ValueError
         ``signal_e`` or ``saturation`` asked of another preset than ``physical``.
     """
-    from .encode import quantise
     extra = [w for w in want if w != "rgb_degraded"]
     if extra and d["degrade"] != "physical":
         raise ValueError(f"{extra[0]} needs degrade = 'physical', got {d['degrade']!r}")
@@ -115,8 +118,13 @@ def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *
         from .paper import PaperConfig, paper_degrade
         paper = PaperConfig(length_px=d["paper_blur_px"], angle_deg=d["paper_angle_deg"],
                             gaussian_var=d["paper_gaussian_var"])
-        out = paper_degrade(np.asarray(rgb8).astype(np.float32) / np.float32(255.0), d["paper_group"], paper, rng=rng)
-        return {"rgb_degraded": quantise(out, 8)}
+        from .paper import _codes8
+        codes = np.asarray(rgb8)
+        out = paper_degrade(_LEVELS8[codes] if codes.dtype == np.uint8 else codes.astype(np.float32) / np.float32(255.0),
+                            d["paper_group"], paper, rng=rng)
+        rgb_degraded = np.empty(out.shape, np.uint8)
+        _codes8(out, rgb_degraded)  # quantise(out, 8) in one pass (out is in [0, 1])
+        return {"rgb_degraded": rgb_degraded}
     from . import _checks
     from .chain import _simulate_frame
     from .exposure import physical_exposure
