@@ -6,7 +6,12 @@ from numpy.testing import assert_array_equal
 
 from degrade import PaperConfig, paper_degrade, quantise, simulate_frame
 from degrade.exposure import physical_exposure
-from degrade.presets import WHITE_BALANCE_M, camera_seed, degrade_outputs, physical_config
+from degrade.presets import (
+    WHITE_BALANCE_M,
+    camera_seed,
+    degrade_outputs,
+    physical_config,
+)
 
 # the [degrade] table of the main job (cli.py's defaults) and its camera
 D = {"degrade": "physical", "paper_group": "D4", "paper_blur_px": 15.0, "paper_angle_deg": 30.0,
