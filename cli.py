@@ -372,9 +372,9 @@ def plan_sequence(cfg: dict, given: set = frozenset()) -> dict:
 # --------------------------------------------------------------------------- one frame (runs in a worker)
 def _worker_ready(quality: str) -> None:
     """A first task for each worker, run while the parent builds the scenes: what a first
-    ``quality`` frame would otherwise wait for — the imports (scipy.signal, ~0.6 s, for the
-    optics' PSFs), numba's kernels loaded from its on-disk cache, the GGX split-sum table."""
-    import scipy.signal  # noqa: F401
+    ``quality`` frame would otherwise wait for — the imports (the degradation chain's, scipy.fft
+    and scipy.special for the PSFs), numba's kernels loaded from its on-disk cache, the GGX
+    split-sum table."""
     import degrade.chain  # noqa: F401
     import raytrace.shade  # noqa: F401
     from raytrace import _precompile
@@ -397,7 +397,7 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
 
     ``images`` maps a modality to its pixels (only the requested ones, plus ``rgb`` when
     ``task["want_rgb"]``)."""
-    from degrade.encode import quantise, srgb_encode
+    from degrade.encode import encode_srgb8
     from raytrace.camera import Camera
     from raytrace.correspondence import FrameHits
     from raytrace.shade import render
@@ -427,7 +427,7 @@ def render_frame_images(task: dict) -> tuple[dict, dict]:
         else:  # fixed: a white Lambertian surface facing the Sun (L = E/π) maps to 1.0
             scale = math.pi / SOLAR_CONSTANT_W_M2
             linear = radiance * np.float32(scale)
-        images["rgb"] = quantise(srgb_encode(np.minimum(linear, np.float32(1.0))), 8)
+        images["rgb"] = encode_srgb8(linear)
         info["exposure_scale"] = float(scale)
     if mods.intersection(CAMERA_MODALITIES):  # one simulation for rgb_degraded, signal_e, saturation
         images.update(degrade_frame(cfg, task, images.get("rgb"), radiance, degrade_seq, sorted(mods.intersection(CAMERA_MODALITIES))))

@@ -21,6 +21,15 @@ hits all methods alike); wall time and process CPU time (all threads) where it h
    textured target at 1.3× exposure (its brightest panels saturate, so blooming has work)
    with the Sun 40° off-axis (glare and ghost in the frame), exposure 20 µs as in the main
    job. ``--artefacts`` prints only this table.
+5. ``--main-job [--base DIR] [--frames N]`` (only this table): the main job's own frames
+   (``python cli.py --target cassini --pattern spiral``, 1280×960, planned as the command line
+   plans them, N of its 48 frames spread over the orbit, rendered once), each process on one
+   numba thread as a worker is: ``degrade.presets.degrade_outputs`` with the ``physical`` preset
+   (rgb_degraded, signal_e, saturation) and the ``paper`` preset, and the clean RGB's encoding
+   (``encode_srgb8``). With ``--base DIR`` (a checkout of another commit, e.g.
+   ``git worktree add /tmp/base 84ef6eb``) its ``degrade`` package is loaded alongside as
+   ``degrade_base`` and run on the same inputs, interleaved (the order alternating), every
+   output compared byte for byte; medians and ratios new/base.
 """
 
 from __future__ import annotations
@@ -57,7 +66,7 @@ from degrade import (
 )
 from degrade.chain import _apply_optics
 from degrade.convolve import DIRECT_MAX_TAPS
-from degrade.sensor import _demosaic, _mosaic, _readout
+from degrade.sensor import _demosaic, _demosaic_oiio, _mosaic, _readout
 
 H, W = 960, 1280
 MOTION = OpticsConfig(motion_length_px=15.0, motion_angle_deg=30.0)
@@ -122,7 +131,8 @@ def physical_table(repeats: int) -> list[str]:
             "optics ⊛ PSF + motion L = 15 px (25×25)": lambda img=img: _apply_optics(img, MOTION),
             "RGGB mosaic": lambda b=blurred: _mosaic(b),
             "readout: Poisson, full well, read noise, ADC": lambda r=raw: _readout(r, sensor, np.random.default_rng(1)),
-            "demosaic MHC (OpenImageIO)": lambda r=read: _demosaic(r, "MHC"),
+            "demosaic MHC (Numba)": lambda r=read: _demosaic(r, "MHC"),
+            "demosaic MHC (OpenImageIO)": lambda r=read: _demosaic_oiio(r, "MHC"),
             "demosaic linear (OpenImageIO)": lambda r=read: _demosaic(r, "linear"),
             "sRGB encode, 8 bit": lambda x=rgb: srgb_encode(x, bits=8),
             "**whole chain** `degrade(img)`": lambda img=img: degrade(img, cfg, rng=2),
@@ -224,13 +234,126 @@ def artefacts_table(repeats: int) -> list[str]:
     return lines
 
 
+def _load_base(base: Path):
+    """The ``degrade`` package of the checkout ``base``, imported as ``degrade_base`` from a
+    temporary copy: numba caches its kernels next to their source under the module's name, and
+    a cache entry written as ``degrade_base`` would break that checkout's own runs."""
+    import atexit
+    import importlib.util
+    import shutil
+    import tempfile
+    tmp = tempfile.mkdtemp(prefix="bench-degrade-base-")
+    atexit.register(shutil.rmtree, tmp, True)
+    copy = Path(tmp) / "degrade_base"
+    shutil.copytree(base / "degrade", copy, ignore=shutil.ignore_patterns("__pycache__"))
+    spec = importlib.util.spec_from_file_location("degrade_base", copy / "__init__.py",
+                                                  submodule_search_locations=[str(copy)])
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["degrade_base"] = mod
+    spec.loader.exec_module(mod)
+    import degrade_base.encode
+    import degrade_base.presets  # noqa: F401
+    return mod
+
+
+def _main_job_inputs(n_frames: int) -> list[dict]:
+    """The degrade_outputs arguments of ``n_frames`` frames of the main job, rendered here."""
+    import cli
+    from degrade import presets
+    from raytrace.dataset import folder
+    from raytrace.dataset.modalities import DEFAULT
+    cfg, given = cli.resolve_config(cli.build_parser().parse_args(["--target", "cassini", "--pattern", "spiral"]))
+    tasks, _ = folder.tasks_for(cli.plan_sequence(cfg, given), "", None, write=False)
+    picks = sorted({round(k * (len(tasks) - 1) / max(1, n_frames - 1)) for k in range(n_frames)})
+    captured, real = [], presets.degrade_outputs
+
+    def spy(d, cam, rgb8, radiance, seed_seq, motion=None, **kw):
+        captured.append({"d": d, "cam": cam, "radiance": np.array(radiance), "motion": motion, "kw": kw,
+                         "seed": (seed_seq.entropy, seed_seq.spawn_key)})
+        return real(d, cam, rgb8, radiance, seed_seq, motion, **kw)
+
+    presets.degrade_outputs = spy
+    try:
+        for i in picks:
+            images, _ = cli.render_frame_images(dict(tasks[i], modalities=list(DEFAULT), want_rgb=False))
+            captured[-1].update(rgb8=images["rgb"], frame=i,
+                                linear=captured[-1]["radiance"] * np.float32(math.pi / cli.SOLAR_CONSTANT_W_M2))
+    finally:
+        presets.degrade_outputs = real
+    return captured
+
+
+def main_job_table(repeats: int, base: Path | None, n_frames: int) -> list[str]:
+    numba.set_num_threads(1)  # as a worker of the main job
+    import degrade.encode as enc_new
+    import degrade.presets as new
+    impl = {"new": (new, enc_new)}
+    if base is not None:
+        b = _load_base(base.resolve())
+        impl["base"] = (b.presets, b.encode)
+    inputs = _main_job_inputs(n_frames)
+    want = {"physical": ("rgb_degraded", "signal_e", "saturation"), "paper": ("rgb_degraded",)}
+
+    def run(which: str, task: str, f: dict):
+        presets, enc = impl[which]
+        if task == "rgb encoding":
+            if which == "new":
+                return {"rgb": enc.encode_srgb8(f["linear"])}
+            return {"rgb": enc.quantise(enc.srgb_encode(np.minimum(f["linear"], np.float32(1.0))), 8)}
+        d = dict(f["d"], degrade=task)
+        return presets.degrade_outputs(d, f["cam"], f["rgb8"], f["radiance"], np.random.SeedSequence(
+            f["seed"][0], spawn_key=f["seed"][1]), f["motion"], **dict(f["kw"], want=want[task]))
+
+    tasks = ("physical", "paper", "rgb encoding")
+    differ = {t: 0 for t in tasks}
+    for f in inputs:  # warm-up and byte comparison
+        for t in tasks:
+            outs = {w: run(w, t, f) for w in impl}
+            if "base" in outs:
+                differ[t] += sum(not np.array_equal(outs["new"][k], outs["base"][k]) or
+                                 outs["new"][k].dtype != outs["base"][k].dtype for k in outs["new"])
+    times = {(w, t): [] for w in impl for t in tasks}
+    for r in range(repeats):
+        for i, f in enumerate(inputs):
+            for t in tasks:
+                order = list(impl) if (r + i) % 2 == 0 else list(impl)[::-1]
+                for w in order:
+                    t0 = time.perf_counter()
+                    run(w, t, f)
+                    times[w, t].append(time.perf_counter() - t0)
+    lines = ["| per frame, median [ms] | " + " | ".join(impl) + (" | new/base | outputs equal |" if base else " |"),
+             "|---|" + "---:|" * len(impl) + ("---:|---|" if base else "")]
+    for t in tasks:
+        med = {w: statistics.median(times[w, t]) for w in impl}
+        row = f"| {t} | " + " | ".join(f"{1e3 * med[w]:.1f}" for w in impl)
+        if base is not None:
+            row += f" | {med['new'] / med['base']:.2f} | {'yes' if differ[t] == 0 else f'NO ({differ[t]} arrays differ)'}"
+        lines.append(row + " |")
+    lines.append(f"\nframes {[f['frame'] for f in inputs]} of the main job, {repeats} rounds each.")
+    return lines
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=int, default=9)
     ap.add_argument("--quick", action="store_true", help="3 repeats")
     ap.add_argument("--artefacts", action="store_true", help="only the camera-artefacts table")
+    ap.add_argument("--main-job", action="store_true", help="only the main job's frames (table 5)")
+    ap.add_argument("--base", type=Path, help="with --main-job: a checkout to compare with")
+    ap.add_argument("--frames", type=int, default=6, help="with --main-job: frames of the 48")
     args = ap.parse_args(argv)
     repeats = 3 if args.quick else args.repeats
+    if args.main_job:
+        load = os.getloadavg()[0]
+        table = main_job_table(repeats, args.base, args.frames)
+        print(f"The main job's frames (cassini spiral, 1280×960), one numba thread; {os.cpu_count()} cores "
+              f"({platform.machine()}), 1-minute load average {load:.1f} at the start, "
+              f"{os.getloadavg()[0]:.1f} at the end.")
+        print(f"Command: `python benchmarks/bench_degrade.py --main-job"
+              f"{' --base ' + str(args.base) if args.base else ''} --frames {args.frames}"
+              f"{' --quick' if args.quick else ' --repeats ' + str(repeats)}`\n")
+        print("\n".join(table))
+        return 0
     if args.artefacts:
         table = artefacts_table(repeats)
         print(f"1280×960 RGB float32, median of {repeats} interleaved runs; {os.cpu_count()} cores "

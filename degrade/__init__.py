@@ -10,8 +10,9 @@ exposure   Radiance → linear sensor signal: auto exposure, or the camera equat
 psf        Airy, Gaussian, pillbox (defocus) and motion PSFs (L, θ from the image velocity),
            and their composition.
 convolve   Mirror-padded convolution, direct or FFT picked by kernel size.
-sensor     RGGB mosaic, Poisson shot noise, full well, read noise, ADC, OpenImageIO demosaic.
-encode     sRGB transfer curve (IEC 61966-2-1) and integer quantisation.
+sensor     RGGB mosaic, Poisson shot noise, full well, read noise, ADC, demosaic (MHC in Numba,
+           bilinear by OpenImageIO).
+encode     sRGB transfer curve (IEC 61966-2-1), integer quantisation, linear → 8-bit sRGB codes.
 artefacts  Camera artefacts: vignetting, PRNU/DSNU, hot pixels, smear, blooming, stray light and
            ghost, on-board JPEG.
 chain      ``OpticsConfig``, ``DegradeConfig``, ``degrade`` and ``simulate_frame``: the physical
@@ -41,7 +42,7 @@ from .chain import (
     simulate_frame,
 )
 from .convolve import convolve_image
-from .encode import dequantise, quantise, srgb_decode, srgb_encode
+from .encode import dequantise, encode_srgb8, quantise, srgb_decode, srgb_encode
 from .paper import (
     PAPER_GROUPS,
     PaperConfig,
@@ -91,6 +92,7 @@ __all__ = [
     "degrade",
     "demosaic",
     "dequantise",
+    "encode_srgb8",
     "format_ablation",
     "gaussian_noise",
     "gaussian_psf",

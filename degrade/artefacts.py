@@ -331,6 +331,11 @@ def bloom(electrons, full_well_e: float, spill: float = 1.0) -> np.ndarray:
     spill = _checks.finite_scalar("spill", spill, nonnegative=True)
     if spill > 1.0:
         raise ValueError(f"spill must be in [0, 1], got {spill!r}")
+    return _bloom(e, fw, spill)
+
+
+def _bloom(e: np.ndarray, fw: float, spill: float) -> np.ndarray:
+    """:func:`bloom` in place on a C-contiguous float64 array ``e`` (returned), checked arguments."""
     flat = e.reshape(e.shape[0], -1)  # columns (and channels) side by side
     hot = np.flatnonzero((flat > fw).any(axis=0))
     if hot.size == 0:

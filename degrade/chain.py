@@ -282,26 +282,45 @@ def simulate_frame(image_linear, config: DegradeConfig = DegradeConfig(), *, rng
     sun_fraction = _checks.finite_scalar("sun_fraction", sun_fraction, nonnegative=True)
     if sun_fraction > 1.0:
         raise ValueError(f"sun_fraction must be in [0, 1], got {sun_fraction!r}")
-    rng = np.random.default_rng(rng)
+    return _simulate_frame(img, config, np.random.default_rng(rng), sun_dir_cam, sun_fraction, camera_seed,
+                           image_linear)
+
+
+def _simulate_frame(img: np.ndarray, config: DegradeConfig, rng, sun_dir_cam, sun_fraction: float, camera_seed: int,
+                    caller=None, codes8: bool = False) -> FrameOutput:
+    """:func:`simulate_frame` of a checked float32 image (``caller``: the array the caller
+    passed, never returned); ``codes8`` (needs ``config.encoding == "srgb8"``): the image as
+    its uint8 codes, ``quantise(simulate_frame(...).image, 8)`` byte for byte, without the
+    float levels in between."""
     signal_e = saturation = None
     if config.optics is not None:
         img = _apply_optics(img, config.optics)
+    jpeg = config.artefacts.jpeg_quality if config.artefacts is not None else 0
     if config.artefacts is not None:
-        img, signal_e, saturation = _sensor_with_artefacts(img, config, sun_dir_cam, sun_fraction, camera_seed, rng)
+        img, signal_e, saturation = _sensor_with_artefacts(img, config, sun_dir_cam, sun_fraction, camera_seed, rng,
+                                                           clip=not codes8)
     elif config.sensor is not None:
         img = _simulate(img, config.sensor, rng)
+    if codes8:
+        from .artefacts import jpeg_roundtrip
+        from .encode import _encode_srgb8
+        codes = _encode_srgb8(np.ascontiguousarray(img, dtype=np.float32))
+        return FrameOutput(jpeg_roundtrip(codes, jpeg) if jpeg else codes, signal_e, saturation)
     if config.encoding == "linear":
-        return FrameOutput(img.copy() if img is image_linear else img, signal_e, saturation)
+        return FrameOutput(img.copy() if img is caller else img, signal_e, saturation)
     bits = {"srgb8": 8, "srgb16": 16, "srgb": None}[config.encoding]
     out = srgb_encode(img, bits=bits)
-    if config.artefacts is not None and config.artefacts.jpeg_quality:
+    if jpeg:
         from .artefacts import jpeg_roundtrip
         from .encode import dequantise, quantise
-        out = dequantise(jpeg_roundtrip(quantise(out, 8), config.artefacts.jpeg_quality), 8)
+        out = dequantise(jpeg_roundtrip(quantise(out, 8), jpeg), 8)
     return FrameOutput(out, signal_e, saturation)
 
 
-def _sensor_with_artefacts(img: np.ndarray, config: DegradeConfig, sun_dir_cam, sun_fraction, camera_seed, rng):
+def _sensor_with_artefacts(img: np.ndarray, config: DegradeConfig, sun_dir_cam, sun_fraction, camera_seed, rng,
+                           clip: bool = True):
+    """(demosaiced DN/(2^b − 1), signal_e, saturation) of the chain with artefacts; ``clip``:
+    the demosaiced image clipped to [0, 1] (the 8-bit encoder clips by itself)."""
     from .artefacts import (
         SOLAR_IRRADIANCE_W_M2,
         camera_maps,
@@ -309,28 +328,36 @@ def _sensor_with_artefacts(img: np.ndarray, config: DegradeConfig, sun_dir_cam, 
         relative_illumination,
         stray_light,
     )
-    from .sensor import _demosaic, _mosaic, _signal_e
+    from .sensor import _demosaic, _mosaic, _signal_e, _signal_e_rggb
     art, optics, c = config.artefacts, config.optics, config.sensor
     h, w = img.shape[:2]
-    img = np.array(img, dtype=np.float32)  # the optics may have returned the caller's array
+    vig = e = None
     if art.vignetting:
         vig = relative_illumination(h, w, focal_length_m=optics.focal_length_m, pixel_pitch_m=optics.pixel_pitch_m,
                                     mechanical=art.mechanical_vignetting)
-        img *= vig if img.ndim == 2 else vig[:, :, None]
     if art.stray_light and sun_dir_cam is not None and sun_fraction > 0.0:
         e = stray_light(h, w, sun_dir_cam, focal_length_m=optics.focal_length_m, pixel_pitch_m=optics.pixel_pitch_m,
                         aperture_m=optics.aperture_m, config=art, sun_irradiance_W_m2=SOLAR_IRRADIANCE_W_M2 * sun_fraction)
         if e is not None:
             e *= np.float32(irradiance_to_signal(1.0, exposure_s=c.exposure_s, pixel_pitch_m=optics.pixel_pitch_m,
                                                  wavelength_m=art.wavelength_m, photons_at_one=c.photons_max))
-            img += e if img.ndim == 2 else e[:, :, None]
     if c.demosaic is not None and img.ndim == 2:
         raise ValueError("image_linear is H×W (monochrome): it needs config.sensor.demosaic=None, "
                          f"got demosaic={c.demosaic!r}")
-    sites = img if c.demosaic is None else _mosaic(img)
-    maps = camera_maps(sites.shape, art, camera_seed)
-    signal_e, dn = _signal_e(sites, c, art, maps, rng)
+    if c.demosaic is not None and art.smear_fraction == 0.0:  # mosaic, illumination and mean in one pass
+        maps = camera_maps((h, w), art, camera_seed)
+        signal_e, dn = _signal_e_rggb(np.ascontiguousarray(img, dtype=np.float32), vig, e, c, art, maps, rng)
+    else:
+        img = np.array(img, dtype=np.float32)  # the optics may have returned the caller's array
+        if vig is not None:
+            img *= vig if img.ndim == 2 else vig[:, :, None]
+        if e is not None:
+            img += e if img.ndim == 2 else e[:, :, None]
+        sites = img if c.demosaic is None else _mosaic(img)
+        maps = camera_maps(sites.shape, art, camera_seed)
+        signal_e, dn = _signal_e(sites, c, art, maps, rng)
     if c.demosaic is not None:
         dn = _demosaic(dn, c.demosaic)
-        np.clip(dn, 0.0, 1.0, out=dn)
+        if clip:
+            np.clip(dn, 0.0, 1.0, out=dn)
     return dn, signal_e, signal_e >= np.float32(c.full_well_e)

@@ -40,38 +40,69 @@ DIRECT_MAX_TAPS = {"shared": 300, "per_channel": 150}
 
 @pjit_exact
 def _convolve_shared(pad, di, dj, w, out):  # pragma: no cover - compiled
-    """out[i, k] += Σ_t w[t] · pad[i + di[t], k + dj[t]]  (rows of W·C interleaved values)."""
+    """out[i, k] += Σ_t w[t] · pad[i + di[t], k + dj[t]]  (rows of W·C interleaved values), the
+    taps added one after the other in their order, four per pass over the row (one load and
+    store of ``out`` per four taps; the same sums, the same rounding)."""
     height, n = out.shape
+    nt = di.size
     for i in numba.prange(height):
         o = out[i]
-        for t in range(di.size):
+        t = 0
+        while t + 4 <= nt:
+            a0 = pad[i + di[t], dj[t]:dj[t] + n]
+            a1 = pad[i + di[t + 1], dj[t + 1]:dj[t + 1] + n]
+            a2 = pad[i + di[t + 2], dj[t + 2]:dj[t + 2] + n]
+            a3 = pad[i + di[t + 3], dj[t + 3]:dj[t + 3] + n]
+            w0, w1, w2, w3 = w[t], w[t + 1], w[t + 2], w[t + 3]
+            for k in range(n):
+                o[k] = (((o[k] + w0 * a0[k]) + w1 * a1[k]) + w2 * a2[k]) + w3 * a3[k]
+            t += 4
+        while t < nt:
             wt = w[t]
-            s = dj[t]
-            a = pad[i + di[t], s:s + n]
+            a = pad[i + di[t], dj[t]:dj[t] + n]
             for k in range(n):
                 o[k] += wt * a[k]
+            t += 1
 
 
 @pjit_exact
 def _convolve_interleaved(pad, di, dj, wpat, out):  # pragma: no cover - compiled
     """As _convolve_shared with per-channel weights: wpat[t] repeats tap t's C weights, so the
-    inner loop over a chunk of wpat.shape[1] values (a multiple of C) vectorises."""
+    inner loop over a chunk of wpat.shape[1] values (a multiple of C) vectorises; four taps per
+    pass, each added in its order (the same sums, the same rounding)."""
     height, n = out.shape
     m = wpat.shape[1]
     full = n - n % m
+    nt = di.size
     for i in numba.prange(height):
         o = out[i]
-        for t in range(di.size):
-            s = dj[t]
-            a = pad[i + di[t], s:s + n]
-            w = wpat[t]
+        t = 0
+        while t + 4 <= nt:
+            a0 = pad[i + di[t], dj[t]:dj[t] + n]
+            a1 = pad[i + di[t + 1], dj[t + 1]:dj[t + 1] + n]
+            a2 = pad[i + di[t + 2], dj[t + 2]:dj[t + 2] + n]
+            a3 = pad[i + di[t + 3], dj[t + 3]:dj[t + 3] + n]
+            w0, w1, w2, w3 = wpat[t], wpat[t + 1], wpat[t + 2], wpat[t + 3]
+            for c0 in range(0, full, m):
+                oc = o[c0:c0 + m]
+                b0, b1, b2, b3 = a0[c0:c0 + m], a1[c0:c0 + m], a2[c0:c0 + m], a3[c0:c0 + m]
+                for k in range(m):
+                    oc[k] = (((oc[k] + w0[k] * b0[k]) + w1[k] * b1[k]) + w2[k] * b2[k]) + w3[k] * b3[k]
+            for k in range(full, n):
+                q = k - full
+                o[k] = (((o[k] + w0[q] * a0[k]) + w1[q] * a1[k]) + w2[q] * a2[k]) + w3[q] * a3[k]
+            t += 4
+        while t < nt:
+            a = pad[i + di[t], dj[t]:dj[t] + n]
+            wr = wpat[t]
             for c0 in range(0, full, m):
                 oc = o[c0:c0 + m]
                 ac = a[c0:c0 + m]
                 for k in range(m):
-                    oc[k] += w[k] * ac[k]
+                    oc[k] += wr[k] * ac[k]
             for k in range(full, n):
-                o[k] += w[k - full] * a[k]
+                o[k] += wr[k - full] * a[k]
+            t += 1
 
 
 _CHUNK = 192  # values per vectorised chunk of the per-channel kernel (a multiple of 1, 2, 3, 4)

@@ -15,7 +15,7 @@ import numpy as np
 from . import _checks
 from ._jit import FASTMATH, pjit
 
-__all__ = ["dequantise", "quantise", "srgb_decode", "srgb_encode"]
+__all__ = ["dequantise", "encode_srgb8", "quantise", "srgb_decode", "srgb_encode"]
 
 # IEC 61966-2-1:1999, §5.2 (encode) and §5.3 (decode, written with the 0.04045 threshold
 # of the amended standard, consistent with 12.92 · 0.0031308).
@@ -57,7 +57,8 @@ _SIGN_BIT = 0x80000000
 @pjit
 def _encode8(x, table, lut, out):  # pragma: no cover - compiled
     """The 8-bit case of _encode, mostly by table: x ≥ 0 is looked up by its bit-pattern bucket;
-    where a code boundary falls inside the bucket (table −1) the curve is evaluated as in _encode."""
+    where a code boundary falls inside the bucket (table −1) the curve is evaluated as in _encode.
+    ``lut`` maps the code to the output: its level (float32) or the code itself (uint8)."""
     xb = x.ravel().view(np.uint32)
     xf = x.ravel()
     of = out.ravel()
@@ -146,6 +147,35 @@ def srgb_encode(image_linear, *, bits: int | None = None) -> np.ndarray:
         _encode8(img, _bucket_codes8(), lut, out)
     else:
         _encode(img, lut, out)
+    return out
+
+
+_CODES8 = np.arange(256, dtype=np.uint8)
+
+
+def encode_srgb8(image_linear) -> np.ndarray:
+    """Linear intensities straight to 8-bit sRGB codes, in one pass.
+
+    Parameters
+    ----------
+    image_linear : array_like of float, any shape (1 to 4 dimensions)
+        Linear intensity, ≥ 0 (1 = display white; larger values clip to 1) [1].
+
+    Returns
+    -------
+    codes : ndarray of uint8, shape like ``image_linear``
+        Equal to ``quantise(srgb_encode(image_linear), 8)`` and to
+        ``quantise(srgb_encode(image_linear, bits=8), 8)`` byte for byte (the same table
+        and curve, storing the code instead of its level) [DN].
+    """
+    img = _checks.image("image_linear", image_linear, ndim=_ANY_NDIM)
+    return _encode_srgb8(img)
+
+
+def _encode_srgb8(img: np.ndarray) -> np.ndarray:
+    """:func:`encode_srgb8` of a checked float32 C-contiguous array."""
+    out = np.empty(img.shape, np.uint8)
+    _encode8(img, _bucket_codes8(), _CODES8, out)
     return out
 
 

@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 from . import _checks
+from ._jit import pjit_exact
 
 __all__ = ["LIGHT_SPEED_M_S", "PLANCK_J_S", "auto_exposure", "physical_exposure"]
 
@@ -107,7 +109,7 @@ def physical_exposure(radiance, *, f_number: float, exposure_s: float, pixel_pit
     ``SensorConfig(quantum_efficiency=QE, full_well_e=FW)`` with its default
     ``photons_at_one`` = FW/QE.
     """
-    img = _checks.image("radiance", radiance, ndim=(3,), channels=3).astype(np.float64)
+    img = _checks.image("radiance", radiance, ndim=(3,), channels=3)
     n = _checks.finite_scalar("f_number", f_number, positive=True)
     t = _checks.finite_scalar("exposure_s", exposure_s, positive=True)
     p = _checks.finite_scalar("pixel_pitch_m", pixel_pitch_m, positive=True)
@@ -119,6 +121,29 @@ def physical_exposure(radiance, *, f_number: float, exposure_s: float, pixel_pit
         raise ValueError(f"wavelengths_m must be 3 wavelengths (R, G, B) [m], got {wavelengths_m!r}")
     lam = np.array([_checks.finite_scalar(f"wavelengths_m[{i}]", v, positive=True)
                     for i, v in enumerate(wavelengths_m)])
-    joules = img * (math.pi / (4.0 * n * n)) * p * p * t
-    photons = joules * lam / (PLANCK_J_S * LIGHT_SPEED_M_S)
-    return (qe * photons / fw).astype(np.float32)
+    out = np.empty(img.shape, np.float32)
+    _camera_equation(img, math.pi / (4.0 * n * n), p, t, np.tile(lam, img.shape[1]), PLANCK_J_S * LIGHT_SPEED_M_S,
+                     qe, fw, out)
+    return out
+
+
+@pjit_exact
+def _camera_equation(img, a, p, t, lam_row, hc, qe, fw, out):  # pragma: no cover - compiled
+    """out = float32(qe·(((((L·a)·p)·p)·t)·λ/hc)/fw), one pass, the float64 operations in the
+    order NumPy runs ``qe * (img * a * p * p * t * lam / hc) / fw`` (the same bits); rows of
+    W·3 interleaved values, ``lam_row`` the wavelengths repeated W times (a loop that vectorises)."""
+    h = img.shape[0]
+    n = lam_row.size
+    src = img.reshape(h, n)
+    dst = out.reshape(h, n)
+    for i in numba.prange(h):
+        s = src[i]
+        d = dst[i]
+        for k in range(n):
+            x = np.float64(s[k]) * a
+            x = x * p
+            x = x * p
+            x = x * t
+            x = x * lam_row[k]
+            x = x / hc
+            d[k] = np.float32(qe * x / fw)

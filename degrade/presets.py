@@ -40,6 +40,10 @@ _CAMERA_SEED_TAG = 0x5EED
 """Mixed into the sequence's seed when the ``degrade`` table sets no ``camera_seed``."""
 
 
+_LEVELS8 = np.arange(256, dtype=np.float32) / np.float32(255.0)
+"""float32(code)/255 in float32 for each 8-bit code: the paper preset's input, by look-up."""
+
+
 def artefact_config(d: dict):
     """The :class:`degrade.artefacts.ArtefactConfig` of the ``degrade`` table ``d`` (keys as
     the option table's; missing keys keep the defaults)."""
@@ -106,7 +110,6 @@ def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *
     ValueError
         ``signal_e`` or ``saturation`` asked of another preset than ``physical``.
     """
-    from .encode import quantise
     extra = [w for w in want if w != "rgb_degraded"]
     if extra and d["degrade"] != "physical":
         raise ValueError(f"{extra[0]} needs degrade = 'physical', got {d['degrade']!r}")
@@ -115,9 +118,15 @@ def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *
         from .paper import PaperConfig, paper_degrade
         paper = PaperConfig(length_px=d["paper_blur_px"], angle_deg=d["paper_angle_deg"],
                             gaussian_var=d["paper_gaussian_var"])
-        out = paper_degrade(np.asarray(rgb8).astype(np.float32) / np.float32(255.0), d["paper_group"], paper, rng=rng)
-        return {"rgb_degraded": quantise(out, 8)}
-    from .chain import simulate_frame
+        from .paper import _codes8
+        codes = np.asarray(rgb8)
+        out = paper_degrade(_LEVELS8[codes] if codes.dtype == np.uint8 else codes.astype(np.float32) / np.float32(255.0),
+                            d["paper_group"], paper, rng=rng)
+        rgb_degraded = np.empty(out.shape, np.uint8)
+        _codes8(out, rgb_degraded)  # quantise(out, 8) in one pass (out is in [0, 1])
+        return {"rgb_degraded": rgb_degraded}
+    from . import _checks
+    from .chain import _simulate_frame
     from .exposure import physical_exposure
     signal = physical_exposure(radiance, f_number=d["f_number"], exposure_s=d["exposure_us"] * 1e-6,
                                pixel_pitch_m=cam["pixel_pitch_um"] * 1e-6,
@@ -125,8 +134,13 @@ def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *
                                wavelengths_m=(WHITE_BALANCE_M,) * 3)
     sun = None if label is None else label.get("sun_dir_cam")
     visible = 1.0 if label is None else float(label.get("shadow_fraction", 1.0))
-    res = simulate_frame(signal, physical_config(d, cam, motion), rng=rng, sun_dir_cam=sun if visible > 0 else None,
-                         sun_fraction=visible, camera_seed=camera_seed(d, sequence_seed))
-    out = {"rgb_degraded": quantise(res.image, 8), "signal_e": res.signal_e,
-           "saturation": np.where(res.saturation, np.uint8(255), np.uint8(0))}
-    return {w: out[w] for w in want}
+    visible = _checks.finite_scalar("sun_fraction", visible, nonnegative=True)
+    if visible > 1.0:
+        raise ValueError(f"sun_fraction must be in [0, 1], got {visible!r}")
+    # simulate_frame without re-checking the signal the camera equation just made; the codes
+    # straight from the demosaiced image (quantise(simulate_frame(...).image, 8) byte for byte)
+    res = _simulate_frame(signal, physical_config(d, cam, motion), rng, sun if visible > 0 else None, visible,
+                          camera_seed(d, sequence_seed), codes8=True)
+    out = {"rgb_degraded": lambda: res.image, "signal_e": lambda: res.signal_e,
+           "saturation": lambda: np.where(res.saturation, np.uint8(255), np.uint8(0))}
+    return {w: out[w]() for w in want}

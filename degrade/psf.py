@@ -322,10 +322,10 @@ def compose(*kernels: np.ndarray) -> np.ndarray:
     Returns
     -------
     psf : ndarray of float64, shape (Σ K_i − n + 1, Σ L_i − n + 1)
-        Full linear convolution (:func:`scipy.signal.fftconvolve`), FFT round-off below
-        1e-12 of the peak set to 0, renormalised to sum 1 [1].
+        Full linear convolution by FFT (the computation of :func:`scipy.signal.fftconvolve`
+        without importing scipy.signal, ~0.5 s: :func:`_fftconvolve_full`), FFT round-off
+        below 1e-12 of the peak set to 0, renormalised to sum 1 [1].
     """
-    from scipy.signal import fftconvolve  # here: scipy.signal costs ~0.4 s to import
 
     if not kernels:
         raise ValueError("compose needs at least one kernel, got none")
@@ -339,8 +339,20 @@ def compose(*kernels: np.ndarray) -> np.ndarray:
             raise ValueError(f"{name} must be finite, >= 0 and have a positive sum")
         if k.size == 1:
             continue
-        out = k if out is None else fftconvolve(out, k, mode="full")
+        out = k if out is None else _fftconvolve_full(out, k)
     if out is None:
         return _DELTA
     out = np.where(out > 1e-12 * out.max(), out, 0.0)
     return out / out.sum()
+
+
+def _fftconvolve_full(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Full 2-D linear convolution of real float64 arrays by FFT, the steps of
+    ``scipy.signal.fftconvolve(a, b, mode="full")`` (SciPy 1.x ``_freq_domain_conv``: real FFTs
+    of each padded to ``next_fast_len`` of the full size, product, inverse, crop; the same
+    bits, tested) using only :mod:`scipy.fft`."""
+    import scipy.fft
+    shape = [a.shape[d] + b.shape[d] - 1 for d in (0, 1)]
+    fshape = [scipy.fft.next_fast_len(n, True) for n in shape]
+    spec = scipy.fft.rfftn(a, fshape, axes=(0, 1)) * scipy.fft.rfftn(b, fshape, axes=(0, 1))
+    return scipy.fft.irfftn(spec, fshape, axes=(0, 1))[:shape[0], :shape[1]].copy()

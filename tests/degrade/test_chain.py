@@ -147,3 +147,20 @@ def test_invalid_degrade_config():
         DegradeConfig(sensor=OpticsConfig())
     with pytest.raises(ValueError, match="config must be a DegradeConfig"):
         degrade(scene(), OpticsConfig(), rng=0)
+
+
+def test_codes_path_equals_quantised_image():
+    """The presets' path straight to uint8 codes (no float levels between demosaic and codes) is
+    quantise(simulate_frame(...).image, 8) byte for byte, with artefacts, JPEG and without."""
+    from degrade import ArtefactConfig, simulate_frame
+    from degrade.chain import _simulate_frame
+    img = scene((48, 64, 3), seed=3) * np.float32(1.3)
+    for art in (ArtefactConfig(), ArtefactConfig(jpeg_quality=80), None):
+        cfg = DegradeConfig(optics=OPTICS, artefacts=art)
+        ref = simulate_frame(img, cfg, rng=5, sun_dir_cam=[0.3, 0.1, 0.95], camera_seed=2)
+        out = _simulate_frame(img, cfg, np.random.default_rng(5), [0.3, 0.1, 0.95], 1.0, 2, codes8=True)
+        assert out.image.dtype == np.uint8
+        assert_array_equal(out.image, quantise(ref.image, 8))
+        if art is not None:
+            assert_array_equal(out.signal_e, ref.signal_e)
+            assert_array_equal(out.saturation, ref.saturation)

@@ -112,3 +112,22 @@ def test_bad_kernels_and_options_raise():
         convolve_image(img, np.ones((3, 3)), mode="wrap")
     with pytest.raises(ValueError, match="method must be one of"):
         convolve_image(img, np.ones((3, 3)), method="magic")
+
+
+@pytest.mark.parametrize("shape, per_channel", [((29, 43, 3), False), ((29, 43, 3), True), ((31, 22), False)])
+def test_direct_is_float32_taps_added_in_order(shape, per_channel):
+    """The direct kernels against NumPy adding w_t · shifted image in float32, tap after tap in
+    the flipped kernel's C order from 0: the same bits (so no regrouping or fused multiply-add)."""
+    channels = shape[2] if len(shape) == 3 else 1
+    img = RNG.random(shape, dtype=np.float32)
+    k = RNG.random((channels if per_channel else 1, 5, 7))  # 35 taps: 8 groups of four and 3 more
+    k[:, 1, 2] = 0.0  # a zero tap is skipped
+    out = convolve_image(img, k if per_channel else k[0], method="direct")
+    pad = np.pad(img.reshape(*shape[:2], channels), ((2, 2), (3, 3), (0, 0)), mode="symmetric")
+    kf = k[:, ::-1, ::-1].astype(np.float32)
+    ref = np.zeros((*shape[:2], channels), np.float32)
+    for i in range(5):
+        for j in range(7):
+            if np.any(kf[:, i, j] != 0):
+                ref += kf[:, i, j] * pad[i:i + shape[0], j:j + shape[1]]
+    assert out.tobytes() == ref.reshape(shape).tobytes()

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from degrade import dequantise, quantise, srgb_decode, srgb_encode
+from degrade import dequantise, encode_srgb8, quantise, srgb_decode, srgb_encode
 
 
 def iec_encode(x):
@@ -67,6 +67,25 @@ def test_8bit_table_path_at_every_code_boundary():
     assert np.all((codes == np.rint(scaled)) | near_edge)
     assert np.count_nonzero(codes != np.rint(scaled)) < 0.1 * x.size
     assert codes[-7] == 0 and codes[-6] == 0 and codes[-4] == 255 and codes[-2] == 255  # 0, −0, 1, >1
+
+
+def test_encode_srgb8_is_encode_then_quantise():
+    """One pass to uint8 codes: the codes of the curve + quantise, at every code boundary ± 6 ulp,
+    on random values, 0, −0, 1 and above."""
+    edges = iec_decode((np.arange(1, 256) - 0.5) / 255).astype(np.float32)
+    x = (edges.view(np.int32)[:, None] + np.arange(-6, 7)[None, :]).astype(np.int32).view(np.float32).ravel()
+    x = np.concatenate([x, np.random.default_rng(2).random(20_000, dtype=np.float32) ** 3,
+                        [0.0, -0.0, 1e-30, 1.0, 1.5, 7.0]]).astype(np.float32)
+    codes = encode_srgb8(x)
+    assert codes.dtype == np.uint8 and codes.shape == x.shape
+    assert_array_equal(codes, quantise(srgb_encode(np.minimum(x, np.float32(1.0))), 8))
+    scaled = 255 * iec_encode(np.maximum(x, 0.0))
+    clear = np.abs(scaled - np.floor(scaled) - 0.5) >= 1e-4  # not within float32 rounding of an edge
+    assert_array_equal(codes[clear], np.rint(scaled[clear]))
+    img = np.random.default_rng(3).random((48, 64, 3), dtype=np.float32) * 1.2
+    assert_array_equal(encode_srgb8(img), quantise(srgb_encode(img, bits=8), 8))
+    with pytest.raises(ValueError, match="image_linear must be >= 0"):
+        encode_srgb8(np.array([-0.5], np.float32))
 
 
 def test_quantise_rounds_and_saturates():

@@ -29,6 +29,17 @@ def test_physical_exposure_by_hand():
     assert_allclose(out[0, 0, 1] * SensorConfig().photons_max, joules[0, 0, 1] / photon_j[1], rtol=1e-6)
 
 
+def test_physical_exposure_is_numpys_float64_expression_bit_for_bit():
+    """The one-pass kernel runs NumPy's float64 operations in NumPy's order: the same bits."""
+    radiance = np.random.default_rng(5).uniform(0.0, 900.0, (30, 41, 3)).astype(np.float32)
+    lam = np.array([610e-9, 530e-9, 455e-9])
+    out = physical_exposure(radiance, f_number=2.8, exposure_s=2e-5, pixel_pitch_m=3.45e-6, quantum_efficiency=0.55,
+                            full_well_e=9000.0, wavelengths_m=tuple(lam))
+    joules = radiance.astype(np.float64) * (math.pi / (4.0 * 2.8 * 2.8)) * 3.45e-6 * 3.45e-6 * 2e-5
+    ref = (0.55 * (joules * lam / (6.62607015e-34 * 299792458.0)) / 9000.0).astype(np.float32)
+    assert out.tobytes() == ref.tobytes()
+
+
 def test_auto_exposure_maps_the_percentile_of_the_masked_luminance():
     rng = np.random.default_rng(0)
     radiance = rng.random((40, 50, 3), dtype=np.float32) * 20

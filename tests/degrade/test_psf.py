@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_array_equal
 from scipy import integrate, special
 from scipy.signal.windows import gaussian as gaussian_window
 
@@ -218,6 +218,17 @@ def test_compose_gaussians_add_variances_and_delta_is_identity():
     assert_allclose(cov, c1 + c2, atol=1e-9)  # variances of independent blurs add
     m = psf.motion_psf(9.0, 10.0)
     assert_allclose(psf.compose(m, psf.gaussian_psf(0.0), psf.defocus_psf(0.0)), m, atol=1e-15)
+
+
+def test_compose_convolution_is_scipy_fftconvolve_bit_for_bit():
+    """compose's FFT convolution (scipy.fft only, no scipy.signal import) against
+    scipy.signal.fftconvolve itself."""
+    from scipy.signal import fftconvolve
+    ks = [psf.airy_psf(1e-3, 600e-9, 4e-3, 3.45e-6), psf.gaussian_psf(1.3), psf.motion_psf(15.0, 30.0),
+          psf.defocus_psf(2.2), np.random.default_rng(0).random((9, 5))]
+    for a in ks:
+        for b in ks:
+            assert_array_equal(psf._fftconvolve_full(a, b), fftconvolve(a, b, mode="full"))
 
 
 @pytest.mark.parametrize("call, name", [

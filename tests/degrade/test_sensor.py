@@ -145,3 +145,88 @@ def test_bad_inputs_raise():
         sensor_readout(np.ones((4, 4), np.float32), {"read_noise_e": 1}, rng=0)
     with pytest.raises(ValueError, match="algorithm must be one of"):
         demosaic(np.ones((4, 4), np.float32), algorithm="VNG")
+
+
+# --------------------------------------------------------------------------- Numba MHC and fused sensor path
+
+# Malvar, He, Cutler (ICASSP 2004), fig. 2: the 5×5 filters (×1/8) of the missing colours
+_G_AT_RB = np.array([[0, 0, -1, 0, 0], [0, 0, 2, 0, 0], [-1, 2, 4, 2, -1], [0, 0, 2, 0, 0], [0, 0, -1, 0, 0]]) / 8
+_ROW_AT_G = np.array([[0, 0, .5, 0, 0], [0, -1, 0, -1, 0], [-1, 4, 5, 4, -1], [0, -1, 0, -1, 0], [0, 0, .5, 0, 0]]) / 8
+_COL_AT_G = _ROW_AT_G.T
+_RB_AT_BR = np.array([[0, 0, -1.5, 0, 0], [0, 2, 0, 2, 0], [-1.5, 0, 6, 0, -1.5], [0, 2, 0, 2, 0],
+                      [0, 0, -1.5, 0, 0]]) / 8
+
+
+def test_mhc_is_the_published_filters():
+    """The demosaic against Malvar–He–Cutler's published 5×5 filters, float64, 2 px from the borders."""
+    raw = np.random.default_rng(11).random((38, 54), dtype=np.float32)
+    f = {name: ndimage.correlate(raw.astype(np.float64), k, mode="mirror")
+         for name, k in (("g", _G_AT_RB), ("row", _ROW_AT_G), ("col", _COL_AT_G), ("rb", _RB_AT_BR))}
+    ref = np.empty((*raw.shape, 3))
+    r, b = (slice(0, None, 2), slice(0, None, 2)), (slice(1, None, 2), slice(1, None, 2))
+    gr, gb = (slice(0, None, 2), slice(1, None, 2)), (slice(1, None, 2), slice(0, None, 2))
+    ref[r] = np.stack([raw[r], f["g"][r], f["rb"][r]], -1)
+    ref[b] = np.stack([f["rb"][b], f["g"][b], raw[b]], -1)
+    ref[gr] = np.stack([f["row"][gr], raw[gr], f["col"][gr]], -1)  # R left/right, B above/below
+    ref[gb] = np.stack([f["col"][gb], raw[gb], f["row"][gb]], -1)
+    out = demosaic(raw, algorithm="MHC")
+    assert_allclose(out[2:-2, 2:-2], ref[2:-2, 2:-2], atol=2e-6)
+
+
+@pytest.mark.parametrize("shape", [(2, 2), (3, 5), (4, 4), (5, 6), (7, 9), (33, 20), (1, 4), (6, 1)])
+def test_mhc_equals_openimageio_borders_included(shape):
+    """Byte for byte as OpenImageIO's MHC, whose border rule (an index off the edge moves back by
+    the Bayer period) the Numba kernel copies."""
+    for scale in (1.0, 3e-4):
+        raw = (np.random.default_rng(shape[0] * 100 + shape[1]).random(shape) * scale).astype(np.float32)
+        ref = oiio.ImageBufAlgo.demosaic(oiio.ImageBuf(raw[:, :, None].copy()), pattern="bayer",
+                                         algorithm="MHC", layout="RGGB").get_pixels(oiio.FLOAT)
+        assert_array_equal(_demosaic(raw, "MHC"), ref)
+
+
+def test_fused_rggb_path_equals_the_general_path():
+    """Mosaic, illumination, stray light and mean electrons in one kernel: the same bits as the
+    NumPy path (vignetting, + stray light, mosaic, _signal_e), for every output."""
+    from degrade import ArtefactConfig
+    from degrade.artefacts import camera_maps
+    from degrade.sensor import _mosaic, _signal_e, _signal_e_rggb
+    rng = np.random.default_rng(5)
+    img = rng.uniform(0.0, 1.4, (40, 56, 3)).astype(np.float32)
+    img[:, :20] = 0.0  # dark columns: the sparse Poisson draws
+    vig = rng.uniform(0.5, 1.0, (40, 56)).astype(np.float32)
+    stray = rng.uniform(0.0, 0.01, (40, 56)).astype(np.float32)
+    c = SensorConfig(dark_current_e_per_s=300.0)
+    for art in (ArtefactConfig(hot_pixel_fraction=0.02), ArtefactConfig(prnu_sigma=0.0, dsnu_sigma_e=0.0,
+                                                                       hot_pixel_fraction=0.0, blooming=False)):
+        maps = camera_maps((40, 56), art, 3)
+        fused = _signal_e_rggb(img, vig, stray, c, art, maps, np.random.default_rng(8))
+        general = _signal_e(_mosaic(img * vig[:, :, None] + stray[:, :, None]), c, art, maps, np.random.default_rng(8))
+        for a, b in zip(fused, general):
+            assert a.dtype == b.dtype == np.float32
+            assert_array_equal(a, b)
+        assert (fused[0] >= c.full_well_e).any()  # blooming had work
+
+
+def test_sparse_poisson_draws_what_numpy_draws():
+    from degrade.sensor import _poisson_sparse
+    mean = np.zeros(5000)
+    mean[::7] = np.linspace(0.1, 3000.0, mean[::7].size)
+    a, b = np.random.default_rng(4), np.random.default_rng(4)
+    assert_array_equal(_poisson_sparse(a, mean), b.poisson(mean))
+    assert a.random() == b.random()  # and leaves the stream where NumPy leaves it
+
+
+def test_read_noise_is_generator_normal_and_adc_is_the_formula():
+    """The fused read-out (standard normal draws z, 0 + σ·z in the kernel) against
+    ``Generator.normal(0, σ)`` of the same child stream and the ADC formula in NumPy."""
+    from degrade.artefacts import ARTEFACTS_OFF, CameraMaps
+    from degrade.sensor import _signal_from_mean
+    c = SensorConfig(shot_noise=False, read_noise_e=7.5, offset_dn=3.0)
+    mean = np.random.default_rng(1).uniform(0.0, 1.1 * c.full_well_e, (40, 56))
+    signal, dn_out = _signal_from_mean(mean, c, ARTEFACTS_OFF, CameraMaps(None, None, None), np.random.default_rng(3))
+    (child,) = np.random.default_rng(3).spawn(1)  # 2240 photosites: one block
+    s = np.minimum(np.minimum(mean, c.full_well_e) + child.normal(0.0, 7.5, mean.size).reshape(mean.shape),
+                   c.full_well_e)
+    assert_array_equal(signal, s.astype(np.float32))
+    ref = np.clip(np.rint(s / c.gain + 3.0), 0.0, c.max_dn) / c.max_dn
+    assert_array_equal(dn_out, ref.astype(np.float32))
