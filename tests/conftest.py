@@ -31,6 +31,13 @@ def pytest_sessionstart(session):
         print(f"conftest: precompile skipped ({type(exc).__name__}: {exc})")
 
 
+@pytest.fixture(autouse=True)
+def _private_cache_dir(tmp_path_factory, monkeypatch):
+    """Each test's own persistent cache (raytrace._diskcache), never the user's: what one test
+    stores (or breaks) no other test reads."""
+    monkeypatch.setenv("ORBITSYNTH_CACHE_DIR", str(tmp_path_factory.mktemp("orbitsynth-cache")))
+
+
 @pytest.fixture
 def nan_box_obj():
     """Writes a 2 × 1 × 1 box (8 vertices, 12 triangles) as OBJ with its first vertex NaN, and
