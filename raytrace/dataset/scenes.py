@@ -12,6 +12,7 @@ the same target and preset loads it instead of building it again.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 
@@ -29,8 +30,7 @@ def load_model(spec: tuple, warn_repair: bool = False):
     """The target model of a model spec: ("builtin", name) or ("mesh", path, unit_scale_m, crease_angle_deg);
     ``warn_repair``: one line on stderr when the mesh file needed more than routine repair."""
     if spec[0] == "builtin":
-        from ..targets import load_target
-        return load_target(spec[1])
+        return builtin_model(spec[1])
     from ..meshio import load_mesh
     model, report = load_mesh(spec[1], unit_scale_m=spec[2], crease_angle_deg=spec[3] if len(spec) > 3 else 30.0)
     if warn_repair and report.non_finite_note():
@@ -38,10 +38,39 @@ def load_model(spec: tuple, warn_repair: bool = False):
     return model
 
 
+@functools.cache
+def builtin_model(name: str):
+    """:func:`raytrace.targets.load_target` ``(name)``, once per process, from the persistent
+    cache (:mod:`raytrace._diskcache`) where an earlier run stored it: the procedural build
+    takes ~0.4 s (Cassini), reading its pickle ~0.02 s. The key is the code's
+    (:func:`raytrace._diskcache.code_version`: the builders are modules of :mod:`raytrace`)."""
+    import pickle
+    from .. import _diskcache
+    from ..targets import BUILTIN_TARGETS, load_target
+    if name not in BUILTIN_TARGETS:
+        return load_target(name)  # its error
+    key = _diskcache.key_digest("model", name.encode())
+    path = _diskcache.entry_path("model", key)
+    payload = None if path is None else _diskcache.read(path, key)
+    if payload is not None:
+        try:
+            return pickle.loads(payload)  # noqa: S301 - our own file, checksummed
+        except Exception:  # noqa: BLE001 - an unreadable entry: built again below
+            pass
+    model = load_target(name)
+    if path is not None:
+        _diskcache.write(path, key, pickle.dumps(model, protocol=pickle.HIGHEST_PROTOCOL))
+    return model
+
+
+_PLANNED: dict = {}  # id(model) -> (model, its Scene): the scene planning built, for prebuild_scenes
+
+
 def scene_of(model, warn_model: bool):
     """``raytrace.scene.Scene(model)``; its warnings about the model (a mesh far from its origin)
     as one line each on stderr when ``warn_model`` (planning, once), else dropped (the workers, which
-    build the scene the plan already built)."""
+    build the scene the plan already built). Planning's scene is kept for :func:`prebuild_scenes`
+    (:func:`_planned_scene`) rather than built twice."""
     import warnings
     from ..scene import Scene
     with warnings.catch_warnings(record=True) as caught:
@@ -49,7 +78,17 @@ def scene_of(model, warn_model: bool):
         scene = Scene(model)
     for w in caught if warn_model else ():
         warn(' '.join(str(w.message).split()))
+    if warn_model:
+        _PLANNED[id(model)] = (model, scene)
     return scene
+
+
+def _planned_scene(model):
+    """The scene planning built for ``model`` (handed over once), else a new one."""
+    kept = _PLANNED.pop(id(model), None)
+    if kept is not None and kept[0] is model:
+        return kept[1]
+    return scene_of(model, warn_model=False)
 
 
 def scene(spec: tuple, prebuilt: str | None = None):
@@ -147,7 +186,7 @@ def prebuild_scenes(tasks: list, folder: str | None) -> dict:
         if not shades(task) or (folder is None and spec in _SCENES):  # this process has its scene
             continue
         from ..presets import preset_cache_options, quality_preset
-        scene = scene_of(load_model(spec), warn_model=False)
+        scene = _planned_scene(load_model(spec))
         r = task["cfg"]["render"]
         # the cache the preset's frames ask for (balanced from 12 rays: a finer lattice)
         options = preset_cache_options(quality_preset(r["quality"], r.get("samples")), scene.scale_m)

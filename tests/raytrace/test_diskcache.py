@@ -169,3 +169,27 @@ def test_small_jobs_render_in_this_process_when_its_kernels_are_compiled(monkeyp
     monkeypatch.setattr(pool.jit, "kernels_not_compiled", lambda quality, serial=False: [] if serial else ["fast"])
     assert not pool.in_process(tasks, 2, "fast")  # compiling the parallel builds costs more than a pool
     assert pool.in_process(tasks, 1, "fast")
+
+
+def test_a_built_in_target_from_the_cache_is_the_one_built(monkeypatch):
+    from raytrace.targets import load_target
+    built = load_target("icesat")
+    scenes.builtin_model.cache_clear()
+    try:
+        stored = scenes.builtin_model("icesat")  # built (the same object) and stored
+        assert stored is built and any(n.startswith("model-") for n in os.listdir(D.cache_dir()))
+        scenes.builtin_model.cache_clear()
+        monkeypatch.setattr("raytrace.targets.load_target", lambda name: pytest.fail("built again"))
+        loaded = scenes.builtin_model("icesat")
+    finally:
+        scenes.builtin_model.cache_clear()
+    assert loaded is not built and (loaded.name, loaded.description, loaded.metadata) == (
+        built.name, built.description, built.metadata)
+    for a, b in zip(loaded.components, built.components, strict=True):
+        assert (a.name, a.material, a.semantic, a.mass_kg, a.crease_angle_rad, a.albedo) == (
+            b.name, b.material, b.semantic, b.mass_kg, b.crease_angle_rad, b.albedo)
+        assert np.array_equal(a.mesh.vertices, b.mesh.vertices) and np.array_equal(a.mesh.faces, b.mesh.faces)
+        assert a.mesh.is_watertight == b.mesh.is_watertight and np.array_equal(a.mesh.bounds, b.mesh.bounds)
+    fresh, cached = scenes.scene_of(built, False), scenes.scene_of(loaded, False)
+    for k in ("vertices", "faces", "face_normal", "corner_normal", "two_sided", "hull_vertices"):
+        assert np.array_equal(getattr(fresh, k), getattr(cached, k)), k
