@@ -14,7 +14,8 @@ second frame (``cli.render_frame_images`` of the planned tasks, images not writt
 ``python cli.py --target cassini --pattern spiral --frames N --quiet`` into a temporary folder,
 caches warm. Every repetition runs each tree once, in turn (rotated), so a shared machine's load
 falls on all alike. Prints per stage and tree the median wall and CPU seconds, and per run the
-median wall time and its ratio to the first tree's.
+median wall time and CPU time (the run's and its workers') with their ratios to the first tree's:
+on a loaded machine the CPU times are the steadier figure.
 """
 
 from __future__ import annotations
@@ -86,14 +87,19 @@ def run_python(tree: str, code: str, env: dict, *args) -> dict:
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
-def run_job(tree: str, frames: int, env: dict) -> float:
+def run_job(tree: str, frames: int, env: dict) -> tuple:
+    """(wall seconds, CPU seconds of the run and its workers) of one main job."""
+    import resource
     out = tempfile.mkdtemp(prefix="bench-fixed-")
     try:
+        r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         subprocess.run([sys.executable, "cli.py", "--target", "cassini", "--pattern", "spiral", "--frames", str(frames),
                         "--quiet", "--out", out], cwd=tree, env=dict(env, PYTHONPATH=tree), check=True,
                        stdout=subprocess.DEVNULL)
-        return time.perf_counter() - t0
+        wall = time.perf_counter() - t0
+        r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
     finally:
         shutil.rmtree(out, ignore_errors=True)
 
@@ -143,10 +149,11 @@ def main() -> None:
             print(f"{name} | " + " | ".join(cells))
     if not a.stages_only:
         for f in a.frames:
-            med = [statistics.median(runs[t][f]) for t in trees]
-            print(f"main job, {f} frames: " + " | ".join(
-                f"{t}: {m:.2f} s ({m / med[0]:.2f}x; runs {', '.join(f'{x:.1f}' for x in runs[t][f])})"
-                for t, m in zip(trees, med)))
+            wall = [statistics.median(w for w, _ in runs[t][f]) for t in trees]
+            cpu = [statistics.median(c for _, c in runs[t][f]) for t in trees]
+            print(f"main job, {f} frames (median wall s, its ratio; median CPU s, its ratio; runs' wall): " + " | ".join(
+                f"{t}: {w:.2f} s ({w / wall[0]:.2f}x), CPU {c:.2f} s ({c / cpu[0]:.2f}x); "
+                f"{', '.join(f'{x:.1f}' for x, _ in runs[t][f])}" for t, w, c in zip(trees, wall, cpu)))
 
 
 if __name__ == "__main__":
