@@ -92,10 +92,12 @@ def default_workers() -> int:
     return available_cores()
 
 
-IN_PROCESS_FRAMES = 4
+IN_PROCESS_FRAMES = 8
 """At most this many frames (and no ``--workers`` given) render in this process on numba's
 threads rather than on a pool: each of a pool's workers first spends ~2 CPU s importing the
-libraries and loading numba's kernels, which this process does once (see docs/performance.md,
+libraries and loading numba's kernels, which this process does once. The main job's Cassini
+frames on 2 cores, this process against 2 workers: 4 frames 4.9 / 6.0 s, 8 frames 5.8 / 7.2 s,
+16 frames 10.2 / 10.3 s (even), 48 frames 24.5 / 20.5 s (2026-12-06, docs/performance.md,
 "Fixed cost")."""
 
 

@@ -64,6 +64,7 @@ def builtin_model(name: str):
 
 
 _PLANNED: dict = {}  # id(model) -> (model, its Scene): the scene planning built, for prebuild_scenes
+_PLANNED_KEEP = 4  # scenes of the latest plans kept (a dataset plans one sequence per target)
 
 
 def scene_of(model, warn_model: bool):
@@ -79,6 +80,8 @@ def scene_of(model, warn_model: bool):
     for w in caught if warn_model else ():
         warn(' '.join(str(w.message).split()))
     if warn_model:
+        while len(_PLANNED) >= _PLANNED_KEEP:  # the oldest go (a plan that never renders)
+            _PLANNED.pop(next(iter(_PLANNED)))
         _PLANNED[id(model)] = (model, scene)
     return scene
 
