@@ -45,6 +45,7 @@ def builtin_model(name: str):
     takes ~0.4 s (Cassini), reading its pickle ~0.02 s. The key is the code's
     (:func:`raytrace._diskcache.code_version`: the builders are modules of :mod:`raytrace`)."""
     import pickle
+
     from .. import _diskcache
     from ..targets import BUILTIN_TARGETS, load_target
     if name not in BUILTIN_TARGETS:
@@ -52,11 +53,11 @@ def builtin_model(name: str):
     key = _diskcache.key_digest("model", name.encode())
     path = _diskcache.entry_path("model", key)
     payload = None if path is None else _diskcache.read(path, key)
-    if payload is not None:
-        try:
-            return pickle.loads(payload)  # noqa: S301 - our own file, checksummed
-        except Exception:  # noqa: BLE001 - an unreadable entry: built again below
-            pass
+    try:
+        if payload is not None:
+            return pickle.loads(payload)  # our own file, checksummed
+    except Exception:  # noqa: BLE001 - an unreadable entry: built again below
+        payload = None
     model = load_target(name)
     if path is not None:
         _diskcache.write(path, key, pickle.dumps(model, protocol=pickle.HIGHEST_PROTOCOL))
@@ -73,6 +74,7 @@ def scene_of(model, warn_model: bool):
     build the scene the plan already built). Planning's scene is kept for :func:`prebuild_scenes`
     (:func:`_planned_scene`) rather than built twice."""
     import warnings
+
     from ..scene import Scene
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -116,12 +118,13 @@ def load_prebuilt(path: str):
     """The Scene pickled by :func:`prebuild_scenes` at ``path``, its radiance cache attached;
     None (and the worker builds its own) if the file cannot be read or is not intact."""
     import pickle
+
     from .. import _diskcache
     payload = _diskcache.read(path)
     try:
         if payload is None:
             raise ValueError(f"{path} is missing, truncated or corrupt")
-        scene, cache, options = pickle.loads(payload)  # noqa: S301 - our own file, checksummed
+        scene, cache, options = pickle.loads(payload)  # our own file, checksummed
         scene.adopt_radiance_cache(cache, **options)
         return scene
     except (pickle.UnpicklingError, EOFError, ValueError, AttributeError, ImportError, TypeError) as exc:
@@ -146,6 +149,7 @@ def scene_key(scene, options: dict) -> bytes | None:
     None if the model holds something that cannot be digested (then nothing is cached)."""
     import hashlib
     import pickle
+
     from .. import _diskcache
     model = scene.model
     h = hashlib.sha256()
@@ -180,6 +184,7 @@ def prebuild_scenes(tasks: list, folder: str | None) -> dict:
     frames (:func:`scene`). Only for tasks that shade (the ``fast`` and ``balanced`` presets with
     an image modality); nothing is built for the others."""
     import pickle
+
     from .. import _diskcache
     out = {}
     for task in tasks:

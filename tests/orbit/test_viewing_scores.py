@@ -15,7 +15,7 @@ def test_stacked_scores_are_the_per_candidate_counts():
     # an observer 20-200 m from the target, drifting: frames lit, in shadow, in penumbra, Sun in the lens
     s = np.hstack([rng.uniform(-200.0, 200.0, (t.size, 3)), rng.uniform(-0.1, 0.1, (t.size, 3))])
     for inclination, raan, epoch in ((0.9, 0.0, "2026-06-21T12:00:00Z"), (1.7, 2.0, "2026-03-20T00:00:00Z")):
-        def make(u0):
+        def make(u0, inclination=inclination, raan=raan, epoch=epoch):
             return ReferenceOrbit(altitude_m=450e3, inclination_rad=inclination, raan_rad=raan, arg_lat_rad=u0,
                                   epoch_utc=epoch)
         r_sun = sun_position_eci(make(0.0).unix_s(t))

@@ -4,6 +4,7 @@ table, and the small jobs rendered in this process (raytrace.dataset.pool.in_pro
 
 import os
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -48,13 +49,14 @@ def test_an_entry_reads_back_only_whole_intact_and_under_its_own_key(tmp_path):
     assert D.write(path, key, payload)
     assert D.read(path, key) == payload and D.read(path) == payload and D.present(path, key)
     assert D.read(path, other) is None and not D.present(path, other)
-    data = bytearray(open(path, "rb").read())
+    entry = Path(path)
+    data = bytearray(entry.read_bytes())
     data[-5000] ^= 0x40  # one bit of the payload
-    open(path, "wb").write(bytes(data))
+    entry.write_bytes(bytes(data))
     assert D.present(path, key) and D.read(path, key) is None  # the length is right, the checksum not
-    open(path, "wb").write(bytes(data[:-1]))
+    entry.write_bytes(bytes(data[:-1]))
     assert not D.present(path, key) and D.read(path, key) is None  # truncated
-    open(path, "wb").write(payload)
+    entry.write_bytes(payload)
     assert not D.present(path, key) and D.read(path, key) is None  # not ours
     assert D.read(str(tmp_path / "missing.bin"), key) is None
     assert [p.name for p in tmp_path.iterdir()] == [os.path.basename(path)]  # no temporary left behind
@@ -135,9 +137,9 @@ def test_a_stored_scene_is_used_by_the_next_run_and_a_broken_one_is_built_again(
 
     monkeypatch.setattr(Scene, "radiance_cache", no_build)
     assert scenes.prebuild_scenes([_task(spec)], str(tmp_path / "tmp")) == first
-    data = bytearray(open(path, "rb").read())
+    data = bytearray(Path(path).read_bytes())
     data[len(data) // 2] ^= 1
-    open(path, "wb").write(bytes(data))
+    Path(path).write_bytes(bytes(data))
     assert scenes.load_prebuilt(path) is None and "building the scene in the worker" in capsys.readouterr().err
     assert not os.path.exists(path)  # dropped: the next run stores it anew
     monkeypatch.setattr(Scene, "radiance_cache", real)
