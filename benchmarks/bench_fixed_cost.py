@@ -10,7 +10,8 @@ Stages: each in a fresh process on one numba thread, as in a pool's worker, with
 (``raytrace.dataset.scenes.prebuild_scenes``, into a temporary folder; with the persistent cache
 (``ORBITSYNTH_CACHE_DIR``, a folder of this run's) warm where the tree has one); a worker's start
 (``cli._worker_ready``: imports, numba's kernels loaded, the split-sum table); its first and
-second frame (``cli.render_frame_images`` of the planned tasks, images not written). Runs:
+second frame (``cli.render_frame_images`` of the planned tasks, images not written), the first
+loading the scene another process built, as a pool's worker does. Runs:
 ``python cli.py --target cassini --pattern spiral --frames N --quiet`` into a temporary folder,
 caches warm. Every repetition runs each tree once, in turn (rotated), so a shared machine's load
 falls on all alike. Prints per stage and tree the median wall and CPU seconds, and per run the
@@ -59,6 +60,17 @@ t = lap("prebuild_scenes", t)
 print(json.dumps(out))
 """
 
+PREBUILD = r"""
+import json, sys
+import cli
+from raytrace.dataset import folder, scenes
+cfg, given = cli.resolve_config(cli.build_parser().parse_args(["--target", "cassini", "--pattern", "spiral",
+                                                               "--frames", "48"]))
+tasks, _ = folder.tasks_for(cli.plan_sequence(cfg, given), "", None, write=False)
+print(json.dumps({"path": scenes.prebuild_scenes(tasks[:1], sys.argv[1])[tasks[0]["model_spec"]]}))
+"""
+
+# a pool's worker: it loads the scene a parent process built (PREBUILD, another process), as in a run
 WORKER = r"""
 import json, sys, time
 t = time.perf_counter(), time.process_time()
@@ -72,10 +84,9 @@ cfg, given = cli.resolve_config(cli.build_parser().parse_args(["--target", "cass
                                                                "--frames", "48"]))
 plan = cli.plan_sequence(cfg, given)
 tasks, _ = folder.tasks_for(plan, "", None, write=False)
-prebuilt = scenes.prebuild_scenes(tasks[:1], sys.argv[1])
 for name, task in zip(("first frame", "second frame"), tasks[:2]):
     t = time.perf_counter(), time.process_time()
-    cli.render_frame_images(dict(task, prebuilt=prebuilt.get(task["model_spec"])))
+    cli.render_frame_images(dict(task, prebuilt=sys.argv[1]))
     out[name] = (time.perf_counter() - t[0], time.process_time() - t[1])
 print(json.dumps(out))
 """
@@ -128,7 +139,8 @@ def main() -> None:
             for tree in order:
                 if not a.runs_only:
                     with tempfile.TemporaryDirectory() as tmp:
-                        for part in (run_python(tree, STAGES, env), run_python(tree, WORKER, env, tmp)):
+                        path = run_python(tree, PREBUILD, env, tmp)["path"]
+                        for part in (run_python(tree, STAGES, env), run_python(tree, WORKER, env, path)):
                             for name, v in part.items():
                                 stages[tree].setdefault(name, []).append(v)
                 if not a.stages_only:

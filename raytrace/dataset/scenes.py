@@ -120,7 +120,7 @@ def load_prebuilt(path: str):
     import pickle
 
     from .. import _diskcache
-    payload = _diskcache.read(path)
+    payload = _diskcache.read_mapped(path)
     try:
         if payload is None:
             raise ValueError(f"{path} is missing, truncated or corrupt")

@@ -48,16 +48,18 @@ def test_an_entry_reads_back_only_whole_intact_and_under_its_own_key(tmp_path):
     payload = os.urandom(100_000)
     assert D.write(path, key, payload)
     assert D.read(path, key) == payload and D.read(path) == payload and D.present(path, key)
+    assert bytes(D.read_mapped(path, key)) == payload and D.read_mapped(path, other) is None
     assert D.read(path, other) is None and not D.present(path, other)
     entry = Path(path)
     data = bytearray(entry.read_bytes())
     data[-5000] ^= 0x40  # one bit of the payload
     entry.write_bytes(bytes(data))
     assert D.present(path, key) and D.read(path, key) is None  # the length is right, the checksum not
+    assert D.read_mapped(path, key) is None
     entry.write_bytes(bytes(data[:-1]))
-    assert not D.present(path, key) and D.read(path, key) is None  # truncated
+    assert not D.present(path, key) and D.read(path, key) is None and D.read_mapped(path, key) is None  # truncated
     entry.write_bytes(payload)
-    assert not D.present(path, key) and D.read(path, key) is None  # not ours
+    assert not D.present(path, key) and D.read(path, key) is None and D.read_mapped(path) is None  # not ours
     assert D.read(str(tmp_path / "missing.bin"), key) is None
     assert [p.name for p in tmp_path.iterdir()] == [os.path.basename(path)]  # no temporary left behind
 
