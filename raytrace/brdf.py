@@ -254,11 +254,25 @@ def _split_sum(n_mu, n_alpha, n_samples):
     return out
 
 
+_SPLIT_SUM_SAMPLES = 4096
+
+
 @functools.cache
 def split_sum_table() -> np.ndarray:
     """(A, B) of ∫ f_spec cos dω_i = F0·A + B on a grid of μ_o = cosθ_o (bin centres of 32
-    bins in (0, 1)) × α (32 values from 0.02 to 1), shape (32, 32, 2), float64."""
-    return _split_sum(_MU_BINS, _MU_BINS, 4096)
+    bins in (0, 1)) × α (32 values from 0.02 to 1), shape (32, 32, 2), float64. Computed once
+    per machine and code (~0.5 s) and kept in the persistent cache (:mod:`raytrace._diskcache`)."""
+    from . import _diskcache
+    shape = (_MU_BINS, _MU_BINS, 2)
+    key = _diskcache.key_digest("splitsum", repr((shape, _SPLIT_SUM_SAMPLES, _ALPHA_MIN)).encode())
+    path = _diskcache.entry_path("splitsum", key)
+    payload = None if path is None else _diskcache.read(path, key)
+    if payload is not None and len(payload) == 8 * math.prod(shape):
+        return np.frombuffer(payload, dtype=np.float64).reshape(shape).copy()  # writable, as computed
+    table = _split_sum(_MU_BINS, _MU_BINS, _SPLIT_SUM_SAMPLES)
+    if path is not None:
+        _diskcache.write(path, key, np.ascontiguousarray(table, dtype=np.float64).tobytes())
+    return table
 
 
 @inline

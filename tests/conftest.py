@@ -6,6 +6,8 @@ themselves where a first call compiles or integrates.
 """
 
 import os
+import shutil
+import tempfile
 
 import numpy as np
 import pytest
@@ -29,6 +31,21 @@ def pytest_sessionstart(session):
         precompile(max(1, min(os.cpu_count() or 1, 4)), GROUPS)
     except Exception as exc:  # noqa: BLE001 (a speed-up only; the tests report real errors)
         print(f"conftest: precompile skipped ({type(exc).__name__}: {exc})")
+
+
+_SESSION_CACHE_DIR = tempfile.mkdtemp(prefix="orbitsynth-test-cache-")
+os.environ["ORBITSYNTH_CACHE_DIR"] = _SESSION_CACHE_DIR  # module-scoped fixtures too: never the user's cache
+
+
+def pytest_sessionfinish(session, exitstatus):
+    shutil.rmtree(_SESSION_CACHE_DIR, ignore_errors=True)
+
+
+@pytest.fixture(autouse=True)
+def _private_cache_dir(tmp_path_factory, monkeypatch):
+    """Each test's own persistent cache (raytrace._diskcache), never the user's: what one test
+    stores (or breaks) no other test reads (module-scoped fixtures share the session's)."""
+    monkeypatch.setenv("ORBITSYNTH_CACHE_DIR", str(tmp_path_factory.mktemp("orbitsynth-cache")))
 
 
 @pytest.fixture

@@ -14,9 +14,9 @@ KERNELS = {f"raytrace.{m}" for m in ("_sampling", "_surface", "_rows", "_gather"
                                      "_paths", "_cache_kernels", "_kernels", "_embree", "_lights", "_lens",
                                      "_texture", "_earth")}
 """The modules of ``raytrace`` that hold numba kernels (and their constants) and nothing that drives them."""
-KERNEL_DEPENDENCIES = {"raytrace._jit", "raytrace.environment", "raytrace.brdf"}
-"""What a kernel module may import besides the other kernel modules: numba's policy and the
-kernels of the environment and the BRDF."""
+KERNEL_DEPENDENCIES = {"raytrace._jit", "raytrace.environment", "raytrace.brdf", "raytrace._diskcache"}
+"""What a kernel module may import besides the other kernel modules: numba's policy, the
+kernels of the environment and the BRDF, and the persistent cache of the BRDF's table."""
 
 
 def _modules() -> dict:

@@ -360,13 +360,13 @@ def test_killed_run_leaves_no_partial_file_and_resumes(ref, tmp_path):
 
 def test_interrupted_pool_removes_its_temporary_scenes(tmp_path):
     """Ctrl-C while two workers render: exit 130 with the one-line message, and the scenes the
-    parent pickled for them (in TMPDIR) are gone."""
+    parent pickled for them (in TMPDIR, the persistent cache off) are gone."""
     tmp = tmp_path / "tmp"
     tmp.mkdir()
     cmd = [sys.executable, str(ROOT / "cli.py"), *SMALL[:4], "--frames", "48", *SMALL[6:], "--workers", "2",
            "--out", str(tmp_path / "seq")]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "TMPDIR": str(tmp)},
+                            env={**os.environ, "TMPDIR": str(tmp), "ORBITSYNTH_CACHE_DIR": ""},
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while not list(tmp.glob("orbitsynth-scenes-*/*.pickle")) and proc.poll() is None and time.monotonic() < deadline:
@@ -403,7 +403,7 @@ def _pool_job(tmp_path, tmp, frames=48):
     cmd = [sys.executable, str(ROOT / "cli.py"), *SMALL[:4], "--frames", str(frames), *SMALL[6:], "--workers", "2",
            "--out", str(seq)]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "TMPDIR": str(tmp)}, start_new_session=True)
+                            env={**os.environ, "TMPDIR": str(tmp), "ORBITSYNTH_CACHE_DIR": ""}, start_new_session=True)
     deadline = time.monotonic() + 120
     while not (seq / ".manifest" / "000001.json").exists() and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)
@@ -467,7 +467,7 @@ def test_workers_stop_when_the_parent_is_killed_and_the_next_run_removes_its_sce
     other.mkdir()
     r = subprocess.run([sys.executable, str(ROOT / "cli.py"), *SMALL[:4], "--frames", "2", *SMALL[6:],
                         "--workers", "2", "--out", str(tmp_path / "next")], cwd=ROOT, capture_output=True, text=True,
-                       env={**os.environ, "TMPDIR": str(tmp)}, timeout=120)
+                       env={**os.environ, "TMPDIR": str(tmp), "ORBITSYNTH_CACHE_DIR": ""}, timeout=120)
     assert r.returncode == 0, r.stderr
     assert sorted(p.name for p in tmp.iterdir()) == [other.name]
 

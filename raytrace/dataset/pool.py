@@ -92,6 +92,25 @@ def default_workers() -> int:
     return available_cores()
 
 
+IN_PROCESS_FRAMES = 8
+"""At most this many frames (and no ``--workers`` given) render in this process on numba's
+threads rather than on a pool: each of a pool's workers first spends ~2 CPU s importing the
+libraries and loading numba's kernels, which this process does once. The main job's Cassini
+frames on 2 cores, this process against 2 workers: 4 frames 4.9 / 6.0 s, 8 frames 5.8 / 7.2 s,
+16 frames 10.2 / 10.3 s (even), 48 frames 24.5 / 20.5 s (2026-12-06, docs/performance.md,
+"Fixed cost")."""
+
+
+def in_process(tasks: list, workers: int, quality: str) -> bool:
+    """Whether ``tasks`` render faster in this process than on ``workers`` pool processes: few
+    frames (:data:`IN_PROCESS_FRAMES`) and numba's cache already holding the kernels' parallel
+    builds this process calls (else compiling them would cost more than the pool saves). The
+    frames are the same bytes either way."""
+    if workers <= 1 or len(tasks) <= 1:
+        return True
+    return len(tasks) <= IN_PROCESS_FRAMES and not jit.kernels_not_compiled(quality, serial=False)
+
+
 def frame_threads(workers: int, tasks: int) -> int:
     """The numba threads each frame of :func:`execute` runs on: the pool's workers share the
     cores; one worker (or one frame) renders in this process, on numba's threads."""
@@ -152,6 +171,9 @@ def execute(tasks: list, frame_fn, *, workers: int, progress=None, client=None, 
             yield res
         return
     if workers <= 1 or len(tasks) == 1:
+        if PREBUILD_SCENES:  # the persistent cache's scenes (or this process's, stored there)
+            prebuilt = scenes.prebuild_scenes(tasks, None)
+            tasks = [dict(t, prebuilt=prebuilt.get(t["model_spec"])) for t in tasks]
         for task in tasks:
             res = run_frame(frame_fn, task)
             if progress is not None:

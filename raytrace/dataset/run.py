@@ -19,7 +19,7 @@ def run_plans(jobs: list, frame_fn, *, config_text, workers: int | None = None, 
     install compiles first; ``ready``: :func:`.pool.execute`'s. Returns one stats dict per
     sequence."""
     opts = {"shard": shard, "scheduler": scheduler, "quiet": quiet, "quality": quality, "desc": desc,
-            "config_text": config_text, "ready": ready}
+            "config_text": config_text, "ready": ready, "auto_workers": workers is None}
     workers = workers or pool.default_workers()
     if scheduler is None:
         workers = pool.fit_workers([plan["camera"] for plan, _ in jobs], workers)
@@ -63,6 +63,8 @@ def _render_claimed(jobs: list, frame_fn, opts: dict, workers: int, client) -> l
                       "visible": sum(f["visible"] for f in plan["result"]["frames"])})
     skipped = sum(s["skipped"] for s in stats)
     t0 = time.perf_counter()
+    if opts["auto_workers"] and client is None and pool.in_process(all_tasks, workers, opts["quality"]):
+        workers = 1
     serial = pool.frame_threads(workers, len(all_tasks)) == 1
     missing = (jit.kernels_not_compiled(opts["quality"], serial)
                if all_tasks and opts["scheduler"] is None else [])

@@ -5,11 +5,14 @@ unit_scale_m, crease_angle_deg)`` — and :func:`scene` builds the :class:`raytr
 radiance cache) once per process. :func:`prebuild_scenes` builds each target's scene and
 radiance cache once in the pool's parent, on every core, and pickles them for the workers,
 which load them (:func:`load_prebuilt`) instead of each building its own on its share of the
-cores.
+cores. The pickle is kept in the persistent cache (:mod:`raytrace._diskcache`), under a digest
+of the model's content, the cache's options and the code (:func:`scene_key`): a later run with
+the same target and preset loads it instead of building it again.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 
@@ -27,8 +30,7 @@ def load_model(spec: tuple, warn_repair: bool = False):
     """The target model of a model spec: ("builtin", name) or ("mesh", path, unit_scale_m, crease_angle_deg);
     ``warn_repair``: one line on stderr when the mesh file needed more than routine repair."""
     if spec[0] == "builtin":
-        from ..targets import load_target
-        return load_target(spec[1])
+        return builtin_model(spec[1])
     from ..meshio import load_mesh
     model, report = load_mesh(spec[1], unit_scale_m=spec[2], crease_angle_deg=spec[3] if len(spec) > 3 else 30.0)
     if warn_repair and report.non_finite_note():
@@ -36,18 +38,62 @@ def load_model(spec: tuple, warn_repair: bool = False):
     return model
 
 
+@functools.cache
+def builtin_model(name: str):
+    """:func:`raytrace.targets.load_target` ``(name)``, once per process, from the persistent
+    cache (:mod:`raytrace._diskcache`) where an earlier run stored it: the procedural build
+    takes ~0.4 s (Cassini), reading its pickle ~0.02 s. The key is the code's
+    (:func:`raytrace._diskcache.code_version`: the builders are modules of :mod:`raytrace`)."""
+    import pickle
+
+    from .. import _diskcache
+    from ..targets import BUILTIN_TARGETS, load_target
+    if name not in BUILTIN_TARGETS:
+        return load_target(name)  # its error
+    key = _diskcache.key_digest("model", name.encode())
+    path = _diskcache.entry_path("model", key)
+    payload = None if path is None else _diskcache.read(path, key)
+    try:
+        if payload is not None:
+            return pickle.loads(payload)  # our own file, checksummed
+    except Exception:  # noqa: BLE001 - an unreadable entry: built again below
+        payload = None
+    model = load_target(name)
+    if path is not None:
+        _diskcache.write(path, key, pickle.dumps(model, protocol=pickle.HIGHEST_PROTOCOL))
+    return model
+
+
+_PLANNED: dict = {}  # id(model) -> (model, its Scene): the scene planning built, for prebuild_scenes
+_PLANNED_KEEP = 4  # scenes of the latest plans kept (a dataset plans one sequence per target)
+
+
 def scene_of(model, warn_model: bool):
     """``raytrace.scene.Scene(model)``; its warnings about the model (a mesh far from its origin)
     as one line each on stderr when ``warn_model`` (planning, once), else dropped (the workers, which
-    build the scene the plan already built)."""
+    build the scene the plan already built). Planning's scene is kept for :func:`prebuild_scenes`
+    (:func:`_planned_scene`) rather than built twice."""
     import warnings
+
     from ..scene import Scene
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         scene = Scene(model)
     for w in caught if warn_model else ():
         warn(' '.join(str(w.message).split()))
+    if warn_model:
+        while len(_PLANNED) >= _PLANNED_KEEP:  # the oldest go (a plan that never renders)
+            _PLANNED.pop(next(iter(_PLANNED)))
+        _PLANNED[id(model)] = (model, scene)
     return scene
+
+
+def _planned_scene(model):
+    """The scene planning built for ``model`` (handed over once), else a new one."""
+    kept = _PLANNED.pop(id(model), None)
+    if kept is not None and kept[0] is model:
+        return kept[1]
+    return scene_of(model, warn_model=False)
 
 
 def scene(spec: tuple, prebuilt: str | None = None):
@@ -70,16 +116,56 @@ def scene(spec: tuple, prebuilt: str | None = None):
 
 def load_prebuilt(path: str):
     """The Scene pickled by :func:`prebuild_scenes` at ``path``, its radiance cache attached;
-    None (and the worker builds its own) if the file cannot be read."""
+    None (and the worker builds its own) if the file cannot be read or is not intact."""
     import pickle
+
+    from .. import _diskcache
+    payload = _diskcache.read_mapped(path)
     try:
-        with open(path, "rb") as fh:
-            scene, cache, options = pickle.load(fh)  # noqa: S301 - our own file, in our own private folder
+        if payload is None:
+            raise ValueError(f"{path} is missing, truncated or corrupt")
+        scene, cache, options = pickle.loads(payload)  # our own file, checksummed
         scene.adopt_radiance_cache(cache, **options)
         return scene
-    except (OSError, pickle.UnpicklingError, EOFError, ValueError) as exc:
+    except (pickle.UnpicklingError, EOFError, ValueError, AttributeError, ImportError, TypeError) as exc:
         warn(f"building the scene in the worker ({exc})")
+        folder = _diskcache.cache_dir()
+        if folder is not None and os.path.dirname(os.path.abspath(path)) == os.path.abspath(folder):
+            _diskcache.discard(path)  # a broken entry of the persistent cache: the next run stores it anew
         return None
+
+
+def _update_array(h, a) -> None:
+    a = np.ascontiguousarray(a)
+    h.update(f"{a.dtype.str}{a.shape}".encode())
+    h.update(a.tobytes())
+
+
+def scene_key(scene, options: dict) -> bytes | None:
+    """The persistent cache's key of ``scene`` with the radiance cache of ``options``: a digest
+    of the model's content (every component's mesh, material, semantic class, crease angle,
+    albedo, authored normals and surface material; the model's name, description and metadata),
+    the scene's material switch, the options and the code (:func:`raytrace._diskcache.key_digest`).
+    None if the model holds something that cannot be digested (then nothing is cached)."""
+    import hashlib
+    import pickle
+
+    from .. import _diskcache
+    model = scene.model
+    h = hashlib.sha256()
+    try:
+        h.update(pickle.dumps((model.name, model.description, model.metadata, bool(scene.procedural_materials),
+                               sorted(options.items())), protocol=4))
+        for c in model.components:
+            h.update(pickle.dumps((c.name, c.material, c.semantic, float(c.mass_kg), float(c.crease_angle_rad),
+                                   c.albedo, c.surface), protocol=4))
+            _update_array(h, np.asarray(c.mesh.vertices, dtype=np.float64))
+            _update_array(h, np.asarray(c.mesh.faces, dtype=np.int64))
+            if c.corner_normals is not None:
+                _update_array(h, c.corner_normals)
+    except (pickle.PicklingError, TypeError, AttributeError, ValueError):
+        return None
+    return _diskcache.key_digest("scene", h.digest())
 
 
 def shades(task: dict) -> bool:
@@ -87,30 +173,50 @@ def shades(task: dict) -> bool:
     return bool(task.get("want_rgb")) or needs_radiance(task["modalities"])
 
 
-def prebuild_scenes(tasks: list, folder: str) -> dict:
+def prebuild_scenes(tasks: list, folder: str | None) -> dict:
     """Build each target's Scene and radiance cache once, here, on every core, and pickle them
-    into ``folder`` for the pool's workers: {model spec: file}. Each worker would otherwise
-    build its own on its share of the cores (Cassini: ~5 s on one core, 2–3.5 s on two; the
-    same cache bit for bit, tests/raytrace/test_cache_solve.py). Only for tasks that shade (the
-    ``fast`` and ``balanced`` presets with an image modality); nothing is built for the others."""
+    for the pool's workers: {model spec: file}. Each worker would otherwise build its own on
+    its share of the cores (Cassini: ~5 s on one core, 2–3.5 s on two; the same cache bit for
+    bit, tests/raytrace/test_cache_solve.py). The file is the persistent cache's entry
+    (:func:`scene_key`): one a previous run stored is used as it is, without building anything;
+    where there is no persistent cache, a file in ``folder``. ``folder`` None (one process renders
+    every frame): only the persistent cache, and a scene built here is kept for this process's
+    frames (:func:`scene`). Only for tasks that shade (the ``fast`` and ``balanced`` presets with
+    an image modality); nothing is built for the others."""
     import pickle
+
+    from .. import _diskcache
     out = {}
     for task in tasks:
         spec = task["model_spec"]
         if spec in out or task["cfg"]["render"]["quality"] == "reference":
             continue
-        if not shades(task):
+        if not shades(task) or (folder is None and spec in _SCENES):  # this process has its scene
             continue
         from ..presets import preset_cache_options, quality_preset
-        scene = scene_of(load_model(spec), warn_model=False)  # not kept here: only the workers render
+        scene = _planned_scene(load_model(spec))
         r = task["cfg"]["render"]
         # the cache the preset's frames ask for (balanced from 12 rays: a finer lattice)
         options = preset_cache_options(quality_preset(r["quality"], r.get("samples")), scene.scale_m)
+        key = scene_key(scene, options)
+        path = None if key is None else _diskcache.entry_path("scene", key)
+        if path is not None and _diskcache.present(path, key):
+            out[spec] = path
+            continue
         cache = scene.radiance_cache(**options)
-        path = os.path.join(folder, f"scene{len(out)}.pickle")
-        with open(path, "wb") as fh:
-            pickle.dump((scene, cache, options), fh, protocol=pickle.HIGHEST_PROTOCOL)
-        out[spec] = path
+        if path is not None or folder is not None:
+            payload = pickle.dumps((scene, cache, options), protocol=pickle.HIGHEST_PROTOCOL)
+            if path is not None and _diskcache.write(path, key, payload):
+                out[spec] = path
+            elif folder is not None:
+                path = os.path.join(folder, f"scene{len(out)}.pickle")
+                if not _diskcache.write(path, key or bytes(32), payload):
+                    raise OSError(f"cannot write {path}")
+                out[spec] = path
+            del payload
+        if folder is None:
+            scene.embree  # noqa: B018 - this process renders: keep the scene as built
+            _SCENES.setdefault(spec, scene)
         del scene, cache
     return out
 
