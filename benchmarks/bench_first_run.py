@@ -5,10 +5,11 @@
 Runs ``python cli.py --target cassini --pattern spiral`` (48 frames, 1280×960, defaults) as a
 real process, alternating
 
-* **cold**: numba's on-disk cache empty (a new ``NUMBA_CACHE_DIR`` per run), as after
-  ``pip install -e .`` in a fresh clone: the kernels are compiled first;
-* **warm**: the same command with the cache filled (one shared ``NUMBA_CACHE_DIR``, filled by
-  an untimed run first),
+* **cold**: numba's on-disk cache and the tool's own (``ORBITSYNTH_CACHE_DIR``: scenes, radiance
+  caches, tables) empty, a new pair of folders per run, as after ``pip install -e .`` in a fresh
+  clone: the kernels are compiled and the radiance cache built first;
+* **warm**: the same command with both caches filled (one shared pair of folders, filled by an
+  untimed run first),
 
 round by round so that load on a shared machine hits both alike, and prints each run's wall
 time, the medians and their ratio. Output goes to temporary folders.
@@ -37,7 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def run(args: list, cache_dir: str, tree: Path = ROOT) -> dict:
-    env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir)
+    env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir, ORBITSYNTH_CACHE_DIR=cache_dir + "-orbitsynth")
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         res = subprocess.run([sys.executable, str(tree / "cli.py"), *args, "--out", os.path.join(tmp, "o")],
@@ -76,7 +77,7 @@ def main() -> None:
     print("| tree | run | " + " | ".join(f"round {k + 1}" for k in range(a.repeats)) + " | median |")
     print("|---|---|" + "---|" * (a.repeats + 1))
     for t in trees:
-        for name, runs in (("cold (empty numba cache), s", cold[t]), ("warm, s", warm[t])):
+        for name, runs in (("cold (empty caches), s", cold[t]), ("warm, s", warm[t])):
             print(f"| {t.name} | {name} | " + " | ".join(f"{v:.1f}" for v in runs)
                   + f" | {statistics.median(runs):.1f} |")
     for t in trees:

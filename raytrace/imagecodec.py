@@ -135,8 +135,10 @@ def exr_bytes(pixels: np.ndarray, *, channel_names=None, half: bool = False, com
         raise ValueError(f"pixels must be float32 of shape (H, W) or (H, W, C), got {px.dtype} {px.shape}")
     h, w, c = px.shape
     names = [str(n) for n in channel_names] if channel_names is not None else _exr_names(c)
-    if len(names) != c or len(set(names)) != c or not all(0 < len(n) <= 31 for n in names):
-        raise ValueError(f"channel_names must name the {c} channels (distinct, 1-31 characters), got {names}")
+    if len(names) != c:
+        raise ValueError(f"channel_names must name the {c} channels, got {len(names)} names")
+    if len(set(names)) != c or not all(0 < len(n) <= 31 for n in names):
+        raise ValueError(f"channel_names must name the {c} channels with distinct names of 1-31 characters, got {names}")
     if compression not in _EXR_COMPRESSIONS:
         raise ValueError(f"compression must be one of {', '.join(_EXR_COMPRESSIONS)}, got {compression!r}")
     if strategy not in ZLIB_STRATEGIES or not (isinstance(level, (int, np.integer)) and 0 <= level <= 9):
