@@ -138,7 +138,8 @@ def exr_bytes(pixels: np.ndarray, *, channel_names=None, half: bool = False, com
     if len(names) != c:
         raise ValueError(f"channel_names must name the {c} channels, got {len(names)} names")
     if len(set(names)) != c or not all(0 < len(n) <= 31 for n in names):
-        raise ValueError(f"channel_names must name the {c} channels with distinct names of 1-31 characters, got {names}")
+        raise ValueError(f"channel_names must name the {c} channels with distinct names of 1-31 characters, "
+                         f"got {names}")
     if compression not in _EXR_COMPRESSIONS:
         raise ValueError(f"compression must be one of {', '.join(_EXR_COMPRESSIONS)}, got {compression!r}")
     if strategy not in ZLIB_STRATEGIES or not (isinstance(level, (int, np.integer)) and 0 <= level <= 9):
