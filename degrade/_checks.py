@@ -36,6 +36,14 @@ def finite_scalar(name: str, value, *, positive: bool = False, nonnegative: bool
     return value
 
 
+def fraction(name: str, value) -> float:
+    """Return ``value`` as a Python float in [0, 1], or raise."""
+    value = finite_scalar(name, value, nonnegative=True)
+    if value > 1.0:
+        raise ValueError(f"{name} must be in [0, 1], got {value!r}")
+    return value
+
+
 def integer(name: str, value, lo: int, hi: int) -> int:
     """Return ``value`` as an int in ``[lo, hi]``, or raise."""
     is_int = isinstance(value, (Integral, np.integer)) and not isinstance(value, (bool, np.bool_))

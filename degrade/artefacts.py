@@ -328,9 +328,7 @@ def bloom(electrons, full_well_e: float, spill: float = 1.0) -> np.ndarray:
     """
     e = np.array(electrons, dtype=np.float64)
     fw = _checks.finite_scalar("full_well_e", full_well_e, positive=True)
-    spill = _checks.finite_scalar("spill", spill, nonnegative=True)
-    if spill > 1.0:
-        raise ValueError(f"spill must be in [0, 1], got {spill!r}")
+    spill = _checks.fraction("spill", spill)
     return _bloom(e, fw, spill)
 
 

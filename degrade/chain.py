@@ -279,9 +279,7 @@ def simulate_frame(image_linear, config: DegradeConfig = DegradeConfig(), *, rng
     """
     _checks.instance("config", config, DegradeConfig)
     img = _checks.image("image_linear", image_linear, channels=3)
-    sun_fraction = _checks.finite_scalar("sun_fraction", sun_fraction, nonnegative=True)
-    if sun_fraction > 1.0:
-        raise ValueError(f"sun_fraction must be in [0, 1], got {sun_fraction!r}")
+    sun_fraction = _checks.fraction("sun_fraction", sun_fraction)
     return _simulate_frame(img, config, np.random.default_rng(rng), sun_dir_cam, sun_fraction, camera_seed,
                            image_linear)
 

@@ -134,9 +134,7 @@ def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *
                                wavelengths_m=(WHITE_BALANCE_M,) * 3)
     sun = None if label is None else label.get("sun_dir_cam")
     visible = 1.0 if label is None else float(label.get("shadow_fraction", 1.0))
-    visible = _checks.finite_scalar("sun_fraction", visible, nonnegative=True)
-    if visible > 1.0:
-        raise ValueError(f"sun_fraction must be in [0, 1], got {visible!r}")
+    visible = _checks.fraction("sun_fraction", visible)
     # simulate_frame without re-checking the signal the camera equation just made; the codes
     # straight from the demosaiced image (quantise(simulate_frame(...).image, 8) byte for byte)
     res = _simulate_frame(signal, physical_config(d, cam, motion), rng, sun if visible > 0 else None, visible,
