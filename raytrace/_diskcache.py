@@ -191,6 +191,26 @@ def write(path: str, key: bytes, payload: bytes) -> bool:
     return True
 
 
+def memoised(kind: str, parts: tuple, build, dump, load):
+    """``build()``, or what an earlier process stored for the same ``kind`` and key ``parts``
+    (bytes, :func:`key_digest`): ``load(payload)`` of the entry (None or an exception: unusable,
+    built again); a built value is stored as ``dump(value)``. Without a cache, ``build()``."""
+    key = key_digest(kind, *parts)
+    path = entry_path(kind, key)
+    payload = None if path is None else read(path, key)
+    if payload is not None:
+        try:
+            value = load(payload)
+        except Exception:  # noqa: BLE001 - an entry that does not decode: built again below
+            value = None
+        if value is not None:
+            return value
+    value = build()
+    if path is not None:
+        write(path, key, dump(value))
+    return value
+
+
 def discard(path: str) -> None:
     """Remove the entry at ``path`` (found broken), if it can be."""
     try:

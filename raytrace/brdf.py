@@ -264,15 +264,14 @@ def split_sum_table() -> np.ndarray:
     per machine and code (~0.5 s) and kept in the persistent cache (:mod:`raytrace._diskcache`)."""
     from . import _diskcache
     shape = (_MU_BINS, _MU_BINS, 2)
-    key = _diskcache.key_digest("splitsum", repr((shape, _SPLIT_SUM_SAMPLES, _ALPHA_MIN)).encode())
-    path = _diskcache.entry_path("splitsum", key)
-    payload = None if path is None else _diskcache.read(path, key)
-    if payload is not None and len(payload) == 8 * math.prod(shape):
-        return np.frombuffer(payload, dtype=np.float64).reshape(shape).copy()  # writable, as computed
-    table = _split_sum(_MU_BINS, _MU_BINS, _SPLIT_SUM_SAMPLES)
-    if path is not None:
-        _diskcache.write(path, key, np.ascontiguousarray(table, dtype=np.float64).tobytes())
-    return table
+
+    def load(payload):  # writable, as computed
+        ok = len(payload) == 8 * math.prod(shape)
+        return np.frombuffer(payload, dtype=np.float64).reshape(shape).copy() if ok else None
+
+    return _diskcache.memoised("splitsum", (repr((shape, _SPLIT_SUM_SAMPLES, _ALPHA_MIN)).encode(),),
+                               lambda: _split_sum(_MU_BINS, _MU_BINS, _SPLIT_SUM_SAMPLES),
+                               lambda table: np.ascontiguousarray(table, dtype=np.float64).tobytes(), load)
 
 
 @inline

