@@ -38,6 +38,13 @@ DIRECT_MAX_TAPS = {"shared": 300, "per_channel": 150}
 """Largest number of nonzero taps convolved directly (else FFT), per kernel layout."""
 
 
+@numba.njit(inline="always", cache=True)
+def _four_rows(pad, di, dj, i, t, n):  # pragma: no cover - compiled
+    """The padded rows (n values each) that taps t … t + 3 add into output row i."""
+    return (pad[i + di[t], dj[t]:dj[t] + n], pad[i + di[t + 1], dj[t + 1]:dj[t + 1] + n],
+            pad[i + di[t + 2], dj[t + 2]:dj[t + 2] + n], pad[i + di[t + 3], dj[t + 3]:dj[t + 3] + n])
+
+
 @pjit_exact
 def _convolve_shared(pad, di, dj, w, out):  # pragma: no cover - compiled
     """out[i, k] += Σ_t w[t] · pad[i + di[t], k + dj[t]]  (rows of W·C interleaved values), the
@@ -49,10 +56,7 @@ def _convolve_shared(pad, di, dj, w, out):  # pragma: no cover - compiled
         o = out[i]
         t = 0
         while t + 4 <= nt:
-            a0 = pad[i + di[t], dj[t]:dj[t] + n]
-            a1 = pad[i + di[t + 1], dj[t + 1]:dj[t + 1] + n]
-            a2 = pad[i + di[t + 2], dj[t + 2]:dj[t + 2] + n]
-            a3 = pad[i + di[t + 3], dj[t + 3]:dj[t + 3] + n]
+            a0, a1, a2, a3 = _four_rows(pad, di, dj, i, t, n)
             w0, w1, w2, w3 = w[t], w[t + 1], w[t + 2], w[t + 3]
             for k in range(n):
                 o[k] = (((o[k] + w0 * a0[k]) + w1 * a1[k]) + w2 * a2[k]) + w3 * a3[k]
@@ -78,10 +82,7 @@ def _convolve_interleaved(pad, di, dj, wpat, out):  # pragma: no cover - compile
         o = out[i]
         t = 0
         while t + 4 <= nt:
-            a0 = pad[i + di[t], dj[t]:dj[t] + n]
-            a1 = pad[i + di[t + 1], dj[t + 1]:dj[t + 1] + n]
-            a2 = pad[i + di[t + 2], dj[t + 2]:dj[t + 2] + n]
-            a3 = pad[i + di[t + 3], dj[t + 3]:dj[t + 3] + n]
+            a0, a1, a2, a3 = _four_rows(pad, di, dj, i, t, n)
             w0, w1, w2, w3 = wpat[t], wpat[t + 1], wpat[t + 2], wpat[t + 3]
             for c0 in range(0, full, m):
                 oc = o[c0:c0 + m]
