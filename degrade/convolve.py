@@ -106,6 +106,91 @@ def _convolve_interleaved(pad, di, dj, wpat, out):  # pragma: no cover - compile
             t += 1
 
 
+@numba.njit(inline="always", cache=True)
+def _reflected(k, n, whole):  # pragma: no cover - compiled
+    """Index k of a row or column extended by reflection into [0, n) (n > the overhang):
+    half-sample (``"reflect"``, edge repeated) or, with ``whole``, whole-sample (``"mirror"``)."""
+    if k < 0:
+        return -k - 1 + whole
+    if k >= n:
+        return 2 * n - 1 - k - whole
+    return k
+
+
+@pjit_exact
+def _rggb_planes(img, r1, r2, whole, planes):  # pragma: no cover - compiled
+    """planes[c, q, r, u] = the image extended by reflection (:func:`_reflected`) at row r − r1,
+    column 2u + q − r2, channel c: each channel's padded columns split by parity, so the sites
+    of one colour and column parity read contiguous runs (entries past the padded width: 0)."""
+    h, w = img.shape[0], img.shape[1]
+    hp, nu = planes.shape[2], planes.shape[3]
+    wp = w + 2 * r2
+    lo = (r2 + 1) // 2  # u from lo to hi: columns 2u − r2 and 2u + 1 − r2 both inside the image
+    hi = max(lo, (w + r2 - 1) // 2)
+    for r in numba.prange(hp):
+        src = img[_reflected(r - r1, h, whole)]
+        flat = src.reshape(-1)
+        r00, r10, r20 = planes[0, 0, r], planes[1, 0, r], planes[2, 0, r]
+        r01, r11, r21 = planes[0, 1, r], planes[1, 1, r], planes[2, 1, r]
+        for u in range(lo, hi):
+            b = 6 * u - 3 * r2
+            r00[u], r10[u], r20[u] = flat[b], flat[b + 1], flat[b + 2]
+            r01[u], r11[u], r21[u] = flat[b + 3], flat[b + 4], flat[b + 5]
+        for q in range(2):
+            for u in range(nu):
+                if lo <= u < hi:
+                    continue
+                col = 2 * u + q
+                jc = _reflected(col - r2, w, whole) if col < wp else -1
+                for c in range(3):
+                    planes[c, q, r, u] = src[jc, c] if jc >= 0 else 0.0
+
+
+@numba.njit(inline="always", cache=True)
+def _site_run(planes, c, p, di, dj, i, t, n):  # pragma: no cover - compiled
+    """The n values of channel c that tap t adds into the sites of column parity p of row i."""
+    e = p + dj[t]
+    s = e // 2
+    return planes[c, e % 2, i + di[t], s:s + n]
+
+
+@pjit_exact
+def _convolve_rggb(planes, di, dj, w, out):  # pragma: no cover - compiled
+    """out[i, j] = Σ_t w[t, c]·x[i + di[t] − r1, j + dj[t] − r2, c] with c = i%2 + j%2 (the
+    channel an RGGB photosite keeps), the taps added one by one in their order from 0, in
+    float32: the values of ``_convolve_interleaved`` at those sites (the same sums, the same
+    rounding) for a third of its work. ``planes``: :func:`_rggb_planes`; each row's sites of
+    one column parity are summed in a contiguous buffer, four taps per pass."""
+    height, width = out.shape
+    nt = di.size
+    for i in numba.prange(height):
+        acc = np.empty((width + 1) // 2, np.float32)
+        o = out[i]
+        for p in range(2):
+            c = i % 2 + p
+            n = (width - p + 1) // 2
+            a = acc[:n]
+            a[:] = 0.0
+            t = 0
+            while t + 4 <= nt:
+                a0 = _site_run(planes, c, p, di, dj, i, t, n)
+                a1 = _site_run(planes, c, p, di, dj, i, t + 1, n)
+                a2 = _site_run(planes, c, p, di, dj, i, t + 2, n)
+                a3 = _site_run(planes, c, p, di, dj, i, t + 3, n)
+                w0, w1, w2, w3 = w[t, c], w[t + 1, c], w[t + 2, c], w[t + 3, c]
+                for m in range(n):
+                    a[m] = (((a[m] + w0 * a0[m]) + w1 * a1[m]) + w2 * a2[m]) + w3 * a3[m]
+                t += 4
+            while t < nt:
+                a0 = _site_run(planes, c, p, di, dj, i, t, n)
+                w0 = w[t, c]
+                for m in range(n):
+                    a[m] += w0 * a0[m]
+                t += 1
+            for m in range(n):
+                o[2 * m + p] = a[m]
+
+
 _CHUNK = 192  # values per vectorised chunk of the per-channel kernel (a multiple of 1, 2, 3, 4)
 
 
@@ -182,3 +267,27 @@ def convolve_image(image, kernel, *, mode: str = "reflect", method: str = "auto"
         np.maximum(out, 0.0, out=out)
     out = out[0] if img.ndim == 2 else out.transpose(1, 2, 0)
     return np.ascontiguousarray(out, dtype=np.float32)
+
+
+def _convolve_sites(img: np.ndarray, kernel, mode: str = "reflect") -> np.ndarray | None:
+    """The RGGB mosaic (:func:`degrade.sensor.mosaic_rggb`) of ``convolve_image(img, kernel,
+    mode=mode)`` for a checked H×W×3 float32 ``img``, byte for byte, computing only the
+    channel each photosite keeps (a third of the direct kernel's work, no padded copy of the
+    image); None where ``convolve_image`` would not take the direct path (FFT, a 1×1 kernel)
+    or a side of the image does not exceed the kernel's radius (repeated reflection)."""
+    k, shared = _kernel_stack(kernel, 3)
+    if k.shape[1:] == (1, 1):
+        return None
+    kf = k[:, ::-1, ::-1].reshape(k.shape[0], -1)
+    taps = np.flatnonzero(np.any(kf != 0.0, axis=0))
+    r1, r2 = k.shape[1] // 2, k.shape[2] // 2
+    h, w = img.shape[:2]
+    if taps.size > DIRECT_MAX_TAPS["shared" if shared else "per_channel"] or h <= r1 or w <= r2:
+        return None
+    di, dj = np.divmod(taps, k.shape[2])
+    weights = np.ascontiguousarray(np.broadcast_to(kf[:, taps].T, (taps.size, 3)), dtype=np.float32)
+    planes = np.empty((3, 2, h + 2 * r1, (w + 2 * r2 + 1) // 2), np.float32)
+    _rggb_planes(np.ascontiguousarray(img), r1, r2, int(PAD_MODES[mode] == "reflect"), planes)
+    out = np.empty((h, w), np.float32)
+    _convolve_rggb(planes, di, dj, weights, out)
+    return out

@@ -140,5 +140,5 @@ def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *
     res = _simulate_frame(signal, physical_config(d, cam, motion), rng, sun if visible > 0 else None, visible,
                           camera_seed(d, sequence_seed), codes8=True)
     out = {"rgb_degraded": lambda: res.image, "signal_e": lambda: res.signal_e,
-           "saturation": lambda: np.where(res.saturation, np.uint8(255), np.uint8(0))}
+           "saturation": lambda: np.ascontiguousarray(res.saturation).view(np.uint8) * np.uint8(255)}  # True: 1
     return {w: out[w]() for w in want}
