@@ -45,27 +45,69 @@ def _four_rows(pad, di, dj, i, t, n):  # pragma: no cover - compiled
             pad[i + di[t + 2], dj[t + 2]:dj[t + 2] + n], pad[i + di[t + 3], dj[t + 3]:dj[t + 3] + n])
 
 
+@numba.njit(inline="always", cache=True)
+def _reflected(k, n, whole):  # pragma: no cover - compiled
+    """Index k of a row or column extended by reflection into [0, n) (n > the overhang):
+    half-sample (``"reflect"``, edge repeated) or, with ``whole``, whole-sample (``"mirror"``)."""
+    if k < 0:
+        return -k - 1 + whole
+    if k >= n:
+        return 2 * n - 1 - k - whole
+    return k
+
+
+@numba.njit(inline="always", cache=True)
+def _edge_value(src, k, e, ch, width, whole):  # pragma: no cover - compiled
+    """Value k + e of the row ``src`` (``width`` pixels of ``ch`` values) extended by reflection
+    of whole pixels (:func:`_reflected`), the channel kept."""
+    q = k + e
+    return src[_reflected(q // ch, width, whole) * ch + q % ch]
+
+
 @pjit_exact
-def _convolve_shared(pad, di, dj, w, out):  # pragma: no cover - compiled
-    """out[i, k] += Σ_t w[t] · pad[i + di[t], k + dj[t]]  (rows of W·C interleaved values), the
-    taps added one after the other in their order, four per pass over the row (one load and
-    store of ``out`` per four taps; the same sums, the same rounding)."""
+def _convolve_shared(img, di, dj, w, r1, r2, ch, whole, out):  # pragma: no cover - compiled
+    """out[i, k] += Σ_t w[t] · x[i + di[t] − r1, k + (dj[t] − r2)·ch] (rows of W·C interleaved
+    values; x: ``img`` extended by reflection, :func:`_reflected`, read in place), the taps added
+    one after the other in their order, four per pass over the row (one load and store of
+    ``out`` per four taps; the same sums, the same rounding as on a padded copy). The values
+    whose four taps all fall inside ``img`` run in one vectorised loop, the few at the ends
+    reflect their index. ``img`` may be wider and taller than the output (a padded copy, r1 = r2 = 0)."""
     height, n = out.shape
+    h, ns = img.shape
+    wpx = ns // ch
     nt = di.size
     for i in numba.prange(height):
         o = out[i]
         t = 0
         while t + 4 <= nt:
-            a0, a1, a2, a3 = _four_rows(pad, di, dj, i, t, n)
+            s0, s1 = img[_reflected(i + di[t] - r1, h, whole)], img[_reflected(i + di[t + 1] - r1, h, whole)]
+            s2, s3 = img[_reflected(i + di[t + 2] - r1, h, whole)], img[_reflected(i + di[t + 3] - r1, h, whole)]
+            e0, e1, e2, e3 = (dj[t] - r2) * ch, (dj[t + 1] - r2) * ch, (dj[t + 2] - r2) * ch, (dj[t + 3] - r2) * ch
             w0, w1, w2, w3 = w[t], w[t + 1], w[t + 2], w[t + 3]
-            for k in range(n):
-                o[k] = (((o[k] + w0 * a0[k]) + w1 * a1[k]) + w2 * a2[k]) + w3 * a3[k]
+            lo = max(0, -e0, -e1, -e2, -e3)
+            hi = max(lo, min(n, ns - e0, ns - e1, ns - e2, ns - e3))
+            oc = o[lo:hi]
+            a0, a1, a2, a3 = s0[lo + e0:hi + e0], s1[lo + e1:hi + e1], s2[lo + e2:hi + e2], s3[lo + e3:hi + e3]
+            for k in range(hi - lo):
+                oc[k] = (((oc[k] + w0 * a0[k]) + w1 * a1[k]) + w2 * a2[k]) + w3 * a3[k]
+            for q in range(n - (hi - lo)):  # the ends: [0, lo) and [hi, n)
+                k = q if q < lo else q + (hi - lo)
+                o[k] = ((((o[k] + w0 * _edge_value(s0, k, e0, ch, wpx, whole)) + w1 * _edge_value(s1, k, e1, ch, wpx, whole))
+                         + w2 * _edge_value(s2, k, e2, ch, wpx, whole)) + w3 * _edge_value(s3, k, e3, ch, wpx, whole))
             t += 4
         while t < nt:
-            wt = w[t]
-            a = pad[i + di[t], dj[t]:dj[t] + n]
-            for k in range(n):
-                o[k] += wt * a[k]
+            s0 = img[_reflected(i + di[t] - r1, h, whole)]
+            e0 = (dj[t] - r2) * ch
+            w0 = w[t]
+            lo = max(0, -e0)
+            hi = max(lo, min(n, ns - e0))
+            oc = o[lo:hi]
+            a0 = s0[lo + e0:hi + e0]
+            for k in range(hi - lo):
+                oc[k] += w0 * a0[k]
+            for q in range(n - (hi - lo)):
+                k = q if q < lo else q + (hi - lo)
+                o[k] += w0 * _edge_value(s0, k, e0, ch, wpx, whole)
             t += 1
 
 
@@ -106,17 +148,6 @@ def _convolve_interleaved(pad, di, dj, wpat, out):  # pragma: no cover - compile
             t += 1
 
 
-@numba.njit(inline="always", cache=True)
-def _reflected(k, n, whole):  # pragma: no cover - compiled
-    """Index k of a row or column extended by reflection into [0, n) (n > the overhang):
-    half-sample (``"reflect"``, edge repeated) or, with ``whole``, whole-sample (``"mirror"``)."""
-    if k < 0:
-        return -k - 1 + whole
-    if k >= n:
-        return 2 * n - 1 - k - whole
-    return k
-
-
 @pjit_exact
 def _rggb_planes(img, r1, r2, whole, planes):  # pragma: no cover - compiled
     """planes[c, q, r, u] = the image extended by reflection (:func:`_reflected`) at row r − r1,
@@ -155,35 +186,37 @@ def _site_run(planes, c, p, di, dj, i, t, n):  # pragma: no cover - compiled
 
 
 @pjit_exact
-def _convolve_rggb(planes, di, dj, w, out):  # pragma: no cover - compiled
-    """out[i, j] = Σ_t w[t, c]·x[i + di[t] − r1, j + dj[t] − r2, c] with c = i%2 + j%2 (the
-    channel an RGGB photosite keeps), the taps added one by one in their order from 0, in
-    float32: the values of ``_convolve_interleaved`` at those sites (the same sums, the same
-    rounding) for a third of its work. ``planes``: :func:`_rggb_planes`; each row's sites of
-    one column parity are summed in a contiguous buffer, four taps per pass."""
+def _convolve_rggb(planes, di, dj, w, nt, out):  # pragma: no cover - compiled
+    """out[i, j] = Σ_t w[c, t]·x[i + di[c, t] − r1, j + dj[c, t] − r2, c] with c = i%2 + j%2
+    (the channel an RGGB photosite keeps) over channel c's nt[c] taps, added one by one in
+    their order from 0, in float32: the values of ``_convolve_interleaved`` at those sites (the
+    same sums, the same rounding: the taps it adds with weight 0 for this channel add +0 to a
+    sum that is never −0, and the image is finite) for a third of its work or less.
+    ``planes``: :func:`_rggb_planes`; each row's sites of one column parity are summed in a
+    contiguous buffer, four taps per pass."""
     height, width = out.shape
-    nt = di.size
     for i in numba.prange(height):
         acc = np.empty((width + 1) // 2, np.float32)
         o = out[i]
         for p in range(2):
             c = i % 2 + p
+            dic, djc, wc, ntc = di[c], dj[c], w[c], nt[c]
             n = (width - p + 1) // 2
             a = acc[:n]
             a[:] = 0.0
             t = 0
-            while t + 4 <= nt:
-                a0 = _site_run(planes, c, p, di, dj, i, t, n)
-                a1 = _site_run(planes, c, p, di, dj, i, t + 1, n)
-                a2 = _site_run(planes, c, p, di, dj, i, t + 2, n)
-                a3 = _site_run(planes, c, p, di, dj, i, t + 3, n)
-                w0, w1, w2, w3 = w[t, c], w[t + 1, c], w[t + 2, c], w[t + 3, c]
+            while t + 4 <= ntc:
+                a0 = _site_run(planes, c, p, dic, djc, i, t, n)
+                a1 = _site_run(planes, c, p, dic, djc, i, t + 1, n)
+                a2 = _site_run(planes, c, p, dic, djc, i, t + 2, n)
+                a3 = _site_run(planes, c, p, dic, djc, i, t + 3, n)
+                w0, w1, w2, w3 = wc[t], wc[t + 1], wc[t + 2], wc[t + 3]
                 for m in range(n):
                     a[m] = (((a[m] + w0 * a0[m]) + w1 * a1[m]) + w2 * a2[m]) + w3 * a3[m]
                 t += 4
-            while t < nt:
-                a0 = _site_run(planes, c, p, di, dj, i, t, n)
-                w0 = w[t, c]
+            while t < ntc:
+                a0 = _site_run(planes, c, p, dic, djc, i, t, n)
+                w0 = wc[t]
                 for m in range(n):
                     a[m] += w0 * a0[m]
                 t += 1
@@ -247,11 +280,16 @@ def convolve_image(image, kernel, *, mode: str = "reflect", method: str = "auto"
     if method == "direct":
         di, dj = np.divmod(taps, k.shape[2])
         weights = np.ascontiguousarray(kf[:, taps].T, dtype=np.float32)  # (T, 1 or C)
+        out = np.zeros((h, w * channels), np.float32)
+        if shared and h > r1 and w > r2:  # the border reflected in the kernel (one reflection)
+            whole = int(pad_mode == "reflect")
+            _convolve_shared(np.ascontiguousarray(img).reshape(h, -1), di, dj, weights[:, 0].copy(), r1, r2, channels,
+                             whole, out)
+            return out.reshape(img.shape)
         pad = np.pad(img.reshape(h, w, channels), ((r1, r1), (r2, r2), (0, 0)), mode=pad_mode)
         pad = pad.reshape(h + 2 * r1, -1)  # rows of (W + 2 r2)·C interleaved values
-        out = np.zeros((h, w * channels), np.float32)
         if shared:
-            _convolve_shared(pad, di, dj * channels, weights[:, 0].copy(), out)
+            _convolve_shared(pad, di, dj, weights[:, 0].copy(), 0, 0, channels, 0, out)
         else:
             _convolve_interleaved(pad, di, dj * channels, np.tile(weights, (1, _CHUNK // channels)), out)
         return out.reshape(img.shape)
@@ -284,10 +322,16 @@ def _convolve_sites(img: np.ndarray, kernel, mode: str = "reflect") -> np.ndarra
     h, w = img.shape[:2]
     if taps.size > DIRECT_MAX_TAPS["shared" if shared else "per_channel"] or h <= r1 or w <= r2:
         return None
-    di, dj = np.divmod(taps, k.shape[2])
-    weights = np.ascontiguousarray(np.broadcast_to(kf[:, taps].T, (taps.size, 3)), dtype=np.float32)
+    weights = np.broadcast_to(kf[:, taps], (3, taps.size)).astype(np.float32)
+    nt = np.count_nonzero(weights, axis=1)
+    di, dj = np.zeros((3, taps.size), np.int64), np.zeros((3, taps.size), np.int64)
+    w3 = np.zeros((3, taps.size), np.float32)
+    for c in range(3):  # each channel's nonzero taps, in the order of ``taps``
+        keep = weights[c] != 0.0
+        di[c, :nt[c]], dj[c, :nt[c]] = np.divmod(taps[keep], k.shape[2])
+        w3[c, :nt[c]] = weights[c, keep]
     planes = np.empty((3, 2, h + 2 * r1, (w + 2 * r2 + 1) // 2), np.float32)
     _rggb_planes(np.ascontiguousarray(img), r1, r2, int(PAD_MODES[mode] == "reflect"), planes)
     out = np.empty((h, w), np.float32)
-    _convolve_rggb(planes, di, dj, weights, out)
+    _convolve_rggb(planes, di, dj, w3, nt.astype(np.int64), out)
     return out
