@@ -31,9 +31,7 @@ hits all methods alike); wall time and process CPU time (all threads) where it h
    ``degrade_base`` and run on the same inputs, interleaved (the order alternating), every
    output compared byte for byte; medians and ratios new/base of the process CPU time, the
    main thread's CPU time (everything but the random draws, which run on the pool's threads)
-   and wall time. Both packages run in one process, so process-wide settings (the heap policy
-   of ``degrade._memory``) apply to both: compare whole processes for those (``--frames 6``
-   in two runs, one with ``ORBITSYNTH_KEEP_HEAP=0``).
+   and wall time.
 """
 
 from __future__ import annotations
@@ -356,8 +354,7 @@ def main(argv=None) -> int:
         table = main_job_table(repeats, args.base, args.frames)
         print(f"The main job's frames (cassini spiral, 1280×960), one numba thread; {os.cpu_count()} cores "
               f"({platform.machine()}), 1-minute load average {load:.1f} at the start, "
-              f"{os.getloadavg()[0]:.1f} at the end; heap kept between frames (degrade._memory): "
-              f"{'no' if os.environ.get('ORBITSYNTH_KEEP_HEAP') == '0' else 'yes'}.")
+              f"{os.getloadavg()[0]:.1f} at the end.")
         print(f"Command: `python benchmarks/bench_degrade.py --main-job"
               f"{' --base ' + str(args.base) if args.base else ''} --frames {args.frames}"
               f"{' --quick' if args.quick else ' --repeats ' + str(repeats)}`\n")

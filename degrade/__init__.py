@@ -19,14 +19,7 @@ chain      ``OpticsConfig``, ``DegradeConfig``, ``degrade`` and ``simulate_frame
            chain in one call.
 paper      The paper's groups D1–D4, bit-identical to ``skimage.util.random_noise``.
 ablation   PSNR/SSIM(/LPIPS) cost of each paper group and physical stage, and a text table.
-
-Importing ``degrade`` keeps freed heap memory for the next frame on glibc (``_memory``:
-no page faults and zero-fills for each frame's large arrays; ``ORBITSYNTH_KEEP_HEAP=0`` off).
 """
-
-from ._memory import keep_freed_memory
-
-keep_freed_memory()
 
 from .ablation import (
     PHYSICAL_STAGES,

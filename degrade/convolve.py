@@ -14,8 +14,11 @@ Both methods compute the same true convolution (the kernel is flipped, as in
 float32 frame on a 2-core machine (``benchmarks/bench_degrade.py``, BENCHMARKS.md):
 the direct kernel's cost grows with the tap count, the FFT's hardly depends on the kernel
 size, so direct wins up to ``DIRECT_MAX_TAPS`` taps. The direct kernel works on the
-interleaved rows (W·C values) without transposing; per-channel weights are laid out as a
-repeating pattern so the inner loop still vectorises. Composite optical PSFs (Airy ⊛ defocus ⊛ motion) are not
+interleaved rows (W·C values) without transposing; one kernel for all channels reads the image
+in place, the border reflected inside the kernel (no padded copy); per-channel weights are
+laid out as a repeating pattern so the inner loop still vectorises (on a padded copy). For the
+physical chain, ``_convolve_sites`` gives the RGGB mosaic of the direct convolution, summing
+only the channel each photosite keeps (the same bits). Composite optical PSFs (Airy ⊛ defocus ⊛ motion) are not
 separable, so no separable path is offered. The choice never depends on the machine, so a
 given input always takes the same code path (byte-reproducible output).
 """
