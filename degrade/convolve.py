@@ -14,11 +14,11 @@ Both methods compute the same true convolution (the kernel is flipped, as in
 float32 frame on a 2-core machine (``benchmarks/bench_degrade.py``, BENCHMARKS.md):
 the direct kernel's cost grows with the tap count, the FFT's hardly depends on the kernel
 size, so direct wins up to ``DIRECT_MAX_TAPS`` taps. The direct kernel works on the
-interleaved rows (W·C values) without transposing; one kernel for all channels reads the image
-in place, the border reflected inside the kernel (no padded copy); per-channel weights are
-laid out as a repeating pattern so the inner loop still vectorises (on a padded copy). For the
-physical chain, ``_convolve_sites`` gives the RGGB mosaic of the direct convolution, summing
-only the channel each photosite keeps (the same bits). Composite optical PSFs (Airy ⊛ defocus ⊛ motion) are not
+interleaved rows (W·C values) of a padded copy without transposing; per-channel weights are
+laid out as a repeating pattern so the inner loop still vectorises. For the physical chain,
+``_convolve_sites`` gives the RGGB mosaic of the direct convolution without a padded copy,
+summing only the channel each photosite keeps (the same bits). Composite optical PSFs
+(Airy ⊛ defocus ⊛ motion) are not
 separable, so no separable path is offered. The choice never depends on the machine, so a
 given input always takes the same code path (byte-reproducible output).
 """
@@ -59,58 +59,27 @@ def _reflected(k, n, whole):  # pragma: no cover - compiled
     return k
 
 
-@numba.njit(inline="always", cache=True)
-def _edge_value(src, k, e, ch, width, whole):  # pragma: no cover - compiled
-    """Value k + e of the row ``src`` (``width`` pixels of ``ch`` values) extended by reflection
-    of whole pixels (:func:`_reflected`), the channel kept."""
-    q = k + e
-    return src[_reflected(q // ch, width, whole) * ch + q % ch]
-
-
 @pjit_exact
-def _convolve_shared(img, di, dj, w, r1, r2, ch, whole, out):  # pragma: no cover - compiled
-    """out[i, k] += Σ_t w[t] · x[i + di[t] − r1, k + (dj[t] − r2)·ch] (rows of W·C interleaved
-    values; x: ``img`` extended by reflection, :func:`_reflected`, read in place), the taps added
-    one after the other in their order, four per pass over the row (one load and store of
-    ``out`` per four taps; the same sums, the same rounding as on a padded copy). The values
-    whose four taps all fall inside ``img`` run in one vectorised loop, the few at the ends
-    reflect their index. ``img`` may be wider and taller than the output (a padded copy, r1 = r2 = 0)."""
+def _convolve_shared(pad, di, dj, w, out):  # pragma: no cover - compiled
+    """out[i, k] += Σ_t w[t] · pad[i + di[t], k + dj[t]]  (rows of W·C interleaved values), the
+    taps added one after the other in their order, four per pass over the row (one load and
+    store of ``out`` per four taps; the same sums, the same rounding)."""
     height, n = out.shape
-    h, ns = img.shape
-    wpx = ns // ch
     nt = di.size
     for i in numba.prange(height):
         o = out[i]
         t = 0
         while t + 4 <= nt:
-            s0, s1 = img[_reflected(i + di[t] - r1, h, whole)], img[_reflected(i + di[t + 1] - r1, h, whole)]
-            s2, s3 = img[_reflected(i + di[t + 2] - r1, h, whole)], img[_reflected(i + di[t + 3] - r1, h, whole)]
-            e0, e1, e2, e3 = (dj[t] - r2) * ch, (dj[t + 1] - r2) * ch, (dj[t + 2] - r2) * ch, (dj[t + 3] - r2) * ch
+            a0, a1, a2, a3 = _four_rows(pad, di, dj, i, t, n)
             w0, w1, w2, w3 = w[t], w[t + 1], w[t + 2], w[t + 3]
-            lo = max(0, -e0, -e1, -e2, -e3)
-            hi = max(lo, min(n, ns - e0, ns - e1, ns - e2, ns - e3))
-            oc = o[lo:hi]
-            a0, a1, a2, a3 = s0[lo + e0:hi + e0], s1[lo + e1:hi + e1], s2[lo + e2:hi + e2], s3[lo + e3:hi + e3]
-            for k in range(hi - lo):
-                oc[k] = (((oc[k] + w0 * a0[k]) + w1 * a1[k]) + w2 * a2[k]) + w3 * a3[k]
-            for q in range(n - (hi - lo)):  # the ends: [0, lo) and [hi, n)
-                k = q if q < lo else q + (hi - lo)
-                o[k] = ((((o[k] + w0 * _edge_value(s0, k, e0, ch, wpx, whole)) + w1 * _edge_value(s1, k, e1, ch, wpx, whole))
-                         + w2 * _edge_value(s2, k, e2, ch, wpx, whole)) + w3 * _edge_value(s3, k, e3, ch, wpx, whole))
+            for k in range(n):
+                o[k] = (((o[k] + w0 * a0[k]) + w1 * a1[k]) + w2 * a2[k]) + w3 * a3[k]
             t += 4
         while t < nt:
-            s0 = img[_reflected(i + di[t] - r1, h, whole)]
-            e0 = (dj[t] - r2) * ch
-            w0 = w[t]
-            lo = max(0, -e0)
-            hi = max(lo, min(n, ns - e0))
-            oc = o[lo:hi]
-            a0 = s0[lo + e0:hi + e0]
-            for k in range(hi - lo):
-                oc[k] += w0 * a0[k]
-            for q in range(n - (hi - lo)):
-                k = q if q < lo else q + (hi - lo)
-                o[k] += w0 * _edge_value(s0, k, e0, ch, wpx, whole)
+            wt = w[t]
+            a = pad[i + di[t], dj[t]:dj[t] + n]
+            for k in range(n):
+                o[k] += wt * a[k]
             t += 1
 
 
@@ -283,16 +252,11 @@ def convolve_image(image, kernel, *, mode: str = "reflect", method: str = "auto"
     if method == "direct":
         di, dj = np.divmod(taps, k.shape[2])
         weights = np.ascontiguousarray(kf[:, taps].T, dtype=np.float32)  # (T, 1 or C)
-        out = np.zeros((h, w * channels), np.float32)
-        if shared and h > r1 and w > r2:  # the border reflected in the kernel (one reflection)
-            whole = int(pad_mode == "reflect")
-            _convolve_shared(np.ascontiguousarray(img).reshape(h, -1), di, dj, weights[:, 0].copy(), r1, r2, channels,
-                             whole, out)
-            return out.reshape(img.shape)
         pad = np.pad(img.reshape(h, w, channels), ((r1, r1), (r2, r2), (0, 0)), mode=pad_mode)
         pad = pad.reshape(h + 2 * r1, -1)  # rows of (W + 2 r2)·C interleaved values
+        out = np.zeros((h, w * channels), np.float32)
         if shared:
-            _convolve_shared(pad, di, dj, weights[:, 0].copy(), 0, 0, channels, 0, out)
+            _convolve_shared(pad, di, dj * channels, weights[:, 0].copy(), out)
         else:
             _convolve_interleaved(pad, di, dj * channels, np.tile(weights, (1, _CHUNK // channels)), out)
         return out.reshape(img.shape)
