@@ -48,17 +48,6 @@ def _four_rows(pad, di, dj, i, t, n):  # pragma: no cover - compiled
             pad[i + di[t + 2], dj[t + 2]:dj[t + 2] + n], pad[i + di[t + 3], dj[t + 3]:dj[t + 3] + n])
 
 
-@numba.njit(inline="always", cache=True)
-def _reflected(k, n, whole):  # pragma: no cover - compiled
-    """Index k of a row or column extended by reflection into [0, n) (n > the overhang):
-    half-sample (``"reflect"``, edge repeated) or, with ``whole``, whole-sample (``"mirror"``)."""
-    if k < 0:
-        return -k - 1 + whole
-    if k >= n:
-        return 2 * n - 1 - k - whole
-    return k
-
-
 @pjit_exact
 def _convolve_shared(pad, di, dj, w, out):  # pragma: no cover - compiled
     """out[i, k] += Σ_t w[t] · pad[i + di[t], k + dj[t]]  (rows of W·C interleaved values), the
@@ -120,35 +109,6 @@ def _convolve_interleaved(pad, di, dj, wpat, out):  # pragma: no cover - compile
             t += 1
 
 
-@pjit_exact
-def _rggb_planes(img, r1, r2, whole, planes):  # pragma: no cover - compiled
-    """planes[c, q, r, u] = the image extended by reflection (:func:`_reflected`) at row r − r1,
-    column 2u + q − r2, channel c: each channel's padded columns split by parity, so the sites
-    of one colour and column parity read contiguous runs (entries past the padded width: 0)."""
-    h, w = img.shape[0], img.shape[1]
-    hp, nu = planes.shape[2], planes.shape[3]
-    wp = w + 2 * r2
-    lo = (r2 + 1) // 2  # u from lo to hi: columns 2u − r2 and 2u + 1 − r2 both inside the image
-    hi = max(lo, (w + r2 - 1) // 2)
-    for r in numba.prange(hp):
-        src = img[_reflected(r - r1, h, whole)]
-        flat = src.reshape(-1)
-        r00, r10, r20 = planes[0, 0, r], planes[1, 0, r], planes[2, 0, r]
-        r01, r11, r21 = planes[0, 1, r], planes[1, 1, r], planes[2, 1, r]
-        for u in range(lo, hi):
-            b = 6 * u - 3 * r2
-            r00[u], r10[u], r20[u] = flat[b], flat[b + 1], flat[b + 2]
-            r01[u], r11[u], r21[u] = flat[b + 3], flat[b + 4], flat[b + 5]
-        for q in range(2):
-            for u in range(nu):
-                if lo <= u < hi:
-                    continue
-                col = 2 * u + q
-                jc = _reflected(col - r2, w, whole) if col < wp else -1
-                for c in range(3):
-                    planes[c, q, r, u] = src[jc, c] if jc >= 0 else 0.0
-
-
 @numba.njit(inline="always", cache=True)
 def _site_run(planes, c, p, di, dj, i, t, n):  # pragma: no cover - compiled
     """The n values of channel c that tap t adds into the sites of column parity p of row i."""
@@ -164,7 +124,7 @@ def _convolve_rggb(planes, di, dj, w, nt, out):  # pragma: no cover - compiled
     their order from 0, in float32: the values of ``_convolve_interleaved`` at those sites (the
     same sums, the same rounding: the taps it adds with weight 0 for this channel add +0 to a
     sum that is never −0, and the image is finite) for a third of its work or less.
-    ``planes``: :func:`_rggb_planes`; each row's sites of one column parity are summed in a
+    ``planes``: :func:`_site_planes`; each row's sites of one column parity are summed in a
     contiguous buffer, four taps per pass."""
     height, width = out.shape
     for i in numba.prange(height):
@@ -274,6 +234,33 @@ def convolve_image(image, kernel, *, mode: str = "reflect", method: str = "auto"
     return np.ascontiguousarray(out, dtype=np.float32)
 
 
+def _reflected(k: int, n: int, whole: int) -> int:
+    """Index k of a row or column extended by one reflection into [0, n): half-sample
+    (``"reflect"``, edge repeated) or, with ``whole``, whole-sample (``"mirror"``)."""
+    return -k - 1 + whole if k < 0 else 2 * n - 1 - k - whole if k >= n else k
+
+
+def _site_planes(img: np.ndarray, r1: int, r2: int, whole: int) -> np.ndarray:
+    """planes[c, q, r, u] = the H×W×3 ``img`` extended by reflection (:func:`_reflected`; H > r1,
+    W > r2) at row r − r1, column 2u + q − r2, channel c (0 past the padded width): each channel's
+    padded columns split by parity, so the sites of one colour and column parity read contiguous
+    runs. Strided copies of the image; the border columns and rows copied from their mirror."""
+    h, w = img.shape[:2]
+    wp = w + 2 * r2
+    nu = (wp + 1) // 2
+    planes = np.empty((3, 2, h + 2 * r1, nu), np.float32)
+    inside = planes[:, :, r1:r1 + h]
+    for q in range(2):
+        lo, hi = (r2 - q + 1) // 2, (w + r2 - q + 1) // 2  # u of the columns 2u + q − r2 in [0, W)
+        inside[:, q, :, lo:hi] = img[:, 2 * lo + q - r2:2 * hi + q - r2:2].transpose(2, 0, 1)
+        for u in (*range(lo), *range(hi, nu)):
+            col = 2 * u + q
+            inside[:, q, :, u] = img[:, _reflected(col - r2, w, whole)].T if col < wp else 0.0
+    for r in (*range(r1), *range(r1 + h, h + 2 * r1)):
+        planes[:, :, r] = inside[:, :, _reflected(r - r1, h, whole)]
+    return planes
+
+
 def _convolve_sites(img: np.ndarray, kernel, mode: str = "reflect") -> np.ndarray | None:
     """The RGGB mosaic (:func:`degrade.sensor.mosaic_rggb`) of ``convolve_image(img, kernel,
     mode=mode)`` for a checked H×W×3 float32 ``img``, byte for byte, computing only the
@@ -297,8 +284,7 @@ def _convolve_sites(img: np.ndarray, kernel, mode: str = "reflect") -> np.ndarra
         keep = weights[c] != 0.0
         di[c, :nt[c]], dj[c, :nt[c]] = np.divmod(taps[keep], k.shape[2])
         w3[c, :nt[c]] = weights[c, keep]
-    planes = np.empty((3, 2, h + 2 * r1, (w + 2 * r2 + 1) // 2), np.float32)
-    _rggb_planes(np.ascontiguousarray(img), r1, r2, int(PAD_MODES[mode] == "reflect"), planes)
+    planes = _site_planes(img, r1, r2, int(PAD_MODES[mode] == "reflect"))
     out = np.empty((h, w), np.float32)
     _convolve_rggb(planes, di, dj, w3, nt.astype(np.int64), out)
     return out
