@@ -17,7 +17,10 @@ Per frame the process CPU seconds of ``shade.render`` and of the anti-aliasing's
 mirror rays, Earth along the misses) and ``_supersample`` (their shading). Prints per checkout
 the median over frames and rounds, the ratio of the medians (this / other), the median of the
 per-frame ratios of the three stages' sum per target, and whether the radiance and the ``rgb``, ``mask``,
-``depth`` and ``normal`` images of every frame are the same bytes in both checkouts.
+``depth`` and ``normal`` images of every frame are the same bytes in both checkouts. Run it once
+after editing a kernel before reading that last line: a fastmath kernel compiled in the process
+can round differently from its cached build (raytrace/_jit.py), so a checkout's first run after
+an edit may differ from every later one.
 """
 
 from __future__ import annotations
