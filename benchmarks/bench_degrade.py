@@ -29,7 +29,9 @@ hits all methods alike); wall time and process CPU time (all threads) where it h
    (``encode_srgb8``). With ``--base DIR`` (a checkout of another commit, e.g.
    ``git worktree add /tmp/base 84ef6eb``) its ``degrade`` package is loaded alongside as
    ``degrade_base`` and run on the same inputs, interleaved (the order alternating), every
-   output compared byte for byte; medians and ratios new/base.
+   output compared byte for byte; medians and ratios new/base of the process CPU time, the
+   main thread's CPU time (everything but the random draws, which run on the pool's threads)
+   and wall time.
 """
 
 from __future__ import annotations
@@ -312,23 +314,27 @@ def main_job_table(repeats: int, base: Path | None, n_frames: int) -> list[str]:
             if "base" in outs:
                 differ[t] += sum(not np.array_equal(outs["new"][k], outs["base"][k]) or
                                  outs["new"][k].dtype != outs["base"][k].dtype for k in outs["new"])
-    times = {(w, t): [] for w in impl for t in tasks}
+    times = {(w, t, c): [] for w in impl for t in tasks for c in ("cpu", "main", "wall")}
     for r in range(repeats):
         for i, f in enumerate(inputs):
             for t in tasks:
                 order = list(impl) if (r + i) % 2 == 0 else list(impl)[::-1]
                 for w in order:
-                    t0 = time.perf_counter()
+                    t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
                     run(w, t, f)
-                    times[w, t].append(time.perf_counter() - t0)
+                    times[w, t, "main"].append(time.thread_time() - m0)
+                    times[w, t, "cpu"].append(time.process_time() - c0)
+                    times[w, t, "wall"].append(time.perf_counter() - t0)
+    clocks = {"cpu": "process CPU", "main": "main thread CPU (not the pool's random draws)", "wall": "wall"}
     lines = ["| per frame, median [ms] | " + " | ".join(impl) + (" | new/base | outputs equal |" if base else " |"),
              "|---|" + "---:|" * len(impl) + ("---:|---|" if base else "")]
     for t in tasks:
-        med = {w: statistics.median(times[w, t]) for w in impl}
-        row = f"| {t} | " + " | ".join(f"{1e3 * med[w]:.1f}" for w in impl)
-        if base is not None:
-            row += f" | {med['new'] / med['base']:.2f} | {'yes' if differ[t] == 0 else f'NO ({differ[t]} arrays differ)'}"
-        lines.append(row + " |")
+        for c, label in clocks.items():
+            med = {w: statistics.median(times[w, t, c]) for w in impl}
+            row = f"| {t}, {label} | " + " | ".join(f"{1e3 * med[w]:.1f}" for w in impl)
+            if base is not None:
+                row += f" | {med['new'] / med['base']:.2f} | {'yes' if differ[t] == 0 else f'NO ({differ[t]} arrays differ)'}"
+            lines.append(row + " |")
     lines.append(f"\nframes {[f['frame'] for f in inputs]} of the main job, {repeats} rounds each.")
     return lines
 

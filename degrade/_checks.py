@@ -78,7 +78,7 @@ def one_of(name: str, value, allowed):
 
 
 def image(name: str, value, *, ndim: tuple[int, ...] = (2, 3), channels: int | None = None,
-          max_value: float | None = None, keep_float64: bool = False) -> np.ndarray:
+          max_value: float | None = None, keep_float64: bool = False, values: bool = True) -> np.ndarray:
     """Return ``value`` as a C-contiguous float32 image after checking it.
 
     Parameters
@@ -96,6 +96,10 @@ def image(name: str, value, *, ndim: tuple[int, ...] = (2, 3), channels: int | N
     keep_float64 : bool
         Return float64 input as float64 (for functions that must reproduce another
         library's float64 arithmetic bit for bit).
+    values : bool
+        Check the values (finite, ≥ 0, ≤ ``max_value``). False: only type and shape, for a
+        caller whose kernel scans the values on its way and calls again with True when it
+        found a bad one (that call raises the message of the bad value).
     """
     arr = np.asarray(value)
     if not np.issubdtype(arr.dtype, np.floating):
@@ -110,6 +114,8 @@ def image(name: str, value, *, ndim: tuple[int, ...] = (2, 3), channels: int | N
         raise ValueError(f"{name} must not be empty, got shape {arr.shape}")
     keep = keep_float64 and arr.dtype == np.float64
     arr = np.ascontiguousarray(arr, dtype=np.float64 if keep else np.float32)
+    if not values:
+        return arr
     lo, hi = float(arr.min()), float(arr.max())
     if not (math.isfinite(lo) and math.isfinite(hi)):
         bad = int(arr.size - np.count_nonzero(np.isfinite(arr)))

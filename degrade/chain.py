@@ -220,6 +220,26 @@ def _apply_optics(img: np.ndarray, optics: OpticsConfig) -> np.ndarray:
     return centre
 
 
+def _optics_sites(img: np.ndarray, optics: OpticsConfig) -> np.ndarray:
+    """``_mosaic(_apply_optics(img, optics))`` of an H×W×3 image, byte for byte: where the
+    direct convolution applies, only the channel each RGGB photosite keeps is convolved
+    (:func:`degrade.convolve._convolve_sites`), and the corner blend is taken at the sites."""
+    from .convolve import _convolve_sites
+    from .sensor import _mosaic
+    centre = _convolve_sites(img, optics_psf(optics, 3))
+    if centre is None:
+        return _mosaic(_apply_optics(img, optics))
+    if optics.corner_sigma_px is None:
+        return centre
+    corner = _convolve_sites(img, optics_psf(optics, 3, corner=True))
+    if corner is None:
+        return _mosaic(_apply_optics(img, optics))
+    corner -= centre
+    corner *= _radius2_weight(*img.shape[:2])[:, :, 0]
+    centre += corner
+    return centre
+
+
 class FrameOutput(NamedTuple):
     """What :func:`simulate_frame` returns (one simulation, one set of random draws)."""
 
@@ -291,7 +311,7 @@ def _simulate_frame(img: np.ndarray, config: DegradeConfig, rng, sun_dir_cam, su
     its uint8 codes, ``quantise(simulate_frame(...).image, 8)`` byte for byte, without the
     float levels in between."""
     signal_e = saturation = None
-    if config.optics is not None:
+    if config.optics is not None and config.artefacts is None:  # with artefacts: in _sensor_with_artefacts
         img = _apply_optics(img, config.optics)
     jpeg = config.artefacts.jpeg_quality if config.artefacts is not None else 0
     if config.artefacts is not None:
@@ -317,8 +337,9 @@ def _simulate_frame(img: np.ndarray, config: DegradeConfig, rng, sun_dir_cam, su
 
 def _sensor_with_artefacts(img: np.ndarray, config: DegradeConfig, sun_dir_cam, sun_fraction, camera_seed, rng,
                            clip: bool = True):
-    """(demosaiced DN/(2^b − 1), signal_e, saturation) of the chain with artefacts; ``clip``:
-    the demosaiced image clipped to [0, 1] (the 8-bit encoder clips by itself)."""
+    """(demosaiced DN/(2^b − 1), signal_e, saturation) of the chain with artefacts from the
+    optics on (``img``: the linear image before the optics); ``clip``: the demosaiced image
+    clipped to [0, 1] (the 8-bit encoder clips by itself)."""
     from .artefacts import (
         SOLAR_IRRADIANCE_W_M2,
         camera_maps,
@@ -342,11 +363,11 @@ def _sensor_with_artefacts(img: np.ndarray, config: DegradeConfig, sun_dir_cam, 
     if c.demosaic is not None and img.ndim == 2:
         raise ValueError("image_linear is H×W (monochrome): it needs config.sensor.demosaic=None, "
                          f"got demosaic={c.demosaic!r}")
-    if c.demosaic is not None and art.smear_fraction == 0.0:  # mosaic, illumination and mean in one pass
+    if c.demosaic is not None and art.smear_fraction == 0.0:  # optics at the sites; illumination and mean in one pass
         maps = camera_maps((h, w), art, camera_seed)
-        signal_e, dn = _signal_e_rggb(np.ascontiguousarray(img, dtype=np.float32), vig, e, c, art, maps, rng)
+        signal_e, dn = _signal_e_rggb(_optics_sites(img, optics), vig, e, c, art, maps, rng)
     else:
-        img = np.array(img, dtype=np.float32)  # the optics may have returned the caller's array
+        img = np.array(_apply_optics(img, optics), dtype=np.float32)  # may be the caller's array
         if vig is not None:
             img *= vig if img.ndim == 2 else vig[:, :, None]
         if e is not None:

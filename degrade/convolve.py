@@ -14,8 +14,11 @@ Both methods compute the same true convolution (the kernel is flipped, as in
 float32 frame on a 2-core machine (``benchmarks/bench_degrade.py``, BENCHMARKS.md):
 the direct kernel's cost grows with the tap count, the FFT's hardly depends on the kernel
 size, so direct wins up to ``DIRECT_MAX_TAPS`` taps. The direct kernel works on the
-interleaved rows (W·C values) without transposing; per-channel weights are laid out as a
-repeating pattern so the inner loop still vectorises. Composite optical PSFs (Airy ⊛ defocus ⊛ motion) are not
+interleaved rows (W·C values) of a padded copy without transposing; per-channel weights are
+laid out as a repeating pattern so the inner loop still vectorises. For the physical chain,
+``_convolve_sites`` gives the RGGB mosaic of the direct convolution without a padded copy,
+summing only the channel each photosite keeps (the same bits). Composite optical PSFs
+(Airy ⊛ defocus ⊛ motion) are not
 separable, so no separable path is offered. The choice never depends on the machine, so a
 given input always takes the same code path (byte-reproducible output).
 """
@@ -106,6 +109,53 @@ def _convolve_interleaved(pad, di, dj, wpat, out):  # pragma: no cover - compile
             t += 1
 
 
+@numba.njit(inline="always", cache=True)
+def _site_run(planes, c, p, di, dj, i, t, n):  # pragma: no cover - compiled
+    """The n values of channel c that tap t adds into the sites of column parity p of row i."""
+    e = p + dj[t]
+    s = e // 2
+    return planes[c, e % 2, i + di[t], s:s + n]
+
+
+@pjit_exact
+def _convolve_rggb(planes, di, dj, w, nt, out):  # pragma: no cover - compiled
+    """out[i, j] = Σ_t w[c, t]·x[i + di[c, t] − r1, j + dj[c, t] − r2, c] with c = i%2 + j%2
+    (the channel an RGGB photosite keeps) over channel c's nt[c] taps, added one by one in
+    their order from 0, in float32: the values of ``_convolve_interleaved`` at those sites (the
+    same sums, the same rounding: the taps it adds with weight 0 for this channel add +0 to a
+    sum that is never −0, and the image is finite) for a third of its work or less.
+    ``planes``: :func:`_site_planes`; each row's sites of one column parity are summed in a
+    contiguous buffer, four taps per pass."""
+    height, width = out.shape
+    for i in numba.prange(height):
+        acc = np.empty((width + 1) // 2, np.float32)
+        o = out[i]
+        for p in range(2):
+            c = i % 2 + p
+            dic, djc, wc, ntc = di[c], dj[c], w[c], nt[c]
+            n = (width - p + 1) // 2
+            a = acc[:n]
+            a[:] = 0.0
+            t = 0
+            while t + 4 <= ntc:
+                a0 = _site_run(planes, c, p, dic, djc, i, t, n)
+                a1 = _site_run(planes, c, p, dic, djc, i, t + 1, n)
+                a2 = _site_run(planes, c, p, dic, djc, i, t + 2, n)
+                a3 = _site_run(planes, c, p, dic, djc, i, t + 3, n)
+                w0, w1, w2, w3 = wc[t], wc[t + 1], wc[t + 2], wc[t + 3]
+                for m in range(n):
+                    a[m] = (((a[m] + w0 * a0[m]) + w1 * a1[m]) + w2 * a2[m]) + w3 * a3[m]
+                t += 4
+            while t < ntc:
+                a0 = _site_run(planes, c, p, dic, djc, i, t, n)
+                w0 = wc[t]
+                for m in range(n):
+                    a[m] += w0 * a0[m]
+                t += 1
+            for m in range(n):
+                o[2 * m + p] = a[m]
+
+
 _CHUNK = 192  # values per vectorised chunk of the per-channel kernel (a multiple of 1, 2, 3, 4)
 
 
@@ -182,3 +232,59 @@ def convolve_image(image, kernel, *, mode: str = "reflect", method: str = "auto"
         np.maximum(out, 0.0, out=out)
     out = out[0] if img.ndim == 2 else out.transpose(1, 2, 0)
     return np.ascontiguousarray(out, dtype=np.float32)
+
+
+def _reflected(k: int, n: int, whole: int) -> int:
+    """Index k of a row or column extended by one reflection into [0, n): half-sample
+    (``"reflect"``, edge repeated) or, with ``whole``, whole-sample (``"mirror"``)."""
+    return -k - 1 + whole if k < 0 else 2 * n - 1 - k - whole if k >= n else k
+
+
+def _site_planes(img: np.ndarray, r1: int, r2: int, whole: int) -> np.ndarray:
+    """planes[c, q, r, u] = the H×W×3 ``img`` extended by reflection (:func:`_reflected`; H > r1,
+    W > r2) at row r − r1, column 2u + q − r2, channel c (0 past the padded width): each channel's
+    padded columns split by parity, so the sites of one colour and column parity read contiguous
+    runs. Strided copies of the image; the border columns and rows copied from their mirror."""
+    h, w = img.shape[:2]
+    wp = w + 2 * r2
+    nu = (wp + 1) // 2
+    planes = np.empty((3, 2, h + 2 * r1, nu), np.float32)
+    inside = planes[:, :, r1:r1 + h]
+    for q in range(2):
+        lo, hi = (r2 - q + 1) // 2, (w + r2 - q + 1) // 2  # u of the columns 2u + q − r2 in [0, W)
+        inside[:, q, :, lo:hi] = img[:, 2 * lo + q - r2:2 * hi + q - r2:2].transpose(2, 0, 1)
+        for u in (*range(lo), *range(hi, nu)):
+            col = 2 * u + q
+            inside[:, q, :, u] = img[:, _reflected(col - r2, w, whole)].T if col < wp else 0.0
+    for r in (*range(r1), *range(r1 + h, h + 2 * r1)):
+        planes[:, :, r] = inside[:, :, _reflected(r - r1, h, whole)]
+    return planes
+
+
+def _convolve_sites(img: np.ndarray, kernel, mode: str = "reflect") -> np.ndarray | None:
+    """The RGGB mosaic (:func:`degrade.sensor.mosaic_rggb`) of ``convolve_image(img, kernel,
+    mode=mode)`` for a checked H×W×3 float32 ``img``, byte for byte, computing only the
+    channel each photosite keeps (a third of the direct kernel's work, no padded copy of the
+    image); None where ``convolve_image`` would not take the direct path (FFT, a 1×1 kernel)
+    or a side of the image does not exceed the kernel's radius (repeated reflection)."""
+    k, shared = _kernel_stack(kernel, 3)
+    if k.shape[1:] == (1, 1):
+        return None
+    kf = k[:, ::-1, ::-1].reshape(k.shape[0], -1)
+    taps = np.flatnonzero(np.any(kf != 0.0, axis=0))
+    r1, r2 = k.shape[1] // 2, k.shape[2] // 2
+    h, w = img.shape[:2]
+    if taps.size > DIRECT_MAX_TAPS["shared" if shared else "per_channel"] or h <= r1 or w <= r2:
+        return None
+    weights = np.broadcast_to(kf[:, taps], (3, taps.size)).astype(np.float32)
+    nt = np.count_nonzero(weights, axis=1)
+    di, dj = np.zeros((3, taps.size), np.int64), np.zeros((3, taps.size), np.int64)
+    w3 = np.zeros((3, taps.size), np.float32)
+    for c in range(3):  # each channel's nonzero taps, in the order of ``taps``
+        keep = weights[c] != 0.0
+        di[c, :nt[c]], dj[c, :nt[c]] = np.divmod(taps[keep], k.shape[2])
+        w3[c, :nt[c]] = weights[c, keep]
+    planes = _site_planes(img, r1, r2, int(PAD_MODES[mode] == "reflect"))
+    out = np.empty((h, w), np.float32)
+    _convolve_rggb(planes, di, dj, w3, nt.astype(np.int64), out)
+    return out

@@ -109,7 +109,7 @@ def physical_exposure(radiance, *, f_number: float, exposure_s: float, pixel_pit
     ``SensorConfig(quantum_efficiency=QE, full_well_e=FW)`` with its default
     ``photons_at_one`` = FW/QE.
     """
-    img = _checks.image("radiance", radiance, ndim=(3,), channels=3)
+    img = _checks.image("radiance", radiance, ndim=(3,), channels=3, values=False)  # values: in the kernel
     n = _checks.finite_scalar("f_number", f_number, positive=True)
     t = _checks.finite_scalar("exposure_s", exposure_s, positive=True)
     p = _checks.finite_scalar("pixel_pitch_m", pixel_pitch_m, positive=True)
@@ -122,8 +122,9 @@ def physical_exposure(radiance, *, f_number: float, exposure_s: float, pixel_pit
     lam = np.array([_checks.finite_scalar(f"wavelengths_m[{i}]", v, positive=True)
                     for i, v in enumerate(wavelengths_m)])
     out = np.empty(img.shape, np.float32)
-    _camera_equation(img, math.pi / (4.0 * n * n), p, t, np.tile(lam, img.shape[1]), PLANCK_J_S * LIGHT_SPEED_M_S,
-                     qe, fw, out)
+    if _camera_equation(img, math.pi / (4.0 * n * n), p, t, np.tile(lam, img.shape[1]), PLANCK_J_S * LIGHT_SPEED_M_S,
+                        qe, fw, out):
+        _checks.image("radiance", img, ndim=(3,), channels=3)  # raises: a value is negative, NaN or inf
     return out
 
 
@@ -131,15 +132,19 @@ def physical_exposure(radiance, *, f_number: float, exposure_s: float, pixel_pit
 def _camera_equation(img, a, p, t, lam_row, hc, qe, fw, out):  # pragma: no cover - compiled
     """out = float32(qe·(((((L·a)·p)·p)·t)·λ/hc)/fw), one pass, the float64 operations in the
     order NumPy runs ``qe * (img * a * p * p * t * lam / hc) / fw`` (the same bits); rows of
-    W·3 interleaved values, ``lam_row`` the wavelengths repeated W times (a loop that vectorises)."""
+    W·3 interleaved values, ``lam_row`` the wavelengths repeated W times (a loop that vectorises).
+    Returns the number of values of ``img`` that are not in [0, inf) (negative, NaN or inf)."""
     h = img.shape[0]
     n = lam_row.size
     src = img.reshape(h, n)
     dst = out.reshape(h, n)
+    bad = 0
     for i in numba.prange(h):
         s = src[i]
         d = dst[i]
+        row_bad = 0
         for k in range(n):
+            row_bad += not (s[k] >= 0.0 and s[k] < np.inf)
             x = np.float64(s[k]) * a
             x = x * p
             x = x * p
@@ -147,3 +152,5 @@ def _camera_equation(img, a, p, t, lam_row, hc, qe, fw, out):  # pragma: no cove
             x = x * lam_row[k]
             x = x / hc
             d[k] = np.float32(qe * x / fw)
+        bad += row_bad
+    return bad

@@ -108,24 +108,30 @@ def _codes8(x, out):  # pragma: no cover - compiled
 
 
 @jit_exact
-def _nonzero_codes(codes):  # pragma: no cover - compiled
-    """Flat indices (C order) and values of the nonzero codes, and the number of distinct codes."""
+def _code_census(codes):  # pragma: no cover - compiled
+    """(number of nonzero codes, number of distinct codes) of a uint8 image, one pass."""
     cf = codes.ravel()
     seen = np.zeros(256, np.bool_)
     n = 0
     for k in range(cf.size):
-        seen[cf[k]] = True
-        if cf[k] != 0:
-            n += 1
-    idx = np.empty(n, np.int64)
-    nz = np.empty(n, np.uint8)
+        c = cf[k]
+        seen[c] = True
+        n += c != 0
+    return n, np.count_nonzero(seen)
+
+
+@jit_exact
+def _nonzero_means(codes, lut, idx, lam):  # pragma: no cover - compiled
+    """idx, lam = flat indices (C order) of the nonzero codes and lut[code] there (``lut``:
+    float64 per code); both one longer than the count (each slot is written, the index
+    advancing only past a nonzero code: no branch)."""
+    cf = codes.ravel()
     n = 0
     for k in range(cf.size):
-        if cf[k] != 0:
-            idx[n] = k
-            nz[n] = cf[k]
-            n += 1
-    return idx, nz, np.count_nonzero(seen)
+        c = cf[k]
+        idx[n] = k
+        lam[n] = lut[c]
+        n += c != 0
 
 
 @pjit_exact
@@ -298,9 +304,12 @@ def paper_degrade(image, group: str = "D4", config: PaperConfig = PaperConfig(),
     _codes8(blurred, codes)
     out = blurred  # reused as the output buffer
     if "poisson" in steps:
-        idx, nz_codes, n_distinct = _nonzero_codes(codes)
+        n_nonzero, n_distinct = _code_census(codes)
         vals = _vals(n_distinct)
-        counts = rng_poisson.poisson((_LUT8 * vals)[nz_codes])  # λ = 0 elsewhere: no draws
+        idx, lam = np.empty(n_nonzero + 1, np.int64), np.empty(n_nonzero + 1, np.float64)
+        _nonzero_means(codes, _LUT8 * vals, idx, lam)
+        idx, lam = idx[:n_nonzero], lam[:n_nonzero]
+        counts = rng_poisson.poisson(lam)  # (B·vals at the nonzero pixels) λ = 0 elsewhere: no draws
         if noise is None:
             out.fill(0.0)
             _scatter_counts(idx, counts, float(vals), out)

@@ -40,10 +40,6 @@ _CAMERA_SEED_TAG = 0x5EED
 """Mixed into the sequence's seed when the ``degrade`` table sets no ``camera_seed``."""
 
 
-_LEVELS8 = np.arange(256, dtype=np.float32) / np.float32(255.0)
-"""float32(code)/255 in float32 for each 8-bit code: the paper preset's input, by look-up."""
-
-
 def artefact_config(d: dict):
     """The :class:`degrade.artefacts.ArtefactConfig` of the ``degrade`` table ``d`` (keys as
     the option table's; missing keys keep the defaults)."""
@@ -119,9 +115,9 @@ def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *
         paper = PaperConfig(length_px=d["paper_blur_px"], angle_deg=d["paper_angle_deg"],
                             gaussian_var=d["paper_gaussian_var"])
         from .paper import _codes8
-        codes = np.asarray(rgb8)
-        out = paper_degrade(_LEVELS8[codes] if codes.dtype == np.uint8 else codes.astype(np.float32) / np.float32(255.0),
-                            d["paper_group"], paper, rng=rng)
+        levels = np.asarray(rgb8).astype(np.float32)  # float32(code)/255 in float32, as a vectorised division
+        levels /= np.float32(255.0)
+        out = paper_degrade(levels, d["paper_group"], paper, rng=rng)
         rgb_degraded = np.empty(out.shape, np.uint8)
         _codes8(out, rgb_degraded)  # quantise(out, 8) in one pass (out is in [0, 1])
         return {"rgb_degraded": rgb_degraded}
@@ -140,5 +136,5 @@ def degrade_outputs(d: dict, cam: dict, rgb8, radiance, seed_seq, motion=None, *
     res = _simulate_frame(signal, physical_config(d, cam, motion), rng, sun if visible > 0 else None, visible,
                           camera_seed(d, sequence_seed), codes8=True)
     out = {"rgb_degraded": lambda: res.image, "signal_e": lambda: res.signal_e,
-           "saturation": lambda: np.where(res.saturation, np.uint8(255), np.uint8(0))}
+           "saturation": lambda: np.ascontiguousarray(res.saturation).view(np.uint8) * np.uint8(255)}  # True: 1
     return {w: out[w]() for w in want}

@@ -441,29 +441,30 @@ def _frozen(a):
     return a
 
 
-def _signal_e_rggb(img: np.ndarray, vig, stray, c: SensorConfig, art, maps,
+def _signal_e_rggb(sites: np.ndarray, vig, stray, c: SensorConfig, art, maps,
                    rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_signal_e` of the RGGB mosaic of the H×W×3 ``img`` times the relative illumination
-    ``vig`` (H×W or None) plus the stray light ``stray`` (H×W or None), without smear: the same
-    float operations in the same order (the same bits), the mosaic and mean in one pass."""
+    """:func:`_signal_e` of the RGGB mosaic ``sites`` (H×W, :func:`_mosaic` of the focal-plane
+    image) times the relative illumination ``vig`` (H×W or None) plus the stray light ``stray``
+    (H×W or None), without smear: the same float operations in the same order (the same bits),
+    illumination and mean in one pass."""
     if art.smear_fraction > 0.0:
         raise ValueError("smear needs the general path (_signal_e)")
-    mean_e = np.empty(img.shape[:2], np.float64)
-    _site_mean(img, _frozen(vig), _frozen(stray), c.quantum_efficiency * c.photons_max, _frozen(maps.gain),
+    mean_e = np.empty(sites.shape, np.float64)
+    _site_mean(sites, _frozen(vig), _frozen(stray), c.quantum_efficiency * c.photons_max, _frozen(maps.gain),
                c.dark_current_e_per_s * c.exposure_s, _frozen(maps.hot_dark_e_per_s), np.float32(c.exposure_s),
                mean_e)
     return _signal_from_mean(mean_e, c, art, maps, rng)
 
 
 @pjit_exact
-def _site_mean(img, vig, stray, k_e, prnu, dark_e, hot, t32, out):  # pragma: no cover - compiled
-    """out[i, j] = mean electrons of RGGB photosite (i, j): v = img[i, j, c] (·vig) (+ stray) in
+def _site_mean(sites, vig, stray, k_e, prnu, dark_e, hot, t32, out):  # pragma: no cover - compiled
+    """out[i, j] = mean electrons of RGGB photosite (i, j): v = sites[i, j] (·vig) (+ stray) in
     float32, then float64(v)·k_e (·prnu) (+ dark_e) (+ float64(float32(hot·t32))): NumPy's
     operations of the general path, in its order; an empty map is absent."""
     h, w = out.shape
     for i in numba.prange(h):
         for j in range(w):
-            v = img[i, j, i % 2 + j % 2]
+            v = sites[i, j]
             if vig.size:
                 v = v * vig[i, j]
             if stray.size:

@@ -321,7 +321,10 @@ def combine(p, r, g, b, wf, t0, t1, t2, p0, p1, p2, g0, g1, g2, cloud, land, mu_
     x = cloud - p[P_CLOUD_THRESHOLD]
     rc = CLOUD_R_MAX * (1.0 - math.exp(-(x / CLOUD_SOFT) ** 2)) if x > 0.0 else 0.0
     rc = min(rc * k, 0.98)
-    kl = LAND_SCALE * k * (1.0 - wf) * math.exp(land) + WATER_SCALE * k * wf
+    if wf == 1.0:  # open water: the land's term is 0 × exp(land) (the same bits without the exp)
+        kl = WATER_SCALE * k * wf
+    else:
+        kl = LAND_SCALE * k * (1.0 - wf) * math.exp(land) + WATER_SCALE * k * wf
     ks = p[10] * max(mu_s, 0.0) / math.pi
     gw = wf * (1.0 - rc)
     t = 1.0 - rc

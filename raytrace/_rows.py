@@ -20,6 +20,37 @@ def take_rows(src, idx, out):
 
 
 @pjit_exact
+def take_ray_rows(idx, O, D, O_out, D_out, O32, D32):
+    """The rays ``idx`` of (O, D) (rows of 3, float64): O_out[j] = O[idx[j]], D_out[j] =
+    D[idx[j]], and both rounded to float32 for Embree (O32, D32) in the same pass: NumPy's
+    ``O[idx]``, ``D[idx]`` and their two ``astype(np.float32)``."""
+    for j in numba.prange(idx.shape[0]):
+        i = idx[j]
+        for a in range(3):
+            o = O[i, a]
+            d = D[i, a]
+            O_out[j, a] = o
+            D_out[j, a] = d
+            O32[j, a] = np.float32(o)
+            D32[j, a] = np.float32(d)
+
+
+@pjit_exact
+def unit_rows(D, idx, out):
+    """out[j] = D[idx[j]] / |D[idx[j]]|: NumPy's ``D[idx] / np.linalg.norm(D[idx], axis=1,
+    keepdims=True)`` to the bit (its sum of squares is left to right, (x² + y²) + z²)."""
+    for j in numba.prange(idx.shape[0]):
+        i = idx[j]
+        x = D[i, 0]
+        y = D[i, 1]
+        z = D[i, 2]
+        n = np.sqrt(x * x + y * y + z * z)
+        out[j, 0] = x / n
+        out[j, 1] = y / n
+        out[j, 2] = z / n
+
+
+@pjit_exact
 def subsample_hits(idx, geom, prim, face_offset, D, centre, number, face, D_hit, pixel, num):
     """The rows ``idx`` of a batch of sub-pixel rays that hit: their faces, directions, pixels
     and numbers, gathered on both cores in one pass. NumPy's fancy indexing runs on one core

@@ -319,14 +319,19 @@ def add_mirror(idx, O, D, geom, prim, hu, hv, NS, WO, comp, E_point, face_offset
     tracer's per quadrant (prefiltered: 0.91–1.07×). L̄_in itself goes to ``out_lbar``."""
     for j in numba.prange(idx.shape[0]):
         k = idx[j]
-        if geom[j] < 0:
-            r, g, b = incoming_env(p, tex, O[j, 0], O[j, 1], O[j, 2], D[j, 0], D[j, 1], D[j, 2])
-        else:
+        c = comp[k]
+        if geom[j] >= 0:
             r, g, b = incoming(geom[j], prim[j], hu[j], hv[j], O[j, 0], O[j, 1], O[j, 2], D[j, 0], D[j, 1], D[j, 2],
                                face_offset, face_normal, corner_normal, comp_of_face, mat_diff, mat_f0, mat_alpha, glossy,
                                table, sun, E_tot, E_sun, valid, face_s, lat_start, lat_ids, p, tex,
                                mat_par, face_uv, atlas, -1.0, -1.0, -1.0, -1.0)
-        c = comp[k]
+        elif prefiltered and mat_alpha[c] >= GLOSSY_A1:
+            # weighted by 1 − t = 0 below: the environment along the mirror ray (Earth's ground,
+            # the costliest part of the term) is not looked up; 0·L = 0 for the finite L it
+            # would be, so the same bits
+            r, g, b = 0.0, 0.0, 0.0
+        else:
+            r, g, b = incoming_env(p, tex, O[j, 0], O[j, 1], O[j, 2], D[j, 0], D[j, 1], D[j, 2])
         if not prefiltered:
             t = min(max((mat_alpha[c] - MIRROR_BLEND_A0) / MIRROR_BLEND_WIDTH, 0.0), 1.0)
             r = (1.0 - t) * r + t * E_point[k, 0] / math.pi

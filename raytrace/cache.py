@@ -84,8 +84,8 @@ from scipy.spatial import cKDTree
 from . import environment as env, presets
 from ._cache_kernels import (_bin_hits, _cache_rays, _csr_sum, _gauss_seidel_sweep, _glint_lattice, _glints,
                              _glossy_bounce,
-                             _interp_rows, _jacobi_step, _lattice_points, _lookup_rows, _oct_cells, _ray_cells,
-                             _rows_irradiance, _sun_rays, _zero_rows)
+                             _interp_rows, _irradiance_corners, _jacobi_step, _lattice_points, _lookup_rows, _oct_cells,
+                             _ray_cells, _rows_irradiance, _sun_rays, _zero_rows)
 from ._threads import submit
 from .brdf import bounce_albedo
 
@@ -814,7 +814,13 @@ class RadianceCache:
             vals[np.flatnonzero(lit)[seen]] = e_sun * cosv[lit][seen]
             E_sun[rows] = vals
         E_open = np.zeros((n, 3))
-        _rows_irradiance(table, nrm, rows, E_open)
+        # the rows' cells and weights in the table, the same every frame: found once per table shape
+        corners = mats.get("table_corners")
+        if corners is None or corners[0] != table.shape[:2]:
+            idx, w = np.empty((len(rows), 3), np.int64), np.empty((len(rows), 4))
+            _irradiance_corners(table.shape[0], table.shape[1], nrm, rows, idx, w)
+            corners = mats["table_corners"] = (table.shape[:2], idx, w)  # one assignment: thread-safe
+        _rows_irradiance(table, rows, corners[1], corners[2], E_open)
         # E0 = E_sun + E_open − π W_sb L_env, the product row-parallel (scipy's is one thread)
         E_open += E_sun[:, None]
         W_sb = mats["W_sb"]

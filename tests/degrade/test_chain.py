@@ -164,3 +164,14 @@ def test_codes_path_equals_quantised_image():
         if art is not None:
             assert_array_equal(out.signal_e, ref.signal_e)
             assert_array_equal(out.saturation, ref.saturation)
+
+
+def test_optics_at_the_sites_equal_the_mosaic_of_the_blurred_image():
+    """The optics evaluated only at the RGGB photosites (corner blend included, and the
+    fallback of a kernel too large for the direct path): the mosaic of apply_optics, byte for byte."""
+    from degrade.chain import _optics_sites
+    from degrade.sensor import mosaic_rggb
+    img = scene((48, 64, 3), seed=4)
+    for optics in (OPTICS, OpticsConfig(aberration_sigma_px=0.5, corner_sigma_px=1.5),
+                   OpticsConfig(motion_length_px=30.0, motion_angle_deg=20.0)):
+        assert _optics_sites(img, optics).tobytes() == mosaic_rggb(apply_optics(img, optics)).tobytes()

@@ -131,3 +131,32 @@ def test_direct_is_float32_taps_added_in_order(shape, per_channel):
             if np.any(kf[:, i, j] != 0):
                 ref += kf[:, i, j] * pad[i:i + shape[0], j:j + shape[1]]
     assert out.tobytes() == ref.reshape(shape).tobytes()
+
+
+@pytest.mark.parametrize("mode", ["reflect", "mirror"])
+@pytest.mark.parametrize("shape", [(29, 43, 3), (30, 8, 3), (5, 4, 3)])
+@pytest.mark.parametrize("per_channel", [False, True])
+def test_rggb_sites_are_the_mosaic_of_the_direct_convolution(mode, shape, per_channel):
+    """Only the channel each RGGB photosite keeps, convolved at the sites: the same bits as the
+    mosaic of the whole direct convolution (also with a tap that is zero in one channel only),
+    and close to scipy.ndimage's float64 convolution at the sites."""
+    from degrade.convolve import _convolve_sites
+    from degrade.sensor import mosaic_rggb
+    img = RNG.random(shape, dtype=np.float32)
+    k = RNG.random((3 if per_channel else 1, 7, 5))  # 35 taps: 8 groups of four and 3 more
+    k[:, 0, 0] = 0.0
+    if per_channel:
+        k[2, :, 0] = 0.0  # blue only: a narrower kernel inside the stack
+    kernel = k if per_channel else k[0]
+    sites = _convolve_sites(img, kernel, mode)
+    assert sites.dtype == np.float32 and sites.shape == shape[:2]
+    assert sites.tobytes() == mosaic_rggb(convolve_image(img, kernel, mode=mode, method="direct")).tobytes()
+    assert_allclose(sites, mosaic_rggb(reference(img, kernel, mode)), rtol=2e-6, atol=1e-6)
+
+
+def test_rggb_sites_decline_what_the_direct_path_does_not_do():
+    from degrade.convolve import _convolve_sites
+    img = RNG.random((20, 20, 3), dtype=np.float32)
+    assert _convolve_sites(img, np.ones((1, 1)), "reflect") is None  # a scale: no convolution
+    assert _convolve_sites(img, np.ones((31, 31)), "reflect") is None  # FFT-sized kernel
+    assert _convolve_sites(img[:3], np.ones((7, 7)), "reflect") is None  # 3 rows ≤ radius 3

@@ -69,3 +69,17 @@ def test_auto_exposure_maps_the_percentile_of_the_masked_luminance():
 def test_errors_name_the_parameter(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+@pytest.mark.parametrize("bad, match", [(-1e-3, "radiance must be >= 0 everywhere, got minimum -0.001"),
+                                        (np.nan, "radiance must be finite, got 1 NaN/inf"),
+                                        (np.inf, "radiance must be finite, got 1 NaN/inf")])
+def test_camera_equation_finds_a_bad_radiance_value(bad, match):
+    """The camera equation's kernel scans the values as it goes: one bad value anywhere raises
+    the same one-line error as the up-front check."""
+    radiance = np.ones((5, 7, 3), np.float32)
+    radiance[3, 6, 2] = bad
+    with pytest.raises(ValueError, match=match):
+        physical_exposure(radiance, f_number=2.0, exposure_s=1e-3, pixel_pitch_m=3.45e-6)
+    radiance[3, 6, 2] = -0.0  # −0 is ≥ 0: accepted, as by the up-front check
+    assert physical_exposure(radiance, f_number=2.0, exposure_s=1e-3, pixel_pitch_m=3.45e-6)[3, 6, 2] == 0.0

@@ -185,8 +185,8 @@ def test_mhc_equals_openimageio_borders_included(shape):
 
 
 def test_fused_rggb_path_equals_the_general_path():
-    """Mosaic, illumination, stray light and mean electrons in one kernel: the same bits as the
-    NumPy path (vignetting, + stray light, mosaic, _signal_e), for every output."""
+    """Illumination, stray light and mean electrons of the mosaic in one kernel: the same bits as
+    the NumPy path (vignetting, + stray light, mosaic, _signal_e), for every output."""
     from degrade import ArtefactConfig
     from degrade.artefacts import camera_maps
     from degrade.sensor import _mosaic, _signal_e, _signal_e_rggb
@@ -199,7 +199,7 @@ def test_fused_rggb_path_equals_the_general_path():
     for art in (ArtefactConfig(hot_pixel_fraction=0.02), ArtefactConfig(prnu_sigma=0.0, dsnu_sigma_e=0.0,
                                                                        hot_pixel_fraction=0.0, blooming=False)):
         maps = camera_maps((40, 56), art, 3)
-        fused = _signal_e_rggb(img, vig, stray, c, art, maps, np.random.default_rng(8))
+        fused = _signal_e_rggb(_mosaic(img), vig, stray, c, art, maps, np.random.default_rng(8))
         general = _signal_e(_mosaic(img * vig[:, :, None] + stray[:, :, None]), c, art, maps, np.random.default_rng(8))
         for a, b in zip(fused, general):
             assert a.dtype == b.dtype == np.float32

@@ -265,3 +265,81 @@ def test_contact_rows_summed_per_chunk_give_the_listed_matrices(monkeypatch):
             for part in ("indptr", "indices", "data"):
                 x, y = getattr(a, part), getattr(b, part)
                 assert x.dtype == y.dtype and np.array_equal(x.view(np.uint8), y.view(np.uint8)), (k, part)
+
+
+@pytest.mark.parametrize("omega", [1.0, 1.2])
+def test_a_sweep_skips_rows_without_entries_and_matches_gauss_seidel_in_numpy(omega):
+    """:func:`raytrace._cache_kernels._gauss_seidel_sweep` on a random system where a third of
+    the rows have no entries (as the cache's unsolved rows) against the sweep written out in
+    NumPy row by row (each row from the newest values, over-relaxed): the same to rounding,
+    the rows without entries left at X0, and a row without entries whose X differs from X0
+    still set to it."""
+    rng = np.random.default_rng(3)
+    n = 60
+    empty = rng.random(n) < 0.35
+    W = sp.random(n, n, density=0.15, random_state=4, format="csr") * 0.1
+    W = sp.diags((~empty).astype(float)) @ W
+    G = sp.random(n, n, density=0.05, random_state=5, format="csr")
+    G = (sp.diags((~empty).astype(float)) @ G).tocsr()
+    G.sort_indices()
+    W = W.tocsr()
+    W.sort_indices()
+    g_data = np.ascontiguousarray(np.repeat(G.data[:, None], 3, axis=1) * rng.random((G.nnz, 3)) * 0.1)
+    rho, rho_b = rng.random((n, 3)), rng.random((n, 3))
+    X0 = rng.random((n, 3))
+    X0[empty & (rng.random(n) < 0.5)] = 0.0
+    X = X0.copy()
+    odd = np.flatnonzero(empty)[0]
+    X[odd] += 1.0  # a row without entries away from its source
+    Y, Yb = rho * X, rho_b * X
+    ref_X, ref_Y, ref_Yb = X.copy(), Y.copy(), Yb.copy()
+    dmax = 0.0
+    for i in range(n):
+        s = X0[i].copy()
+        for k in range(W.indptr[i], W.indptr[i + 1]):
+            s += W.data[k] * ref_Y[W.indices[k]]
+        for k in range(G.indptr[i], G.indptr[i + 1]):
+            s += g_data[k] * ref_Yb[G.indices[k]]
+        dmax = max(dmax, float(np.abs(s - ref_X[i]).max()))
+        ref_X[i] = ref_X[i] + omega * (s - ref_X[i]) if omega != 1.0 else s
+        ref_Y[i], ref_Yb[i] = rho[i] * ref_X[i], rho_b[i] * ref_X[i]
+    # (the index types of the cache's own matrices: SciPy's int32 for W_ss, int64 for W_g)
+    d = _cache_kernels._gauss_seidel_sweep(W.indptr.astype(np.int32), W.indices.astype(np.int32), W.data,
+                                           G.indptr.astype(np.int64), G.indices.astype(np.int64), g_data, rho, rho_b,
+                                           X0, X, Y, Yb, omega)
+    np.testing.assert_allclose(X, ref_X, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(Y, ref_Y, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(Yb, ref_Yb, rtol=1e-13, atol=1e-15)
+    assert d == pytest.approx(dmax, rel=1e-13)
+    rest = np.flatnonzero(empty)[1:]
+    assert np.array_equal(X[rest], X0[rest])
+    assert np.allclose(X[odd], X0[odd] + (1.0 - omega) * 1.0, rtol=1e-13)
+
+
+def test_rows_irradiance_from_corners_found_once_is_the_bilinear_table():
+    """The rows' unoccluded irradiance, from their table cells and weights found once
+    (:func:`raytrace._cache_kernels._irradiance_corners`) and summed per frame
+    (:func:`raytrace._cache_kernels._rows_irradiance`), against the table interpolated in NumPy
+    (θ = π i/(n_t − 1), φ = 2π j/n_p, bilinear, φ wrapping), on both sides of random normals,
+    the poles and the φ = 0 seam included; rows not listed are left alone."""
+    rng = np.random.default_rng(8)
+    nrm = rng.normal(size=(40, 3))
+    nrm[:3] = [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.6, -1e-12, 0.8]]
+    nrm /= np.linalg.norm(nrm, axis=1)[:, None]
+    table = rng.random((49, 96, 3))
+    rows = np.flatnonzero(rng.random(80) < 0.7).astype(np.int64)
+    idx, w = np.empty((len(rows), 3), np.int64), np.empty((len(rows), 4))
+    _cache_kernels._irradiance_corners(49, 96, nrm, rows, idx, w)
+    out = np.full((80, 3), -1.0)
+    _cache_kernels._rows_irradiance(table, rows, idx, w, out)
+    n = nrm[rows // 2] * np.where(rows % 2 == 0, 1.0, -1.0)[:, None]
+    x = np.arccos(np.clip(n[:, 2], -1, 1)) / math.pi * 48
+    y = np.mod(np.arctan2(n[:, 1], n[:, 0]), 2 * math.pi) / (2 * math.pi) * 96
+    i = np.minimum(x.astype(int), 47)
+    j = y.astype(int) % 96
+    fx, fy = (x - i)[:, None], (y - np.floor(y))[:, None]
+    expect = ((1 - fx) * (1 - fy) * table[i, j] + (1 - fx) * fy * table[i, (j + 1) % 96]
+              + fx * (1 - fy) * table[i + 1, j] + fx * fy * table[i + 1, (j + 1) % 96])
+    np.testing.assert_allclose(out[rows], expect, rtol=1e-12)
+    rest = np.setdiff1d(np.arange(80), rows)
+    assert (out[rest] == -1.0).all()

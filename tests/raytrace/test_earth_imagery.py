@@ -307,3 +307,39 @@ def test_night_side_is_the_twilight_sky_whatever_the_clouds():
                       for v, u in zip(*np.nonzero(night), strict=True)])
     assert exact.max() > 0.0  # twilight: the air above is lit
     np.testing.assert_allclose(rad[night], exact, rtol=1e-2, atol=1e-3 * exact.max())
+
+
+def _adding(rc, rho):
+    """The clouds over the ground by the adding formula (raytrace._earth's docstring):
+    R_c + (1 − R_c)² ρ / (1 − R_c ρ)."""
+    return rc + (1.0 - rc) ** 2 * rho / (1.0 - rc * rho)
+
+
+@pytest.mark.parametrize("cloud_over", [-0.2, 0.05, 0.4])
+def test_combine_open_water_and_coast_against_the_adding_formula(cloud_over):
+    """combine() against the model written out here: over open water (water fraction 1) the land's
+    detail does not matter (its term is left out, the same radiance for any land log-detail, even
+    one whose exponential overflows); a coast (fraction 0.9) takes it in, the land's reflectance
+    scaled by exp(land)."""
+    p = np.zeros(_earth.N_EARTH_PARAMS)
+    p[10] = SOLAR_CONSTANT_W_M2
+    p[_earth.P_SURF_SCALE] = 1.2
+    p[_earth.P_CLOUD_THRESHOLD] = _earth.CLOUD_THRESHOLD
+    rgb, t, path, gl = (0.02, 0.04, 0.09), (0.9, 0.85, 0.7), (3.0, 5.0, 12.0), (40.0, 38.0, 30.0)
+    mu_s, k = 0.6, p[_earth.P_SURF_SCALE]
+    cloud = _earth.CLOUD_THRESHOLD + cloud_over
+    x = cloud_over
+    rc = min(_earth.CLOUD_R_MAX * (1.0 - math.exp(-(x / _earth.CLOUD_SOFT) ** 2)) * k, 0.98) if x > 0 else 0.0
+
+    def expected(wf, land):
+        kl = _earth.LAND_SCALE * k * (1.0 - wf) * math.exp(land) + _earth.WATER_SCALE * k * wf
+        return [SOLAR_CONSTANT_W_M2 * mu_s / math.pi * t[c] * _adding(rc, min(rgb[c] * kl, 1.0))
+                + wf * (1.0 - rc) * gl[c] + path[c] for c in range(3)]
+
+    for wf, lands in ((1.0, (-0.5, 0.0, 0.7, 800.0)), (0.9, (-0.5, 0.0, 0.7))):
+        for land in lands:
+            got = _earth.combine(p, *rgb, wf, *t, *path, *gl, cloud, land, mu_s)
+            want = expected(wf, 0.0 if wf == 1.0 else land)
+            np.testing.assert_allclose(got, want, rtol=1e-12)
+    coast = [_earth.combine(p, *rgb, 0.9, *t, *path, *gl, cloud, land, mu_s)[0] for land in (-0.5, 0.7)]
+    assert coast[1] > coast[0]  # the land's detail shows on the coast

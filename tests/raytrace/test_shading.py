@@ -816,3 +816,88 @@ def test_put_rows_nonnegative_is_numpys_clamped_assignment():
     _rows.put_rows_nonnegative(idx, src, b)
     assert a.tobytes() == b.tobytes()
     assert not np.signbit(b[idx]).any() and (b[idx] >= 0).all()
+
+
+def test_unit_rows_and_take_ray_rows_are_numpys_expressions():
+    """The kernels that gather the sub-samples' rays are NumPy's expressions bit for bit:
+    ``D[idx] / np.linalg.norm(D[idx], axis=1, keepdims=True)`` (the misses' directions towards
+    the environment) and ``O[idx]``, ``D[idx]`` with their float32 roundings (the mirror rays
+    for Embree), over magnitudes from 10⁻³⁰ to 10³⁰ and rounding ties of float32."""
+    from raytrace import _rows
+    rng = np.random.default_rng(5)
+    n = 4000
+    D = rng.standard_normal((n, 3)) * 10.0 ** rng.integers(-30, 30, (n, 1))
+    D[:3] = [[1.0, 1.0 + 2.0 ** -24, -(1.0 + 3 * 2.0 ** -24)], [3.0, 4.0, 12.0], [-0.0, 1e-300, 2.0]]
+    O = rng.standard_normal((n, 3)) * 1e3
+    idx = np.sort(rng.choice(n, 1500, replace=False)).astype(np.int64)
+    idx[0] = 0
+    got = np.empty((len(idx), 3))
+    _rows.unit_rows(D, idx, got)
+    assert got.tobytes() == (D[idx] / np.linalg.norm(D[idx], axis=1, keepdims=True)).tobytes()
+    oi, di = np.empty((len(idx), 3)), np.empty((len(idx), 3))
+    o32, d32 = np.empty((len(idx), 3), np.float32), np.empty((len(idx), 3), np.float32)
+    _rows.take_ray_rows(idx, O, D, oi, di, o32, d32)
+    assert oi.tobytes() == O[idx].tobytes() and di.tobytes() == D[idx].tobytes()
+    with np.errstate(over="ignore"):
+        assert o32.tobytes() == O[idx].astype(np.float32).tobytes()
+        assert d32.tobytes() == D[idx].astype(np.float32).tobytes()
+
+
+def _glossy_points(material):
+    """A ``fast`` context of a unit sphere of ``material`` under the Sun with Earth filling the
+    sky behind the camera, and the surfaces of the sphere's pixels seen from the Earth side (their
+    mirror rays all escape towards Earth)."""
+    from raytrace._kernels import centre_rays
+    from raytrace.presets import preset_cache_options, quality_preset
+    scene = _sphere_scene(albedo=None, material=material)
+    light = Lighting(sun_dir_body=(0.6, -0.48, 0.64), ambient_radiance_W_m2_sr=1.0,
+                     earth=Earth((0, -1, 0), 6.778e6))
+    R, t = _pose([0.0, -4.0, 0.5])
+    ctx = _context._Context(scene, light, preset_cache_options(quality_preset("fast"), scene.scale_m, None),
+                            prefiltered_glossy=True)
+    ctx.px_rad = 1.0 / CAM.fx
+    geo = scene.render_geometry(CAM, R, t)
+    pix = np.flatnonzero(geo.instance.ravel() > 0)
+    O, D = np.empty((len(pix), 3)), np.empty((len(pix), 3))
+    R_bc = np.ascontiguousarray(R.T)
+    centre_rays(pix, W, -R_bc @ t, R_bc, CAM.fx, CAM.fy, CAM.cx, CAM.cy, *CAM.lens_arrays(), O, D)
+    s = _context._surfaces(scene, O, D, geo.face_index.ravel()[pix].astype(np.int64), ctx.px_rad)
+    return ctx, s
+
+
+@pytest.mark.parametrize("material, wide", [("aluminium", True), ("solar_cell", False)])
+def test_mirror_term_of_a_wide_lobe_takes_nothing_along_its_missed_mirror_ray(material, wide):
+    """``fast``'s mirror term (raytrace._surface.add_mirror) blends the radiance along the mirror
+    ray with weight 1 − t, t = 1 at α ≥ GLOSSY_A1 where the ray escapes: on aluminium (α 0.35)
+    the term is the same bits whatever the environment along the missed rays (Earth there, or
+    no Earth: the kernel does not look it up), on solar cells (α 0.08 < GLOSSY_A1) it changes
+    with it. The sub-samples' mirror rays (raytrace._antialias._mirror_hits) are those of
+    :meth:`raytrace._context._Sunlight.mirror_hits`, array for array."""
+    from raytrace import environment as env
+    from raytrace._surface import GLOSSY_A1
+    ctx, s = _glossy_points(material)
+    assert (ctx.alpha[s["comp"]] >= GLOSSY_A1).all() == wide
+    hits = ctx.mirror_hits(s)
+    fast = _antialias._mirror_hits(ctx, s)
+    for a, b in zip(hits[:3], fast[:3]):
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+    assert all(hits[3][k].tobytes() == fast[3][k].tobytes() for k in hits[3])
+    assert len(hits[0]) > 100 and (hits[3]["geomID"] < 0).all()
+    E = ctx.cache_E(s)
+    L_earth = np.zeros((len(s["P"]), 3))
+    ctx.add_mirror(s, E, L_earth, hits)
+    p = ctx.p
+    try:
+        ctx.p = p.copy()
+        ctx.p[env.P_HAS_EARTH] = 0.0
+        ctx.p[env.P_AMBIENT] = 50.0
+        L_none = np.zeros((len(s["P"]), 3))
+        ctx.add_mirror(s, E, L_none, hits)
+    finally:
+        ctx.p = p
+    rows = hits[0]
+    assert (L_earth[rows] > 0.0).all()
+    if wide:
+        assert L_earth.tobytes() == L_none.tobytes()
+    else:
+        assert (np.abs(L_none[rows] - L_earth[rows]) > 1e-6 * L_earth[rows]).mean() > 0.5
