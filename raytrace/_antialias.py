@@ -9,7 +9,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from . import _background, _edges, _gather, _rows, _surface, presets
+from . import _background, _edges, _gather, _rows, presets
 from ._context import _Context, _Sunlight, _surfaces
 from ._kernels import ray_origins32
 from ._lights import SUN_X, SUN_Y, SUN_Z
@@ -333,7 +333,7 @@ def _trace_subsamples(sunl: _Sunlight, scene: Scene, o_body, D, h, centre, numbe
             # strata permuted per pixel, independent of the sub-samples' cells
             disc = (c_idx, n_idx, S, seed)
         Ls, _ = sunl.sunlight(s, disc=disc)
-        tr.update(s=s, Dh=Dh, c_idx=c_idx, n_idx=n_idx, Ls=Ls, mirror=_mirror_hits(sunl, s))
+        tr.update(s=s, Dh=Dh, c_idx=c_idx, n_idx=n_idx, Ls=Ls, mirror=sunl.mirror_hits(s))
     miss = np.flatnonzero(~hit)
     if len(miss) and sunl.lighting.earth is not None:
         Dm = np.empty((len(miss), 3))
@@ -342,35 +342,6 @@ def _trace_subsamples(sunl: _Sunlight, scene: Scene, o_body, D, h, centre, numbe
         _background.env_along(o_body, Dm, sunl.p_background, sunl.tex, out)
         tr["miss"] = (miss, out)
     return tr
-
-
-def _mirror_hits(sunl: _Sunlight, s):
-    """:meth:`raytrace._context._Sunlight.mirror_hits` of the sub-samples' points ``s``, the same
-    arrays: where the glossy term is prefiltered (``fast``: every specular point casts its
-    mirror ray), with the specular points found, their rays gathered and rounded to float32
-    by kernels, not NumPy's row reductions and fancy indexing (~3 ms of a Cassini frame's
-    anti-aliasing); otherwise the method itself."""
-    if not sunl.prefiltered_glossy:
-        return sunl.mirror_hits(s)
-    if "m_f0" in s:
-        f0 = s["m_f0"]
-        spec = np.maximum(np.maximum(f0[:, 0], f0[:, 1]), f0[:, 2]) > 0.0  # f0.max(axis=1) > 0
-    else:
-        spec = sunl.specular[s["comp"]]
-    if not spec.any():
-        return None
-    n = len(s["P"])
-    o = np.empty((n, 3))
-    d = np.empty((n, 3))
-    _surface.mirror_rays(s["NS"], s["NG"], s["WO"], s["P"], sunl.eps, spec, o, d)
-    idx = np.flatnonzero(spec)
-    if not len(idx):
-        return idx, o[idx], d[idx], sunl.scene.intersect(o[idx], d[idx])
-    m = len(idx)
-    oi, di = np.empty((m, 3)), np.empty((m, 3))
-    o32, d32 = np.empty((m, 3), np.float32), np.empty((m, 3), np.float32)
-    _rows.take_ray_rows(idx, o, d, oi, di, o32, d32)
-    return idx, oi, di, sunl.scene.intersect(o32, d32)
 
 
 def _shade_subsamples(ctx: _Context, geo, camera: Camera, R_cam, tr: dict, S, seed, centre_light, gather_rays,

@@ -165,8 +165,14 @@ class _Sunlight:
     def mirror_hits(self, s):
         """The mirror rays of the specular points of ``s`` and their closest hits, as
         :meth:`_Context.add_mirror` takes them: (rows, origins, directions, hits), or None where
-        no point is specular."""
-        spec = self.specular[s["comp"]] if "m_f0" not in s else s["m_f0"].max(axis=1) > 0.0
+        no point is specular. Where the glossy term is prefiltered (``fast``: every specular point
+        casts its mirror ray) the rays are gathered and rounded to float32 by a kernel
+        (:func:`raytrace._rows.take_ray_rows`, not NumPy's fancy indexing: the same arrays)."""
+        if "m_f0" in s:
+            f0 = s["m_f0"]
+            spec = np.maximum(np.maximum(f0[:, 0], f0[:, 1]), f0[:, 2]) > 0.0  # f0.max(axis=1) > 0, faster
+        else:
+            spec = self.specular[s["comp"]]
         if not spec.any():
             return None
         n = len(s["P"])
@@ -175,20 +181,23 @@ class _Sunlight:
         _surface.mirror_rays(s["NS"], s["NG"], s["WO"], s["P"], self.eps, spec, o, d)
         idx = np.flatnonzero(spec)
         if self.prefiltered_glossy:
-            h = self.scene.intersect(o[idx], d[idx])
+            m = len(idx)
+            oi, di = np.empty((m, 3)), np.empty((m, 3))
+            o32, d32 = np.empty((m, 3), np.float32), np.empty((m, 3), np.float32)
+            _rows.take_ray_rows(idx, o, d, oi, di, o32, d32)
+            return idx, oi, di, self.scene.intersect(o32, d32)
+        # ``balanced`` weights the mirror ray by 1 − t (add_mirror): where t = 1 (wide
+        # lobes: paint, aluminium) it needs no ray, and a miss stands in for it
+        h = {"geomID": np.full(len(idx), -1, np.int32), "primID": np.zeros(len(idx), np.int32),
+             "u": np.zeros(len(idx), np.float32), "v": np.zeros(len(idx), np.float32)}
+        if "m_alpha" in s:  # as mirror_weighted, per point
+            cast = np.flatnonzero(s["m_alpha"][idx] < _surface.MIRROR_BLEND_A0 + _surface.MIRROR_BLEND_WIDTH)
         else:
-            # ``balanced`` weights the mirror ray by 1 − t (add_mirror): where t = 1 (wide
-            # lobes: paint, aluminium) it needs no ray, and a miss stands in for it
-            h = {"geomID": np.full(len(idx), -1, np.int32), "primID": np.zeros(len(idx), np.int32),
-                 "u": np.zeros(len(idx), np.float32), "v": np.zeros(len(idx), np.float32)}
-            if "m_alpha" in s:  # as mirror_weighted, per point
-                cast = np.flatnonzero(s["m_alpha"][idx] < _surface.MIRROR_BLEND_A0 + _surface.MIRROR_BLEND_WIDTH)
-            else:
-                cast = np.flatnonzero(self.mirror_weighted[s["comp"][idx]])
-            if len(cast):
-                hc = self.scene.intersect(o[idx[cast]], d[idx[cast]])
-                for key in h:
-                    h[key][cast] = hc[key]
+            cast = np.flatnonzero(self.mirror_weighted[s["comp"][idx]])
+        if len(cast):
+            hc = self.scene.intersect(o[idx[cast]], d[idx[cast]])
+            for key in h:
+                h[key][cast] = hc[key]
         return idx, o[idx], d[idx], h
 
     def soft_shadows(self, s, vis, occ_t, footprint_m, pix, H, W, n_rays, seed):

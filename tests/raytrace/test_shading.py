@@ -871,17 +871,21 @@ def test_mirror_term_of_a_wide_lobe_takes_nothing_along_its_missed_mirror_ray(ma
     ray with weight 1 − t, t = 1 at α ≥ GLOSSY_A1 where the ray escapes: on aluminium (α 0.35)
     the term is the same bits whatever the environment along the missed rays (Earth there, or
     no Earth: the kernel does not look it up), on solar cells (α 0.08 < GLOSSY_A1) it changes
-    with it. The sub-samples' mirror rays (raytrace._antialias._mirror_hits) are those of
-    :meth:`raytrace._context._Sunlight.mirror_hits`, array for array."""
-    from raytrace import environment as env
+    with it. The mirror rays :meth:`raytrace._context._Sunlight.mirror_hits` gathers by a kernel
+    (raytrace._rows.take_ray_rows) are NumPy's fancy indexing of them, array for array."""
+    from raytrace import _surface, environment as env
     from raytrace._surface import GLOSSY_A1
     ctx, s = _glossy_points(material)
     assert (ctx.alpha[s["comp"]] >= GLOSSY_A1).all() == wide
     hits = ctx.mirror_hits(s)
-    fast = _antialias._mirror_hits(ctx, s)
-    for a, b in zip(hits[:3], fast[:3]):
+    spec = s["m_f0"].max(axis=1) > 0.0 if "m_f0" in s else ctx.specular[s["comp"]]
+    o, d = np.empty((len(spec), 3)), np.empty((len(spec), 3))
+    _surface.mirror_rays(s["NS"], s["NG"], s["WO"], s["P"], ctx.eps, spec, o, d)
+    idx = np.flatnonzero(spec)
+    ref = (idx, o[idx], d[idx], ctx.scene.intersect(o[idx], d[idx]))
+    for a, b in zip(hits[:3], ref[:3]):
         assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
-    assert all(hits[3][k].tobytes() == fast[3][k].tobytes() for k in hits[3])
+    assert all(hits[3][k].tobytes() == ref[3][k].tobytes() for k in hits[3])
     assert len(hits[0]) > 100 and (hits[3]["geomID"] < 0).all()
     E = ctx.cache_E(s)
     L_earth = np.zeros((len(s["P"]), 3))
