@@ -28,7 +28,11 @@ def pytest_sessionstart(session):
     call, as they would without it."""
     try:
         from raytrace._precompile import GROUPS, precompile
-        precompile(max(1, min(os.cpu_count() or 1, 4)), GROUPS)
+        processes = max(1, min(os.cpu_count() or 1, 4))
+        precompile(processes, GROUPS)
+        # the serial builds of the main job's and a balanced frame's kernels: what the CLI's
+        # pool workers and tests/raytrace/test_threaded_kernels.py call on one numba thread
+        precompile(processes, ("fast", "balanced"), serial=True)
     except Exception as exc:  # noqa: BLE001 (a speed-up only; the tests report real errors)
         print(f"conftest: precompile skipped ({type(exc).__name__}: {exc})")
 

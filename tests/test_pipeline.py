@@ -481,10 +481,12 @@ def test_dask_local_cluster_gives_the_same_bytes(ref, tmp_path):
     assert_same_tree(ref, tmp_path / "dask")
 
 
-def test_unreachable_scheduler_is_one_line_and_writes_nothing(tmp_path, capsys):
+def test_unreachable_scheduler_is_one_line_and_writes_nothing(tmp_path, capsys, monkeypatch):
     """The scheduler is connected before the sequence folder is prepared (it left scenario.json, the model and
     empty modality folders behind)."""
     pytest.importorskip("distributed")
+    from raytrace.dataset import pool
+    monkeypatch.setattr(pool, "SCHEDULER_TIMEOUT_S", 2.0)  # nobody answers: the test needs no 10 s wait
     import socket
     with socket.socket() as sock:  # a port nobody listens on
         sock.bind(("127.0.0.1", 0))

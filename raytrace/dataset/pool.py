@@ -140,15 +140,19 @@ def _prebuild_threads(threads: int, quality: str):
         numba.set_num_threads(before)
 
 
+SCHEDULER_TIMEOUT_S = 10.0
+"""How long :func:`connect_scheduler` tries to reach ``--scheduler`` before giving up."""
+
+
 def connect_scheduler(scheduler: str):
     """A dask.distributed client of ``--scheduler``, connected before anything is written (a
-    scheduler that cannot be reached leaves no folder behind)."""
+    scheduler that cannot be reached within :data:`SCHEDULER_TIMEOUT_S` leaves no folder behind)."""
     try:
         from distributed import Client
     except ImportError:
         raise UsageError("--scheduler needs dask.distributed: pip install 'orbitsynth[dask]'") from None
     try:
-        return Client(scheduler, timeout="10s")
+        return Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
     except (OSError, TimeoutError, ValueError) as exc:
         raise UsageError(f"--scheduler: cannot connect to {scheduler} ({exc})") from None
 

@@ -53,10 +53,10 @@ def _view(R_be, dist_m, sun_body, W, H, f, R_body_from_cam=np.eye(3), seed=0, cl
     p[env.P_PIX_RAD] = 1.0 / f
     if not clouds:
         p[env.P_CLOUD_THRESHOLD] = 1e3
-    rad = np.zeros((H, W, 3))
+    rad = np.zeros((H, W, 3), np.float32)  # the renderer's types: the kernel's compiled signature
     mask = np.zeros((H, W), dtype=bool)
     cam = Camera(W, H, f, f, (W - 1) / 2, (H - 1) / 2)
-    earth_background(np.zeros((H, W), dtype=np.int32), np.zeros(3), np.ascontiguousarray(R_body_from_cam), f, f,
+    earth_background(np.zeros((H, W), dtype=np.uint16), np.zeros(3), np.ascontiguousarray(R_body_from_cam), f, f,
                      cam.cx, cam.cy, *cam.lens_arrays(), p, tex, shade._BACKGROUND_STEP, shade._BACKGROUND_TOL,
                      shade._BACKGROUND_CHORD, mask, rad)
     u, v = np.meshgrid(np.arange(W), np.arange(H))
@@ -245,7 +245,7 @@ def test_main_job_earth_has_texture_ocean_and_clouds(main_job_frames):
         p, tex = _background_params(light)
         p[env.P_PIX_RAD] = 1.0 / cam.fx
         H, W = cam.height, cam.width
-        rad = np.zeros((H, W, 3))
+        rad = np.zeros((H, W, 3), np.float32)
         mask = np.zeros((H, W), dtype=bool)
         earth_background(geo.instance, o, R_bc, cam.fx, cam.fy, cam.cx, cam.cy, *cam.lens_arrays(), p, tex,
                          shade._BACKGROUND_STEP, shade._BACKGROUND_TOL, shade._BACKGROUND_CHORD, mask, rad)
