@@ -8,6 +8,7 @@ own loaders: the baseline https://github.com/tpark94/speedplusbaseline (``prepro
 from __future__ import annotations
 
 import hashlib
+import io
 from pathlib import Path
 
 import numpy as np
@@ -107,6 +108,10 @@ def _one_target_one_camera(sequences: list) -> dict:
     return camera
 
 
+_MAT_TEXT = b"MATLAB 5.0 MAT-file, written by orbitsynth's SPEED+ export"
+_MAT_TEXT_BYTES = 116
+
+
 def _write_models(models: Path, seq, link: bool) -> None:
     """The target's mesh in metres (the sequence's PLY) and in millimetres (what SPNv2's
     load_cad_model reads: vertex x, y, z divided by 1000), and its keypoints (.mat and .json)."""
@@ -120,7 +125,13 @@ def _write_models(models: Path, seq, link: bool) -> None:
     mesh_mm.apply_scale(1000.0)
     (models / f"{target}.ply").write_bytes(export_ply(mesh_mm, encoding="binary", include_attributes=False))
     if seq.keypoints_body_m is not None:
-        savemat(models / f"{target}Points.mat", {KEYPOINTS_MAT_KEY: seq.keypoints_body_m.T.copy()})
+        buf = io.BytesIO()
+        savemat(buf, {KEYPOINTS_MAT_KEY: seq.keypoints_body_m.T.copy()})
+        # the header's 116-byte text holds the time of writing (MAT-file format, level 5): a fixed
+        # text instead, so that the same sequence exports to the same bytes
+        mat = bytearray(buf.getvalue())
+        mat[:_MAT_TEXT_BYTES] = _MAT_TEXT.ljust(_MAT_TEXT_BYTES)
+        (models / f"{target}Points.mat").write_bytes(bytes(mat))
         _write_json(models / "keypoints.json", {
             "frame": "body", "unit": "m", "source": f"{seq.root.name}/model/keypoints.json",
             "names": list(seq.keypoint_names), "points_body_m": seq.keypoints_body_m.tolist()})

@@ -94,6 +94,21 @@ def test_layout_and_pose_labels(exported, sequence):
         ["icesat.ply", "icesatPoints.mat", "icesat_m.ply", "keypoints.json"]
 
 
+def test_the_keypoints_mat_file_has_no_time_stamp(sequence, tmp_path, monkeypatch):
+    """scipy writes the time into a MAT-file's header; the export writes a fixed text there, so
+    an export made at another time is the same bytes (and scipy and MATLAB's header rules still
+    read it: 116 bytes of text starting "MATLAB 5.0 MAT-file", then version and endian)."""
+    import time
+    first = export_speedplus(sequence[0], tmp_path / "a", split="val") / "models" / "icesatPoints.mat"
+    monkeypatch.setattr(time, "asctime", lambda *a: "Thu Jan  1 00:00:00 1970")
+    second = export_speedplus(sequence[0], tmp_path / "b", split="val") / "models" / "icesatPoints.mat"
+    data = first.read_bytes()
+    assert data == second.read_bytes()
+    assert data.startswith(b"MATLAB 5.0 MAT-file") and b"1970" not in data and b"Created on" not in data
+    assert data[126:128] == b"IM"  # little-endian indicator after the 116 + 8 + 2 header bytes
+    assert_array_equal(loadmat(first)["tango3Dpoints"], sequence[2].T)
+
+
 def test_camera_json_reads_with_spnv2(exported):
     cam = load_camera_intrinsics(exported / "camera.json")  # fails on any non-number
     assert (int(cam["Nu"]), int(cam["Nv"])) == (W, H)
