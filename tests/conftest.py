@@ -26,6 +26,8 @@ def pytest_sessionstart(session):
     (the main job's kernels precompiled, the rest compiled where first called) to 9 min 39 s.
     With a warm cache it takes ~3 s. A failure here only means the kernels compile on first
     call, as they would without it."""
+    if hasattr(session.config, "workerinput"):  # a pytest-xdist worker: its controller compiled them
+        return
     try:
         from raytrace._precompile import GROUPS, precompile
         processes = max(1, min(os.cpu_count() or 1, 4))

@@ -465,19 +465,24 @@ def test_render_scene_stars_in_the_background_only(tmp_path):
 def test_a_fresh_numba_cache_is_detected_and_filled_by_the_precompile_step(tmp_path):
     """jit.kernels_not_compiled in a process whose numba cache directory is empty: every group
     a ``reference`` frame calls; after raytrace._precompile compiled the kernel standing for
-    the main job's group into that directory, the preset's group only; after its own, none."""
+    the main job's group into that directory, the preset's group only; after its own, none. In
+    the serial builds, which the main job's pool workers call (and compile in half the time);
+    the parallel build of a probe is another cache entry (test_threaded_kernels.py)."""
     code = ("import cli, sys; from raytrace import _precompile as P; from raytrace.dataset import jit; "
-            "a = jit.kernels_not_compiled('reference'); "
-            "bad = P._compile_share([(n, P.group_signatures(['fast', 'reference'])[n][1]) for n in [P.probe('fast')]]); "
-            "b = jit.kernels_not_compiled('reference'); "
+            "a = jit.kernels_not_compiled('reference', serial=True); "
+            "bad = P._compile_share([(n, P.group_signatures(['fast', 'reference'])[n][1]) for n in [P.probe('fast')]], "
+            "serial=True); "
+            "b = jit.kernels_not_compiled('reference', serial=True); "
+            "c = jit.kernels_not_compiled('reference', serial=False); "
             "bad += P._compile_share([(n, P.group_signatures(['fast', 'reference'])[n][1]) "
-            "for n in [P.probe('reference')]]); "
-            "print(','.join(a), bad, ','.join(b), ','.join(jit.kernels_not_compiled('reference')) or '-')")
+            "for n in [P.probe('reference')]], serial=True); "
+            "print(','.join(a), bad, ','.join(b), ','.join(c), "
+            "','.join(jit.kernels_not_compiled('reference', serial=True)) or '-')")
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300,
                        check=False)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split() == ["fast,reference", "[]", "reference", "-"]
+    assert r.stdout.split() == ["fast,reference", "[]", "reference", "fast,reference", "-"]
 
 
 def test_keypoints_option_labels_and_sequence_identity(tmp_path, capsys):
