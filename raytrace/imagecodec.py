@@ -1,8 +1,9 @@
 """Image files encoded in memory, for speed: PNG (8/16-bit grey or RGB) and OpenEXR (float32 or
-half, scan lines, uncompressed or ZIP), with numpy and zlib (zlib-ng where it writes the same bytes). :func:`raytrace.files.write_image`
-writes a frame's files with them (one write, the checksum taken from memory); OpenImageIO reads
-them, and writes what they do not cover. tests/test_files_compression.py reads every setting
-back with other decoders (libpng through OpenCV, Pillow, OpenEXR through OpenImageIO).
+half, scan lines, uncompressed or ZIP), with numpy and zlib (zlib-ng where it writes the same
+bytes). :func:`raytrace.files.write_image` writes a frame's files with them (one write, the
+checksum taken from memory); OpenImageIO reads them, and writes what they do not cover.
+tests/test_files_compression.py reads every setting back with other decoders (libpng through
+OpenCV, Pillow, OpenEXR through OpenImageIO).
 """
 
 from __future__ import annotations

@@ -21,19 +21,18 @@ if os.environ.get("CI"):
 def pytest_sessionstart(session):
     """Fill numba's on-disk cache with the kernels of every preset on every core at once
     (:func:`raytrace._precompile.precompile`, all groups) before the tests call them one by
-    one. On a fresh clone that is ~250 s of compiling on one core, 120 s on two (a 2-core AMD
-    EPYC; the ``balanced`` paths ~110 s of it): the suite from a cold cache went from 11 min 3 s
-    (the main job's kernels precompiled, the rest compiled where first called) to 9 min 39 s.
-    With a warm cache it takes ~3 s. A failure here only means the kernels compile on first
-    call, as they would without it."""
+    one: their parallel builds (what a test's own process calls on two numba threads) and, of
+    the main job's and a ``balanced`` frame's kernels, their serial builds (the CLI's pool
+    workers, tests/raytrace/test_threaded_kernels.py). From a fresh clone ~150 s on two cores
+    (BENCHMARKS.md, "The test suite from a cold cache"); ~3 s with a warm cache. Under
+    pytest-xdist only in the controller, before its workers start. A failure here only means
+    the kernels compile on first call, as they would without it."""
     if hasattr(session.config, "workerinput"):  # a pytest-xdist worker: its controller compiled them
         return
     try:
         from raytrace._precompile import GROUPS, precompile
         processes = max(1, min(os.cpu_count() or 1, 4))
         precompile(processes, GROUPS)
-        # the serial builds of the main job's and a balanced frame's kernels: what the CLI's
-        # pool workers and tests/raytrace/test_threaded_kernels.py call on one numba thread
         precompile(processes, ("fast", "balanced"), serial=True)
     except Exception as exc:  # noqa: BLE001 (a speed-up only; the tests report real errors)
         print(f"conftest: precompile skipped ({type(exc).__name__}: {exc})")

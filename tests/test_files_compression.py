@@ -125,7 +125,8 @@ def test_zlib_ng_writes_zlibs_own_bytes(monkeypatch):
                 ours = imagecodec._compressor(level, strategy)
                 ref = zlib.compressobj(level, zlib.DEFLATED, 15, 9, imagecodec.ZLIB_STRATEGIES[strategy])
                 assert type(ours).__module__ == "zlib_ng"  # not zlib's own
-                assert ours.compress(data) + ours.flush() == ref.compress(data) + ref.flush(), (len(data), strategy, level)
+                assert ours.compress(data) + ours.flush() == ref.compress(data) + ref.flush(), \
+                    (len(data), strategy, level)
     frame = _frame_like(rng)
     with_ng = {k: F.png_bytes(frame[k], srgb=k != "mask", filter="up", level=1, strategy=s)
                for k, s in (("rgb", "rle"), ("rgb_degraded", "huffman"), ("mask", "rle"))}
