@@ -29,9 +29,9 @@ def _compressor(level: int, strategy: str):
     """A deflate compressor (zlib format, 32 KiB window, memLevel 9) at ``level`` with
     ``strategy``. zlib-ng, where installed, for ``huffman`` and ``rle`` at levels 1–9: it writes
     zlib's own stream for them, byte for byte (tests/test_files_compression.py checks it), in
-    about half the time (a main-job frame's rgb 15.8 → 9.5 ms, rgb_degraded 32 → 17 ms). Other
-    strategies and level 0 take zlib itself: zlib-ng's ``default`` level 1 is another, larger
-    stream."""
+    about half the time (a main-job frame's five files 97 → 53 ms, BENCHMARKS.md "Writing the
+    frames"). Other strategies and level 0 take zlib itself: zlib-ng's ``default`` level 1 is
+    another, larger stream."""
     if _zlib_ng is not None and strategy in ("huffman", "rle") and level >= 1:
         return _zlib_ng.compressobj(int(level), _zlib_ng.DEFLATED, 15, 9, ZLIB_STRATEGIES[strategy])
     return zlib.compressobj(int(level), zlib.DEFLATED, 15, 9, ZLIB_STRATEGIES[strategy])
