@@ -43,9 +43,11 @@ def _above(lat_deg: float, lon_deg: float):
     return np.vstack([east, -north, -up])  # rows: the body axes in Earth-fixed coordinates
 
 
-def _view(R_be, dist_m, sun_body, W, H, f, R_body_from_cam=np.eye(3), seed=0, clouds=True, albedo=0.3):
+def _view(R_be, dist_m, sun_body, W, H, f, R_body_from_cam=np.eye(3), seed=0, clouds=True, albedo=0.3,
+          step=shade._BACKGROUND_STEP):
     """Earth behind an empty image: radiance (H, W, 3), Earth mask, and per pixel the unit ray,
-    the ground normal (body frame) and the Sun's cosine there (numpy, on its own)."""
+    the ground normal (body frame) and the Sun's cosine there (numpy, on its own); ``step`` 1:
+    every pixel's state evaluated, none interpolated."""
     earth = Earth((0.0, 0.0, 1.0), dist_m, texture="bluemarble", R_body_from_earth=R_be, cloud_seed=seed,
                   albedo=albedo)
     light = Lighting(sun_dir_body=tuple(_unit(sun_body)), earth=earth)
@@ -57,7 +59,7 @@ def _view(R_be, dist_m, sun_body, W, H, f, R_body_from_cam=np.eye(3), seed=0, cl
     mask = np.zeros((H, W), dtype=bool)
     cam = Camera(W, H, f, f, (W - 1) / 2, (H - 1) / 2)
     earth_background(np.zeros((H, W), dtype=np.uint16), np.zeros(3), np.ascontiguousarray(R_body_from_cam), f, f,
-                     cam.cx, cam.cy, *cam.lens_arrays(), p, tex, shade._BACKGROUND_STEP, shade._BACKGROUND_TOL,
+                     cam.cx, cam.cy, *cam.lens_arrays(), p, tex, step, shade._BACKGROUND_TOL,
                      shade._BACKGROUND_CHORD, mask, rad)
     u, v = np.meshgrid(np.arange(W), np.arange(H))
     D = np.stack([(u - cam.cx) / f, (v - cam.cy) / f, np.ones((H, W))], -1) @ np.asarray(R_body_from_cam).T
@@ -307,6 +309,33 @@ def test_night_side_is_the_twilight_sky_whatever_the_clouds():
                       for v, u in zip(*np.nonzero(night), strict=True)])
     assert exact.max() > 0.0  # twilight: the air above is lit
     np.testing.assert_allclose(rad[night], exact, rtol=1e-2, atol=1e-3 * exact.max())
+
+
+@pytest.mark.parametrize("tilt_deg", [0.0, 55.0])
+def test_day_side_pixels_are_the_point_by_point_evaluation(tilt_deg):
+    """Every pixel's state evaluated (step 1), each lit ground pixel of the background kernel, whose
+    fine octaves are summed a row at a time, against :func:`raytrace._earth.point_radiance` called
+    point by point (its octaves summed one point at a time): at nadir and on a view tilted along
+    the rows towards the horizon, where the footprint, and with it the number of fine octaves and
+    the last one's fade, changes along each row. Pixels finer than the coarse octaves' 3 km
+    (point_radiance fades those beyond the footprint, the kernel's state keeps them all)."""
+    W, H, f = 160, 48, 1000.0
+    dist = R_E + 400e3
+    a = math.radians(tilt_deg)  # about the camera's y axis: the view's obliquity changes along x, the rows
+    R_bc = np.array([[math.cos(a), 0.0, math.sin(a)], [0.0, 1.0, 0.0], [-math.sin(a), 0.0, math.cos(a)]])
+    rad, mask, D, m, mu_s, p, tex = _view(_above(-5.0, 140.0), dist, (0.3, -0.2, -1.0), W, H, f,
+                                          R_body_from_cam=R_bc, step=1)
+    lit = mask & (mu_s > 0.1)
+    assert lit.sum() == W * H
+    t = D @ np.array([0.0, 0.0, dist]) - np.sqrt(R_E ** 2 - dist ** 2 + (D[..., 2] * dist) ** 2)
+    exact = np.array([_earth.point_radiance(p, tex, *m[v, u], *D[v, u], float(t[v, u]))
+                      for v, u in zip(*np.nonzero(lit), strict=True)])
+    foot = np.maximum(t / f / np.maximum(-np.einsum("ijk,ijk->ij", D, m), 0.05), 100.0)
+    assert foot.max() < 3e3
+    octaves = np.floor(np.log2(R_E / _earth.F_FINE / foot) - 1.0)  # whole fine octaves, per pixel
+    varies = (octaves.min(axis=1) < octaves.max(axis=1)).all()
+    assert varies if tilt_deg else not varies
+    np.testing.assert_allclose(rad[lit], exact, rtol=1e-5)
 
 
 def _adding(rc, rho):
