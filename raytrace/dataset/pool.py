@@ -162,8 +162,8 @@ def execute(tasks: list, frame_fn, *, workers: int, progress=None, client=None, 
     of ``workers`` spawned processes, or on a dask.distributed cluster (``client``, connected by
     :func:`connect_scheduler`); yields results as they complete and advances ``progress`` (a
     tqdm bar) by one per frame. ``frame_fn`` must be picklable (a module-level function); so
-    must ``ready``, called once in each pool worker while this process builds the scenes
-    (:data:`PREBUILD_SCENES`), to load what a first frame would otherwise wait for."""
+    must ``ready``, queued once per pool worker ahead of the frames while this process builds
+    the scenes (:data:`PREBUILD_SCENES`), to load what a first frame would otherwise wait for."""
     if not tasks:
         return
     if client is not None:
@@ -206,13 +206,16 @@ def execute(tasks: list, frame_fn, *, workers: int, progress=None, client=None, 
                 warn(f"the workers build their own scenes ({exc})")
                 prebuilt = {}
             tasks = [dict(t, prebuilt=prebuilt.get(t["model_spec"])) for t in tasks]
-        for fut in readied:
-            fut.result()
-        pending = {pool.submit(run_frame, frame_fn, t) for t in tasks}
+        # the frames queued behind the ready calls, not after them all: a worker that is ready
+        # starts rendering while the other still loads (a failed ready call raises as it ends)
+        frames = {pool.submit(run_frame, frame_fn, t) for t in tasks}
+        pending = frames | set(readied)
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:
                 res = fut.result()
+                if fut not in frames:
+                    continue
                 if progress is not None:
                     progress.update(1)
                 yield res
