@@ -519,6 +519,10 @@ def main_job(argv: list) -> int:
             sys.stdout.flush()
         except BrokenPipeError:  # e.g. `python cli.py --dry-run | head`: the reader left, not an error
             sys.stdout = None
+        except OSError as exc:  # e.g. a full disk
+            sys.stdout = None
+            sys.stderr.write(f"{PROG}: error: cannot write the plan to standard output ({exc.strerror or exc})\n")
+            return 1
         return 0
     seq_dir = args.out or os.path.join("output", plan["name"])
     t0 = time.perf_counter()
@@ -989,4 +993,4 @@ if __name__ == "__main__":
     # run as the module `cli`, so worker processes (spawned, or dask) find run_frame by name
     import cli
     pool.install_termination_handlers()
-    sys.exit(cli.main())
+    pool.exit_without_teardown(cli.main())

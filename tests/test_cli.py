@@ -549,3 +549,28 @@ def test_a_config_files_keypoints_go_with_its_model(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err == "cli.py: error: --config: [sequence] keypoints is not used by the dataset command (built-in targets only)"
     assert not (tmp_path / "ds").exists()
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
+@pytest.mark.parametrize("flag", ["--dry-run", "--json"])
+def test_a_plan_that_cannot_be_written_is_a_one_line_error(flag):
+    """Standard output on a full disk: one line naming it, status 1, no traceback."""
+    with open("/dev/full", "w") as full:
+        r = subprocess.run([sys.executable, str(ROOT / "cli.py"), "--target", "cassini", flag], stdout=full,
+                           stderr=subprocess.PIPE, text=True, cwd=ROOT, timeout=120, check=False)
+    assert r.returncode == 1
+    assert r.stderr.strip().splitlines() == ["cli.py: error: cannot write the plan to standard output "
+                                             "(No space left on device)"]
+
+
+def test_a_reader_that_leaves_early_is_not_an_error():
+    """`cli.py --json | head -1`: the command ends with status 0 and nothing on standard error,
+    its output up to where the reader left as it would be whole."""
+    whole = run("--target", "cassini", "--json", "--frames", "2000")  # 3.4 MB: more than a pipe holds
+    p = subprocess.Popen([sys.executable, str(ROOT / "cli.py"), "--target", "cassini", "--json", "--frames", "2000"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+    first = p.stdout.readline()
+    p.stdout.close()  # the reader leaves
+    err = p.stderr.read()
+    assert p.wait(timeout=120) == 0 and err == b""
+    assert whole.returncode == 0 and first.decode() == whole.stdout.splitlines(keepends=True)[0]

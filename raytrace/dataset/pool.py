@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import os
+import sys
 import time
 
 from . import UsageError, jit, scenes, warn
@@ -357,6 +358,25 @@ def install_termination_handlers() -> None:
     for sig in _termination_signals():
         if signal.getsignal(sig) == signal.SIG_DFL:
             signal.signal(sig, _on_termination)
+
+
+def exit_without_teardown(status: int) -> None:
+    """End the CLI's process with ``status`` once its command (``cli.main``) has returned: the
+    exit handlers run (multiprocessing's among them: its children joined, its semaphores
+    released), the standard streams are flushed, then ``os._exit`` skips the interpreter's
+    teardown, whose garbage collections over numba's compiled objects were ~0.4 s of every
+    command (of a 2-frame main job's ~2.8 s; docs/performance.md, "Fixed cost"). Nothing is left
+    to write by then: every file is written and closed, every thread pool idle."""
+    import atexit
+    status = 0 if status is None else int(status)
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):  # None where a reader left early (main's dry run)
+        try:
+            if stream is not None:
+                stream.flush()
+        except (OSError, ValueError):  # a closed pipe: as Python's own flush at exit reports it
+            status = status or 120
+    os._exit(status)
 
 
 def interruption(exc: BaseException) -> KeyboardInterrupt | None:
