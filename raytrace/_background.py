@@ -166,7 +166,7 @@ def earth_background(inst, o_body, R_body_from_cam, fx, fy, cx, cy, lens, table,
     inside; per pixel its fine octaves and the Sun's cosine, and the atmosphere's limb glow on
     rays that miss the ground (``earth_px`` stays False there). The fine octaves are summed after
     each row, an octave at a time over the row's lit ground points (:func:`_fine_octaves_of_row`,
-    a loop LLVM vectorises): the same bits as point by point, the kernel ~0.85× the time on the
+    a loop LLVM vectorises): the same bits as point by point, the kernel ~0.92× the time on the
     main job's frames (BENCHMARKS.md, "Earth behind the target")."""
     H, W = inst.shape
     ox, oy, oz = o_body[0], o_body[1], o_body[2]

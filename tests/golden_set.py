@@ -21,7 +21,10 @@ Then every file of the two trees is compared: the same relative paths, the same 
 the fields that hold the time a run took or the absolute path it wrote to (:data:`VOLATILE`),
 which are dropped from JSON before comparing. Prints each difference and exits 1 if any.
 Not a pytest module (it takes minutes and two checkouts): run by hand before and after a
-change meant to keep the outputs.
+change meant to keep the outputs. The kernels compiled with fastmath can differ in a last bit
+with the way numba's cache was filled (which kernel compiled a shared helper first): compare
+checkouts whose caches were filled alike, e.g. both from empty with
+``NUMBA_CACHE_DIR=$(mktemp -d) python tests/golden_set.py /tmp/before .``.
 """
 
 from __future__ import annotations
