@@ -235,7 +235,7 @@ def precompile(processes: int, groups=("fast",), progress=None, serial: bool = F
     them; the last call has ``done == total``."""
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     import multiprocessing
-    from ._threads import exit_with_parent, pool_processes
+    from ._threads import compile_worker_init, pool_processes
     entries = entries_to_compile(groups)
     if not entries:
         return []
@@ -246,7 +246,7 @@ def precompile(processes: int, groups=("fast",), progress=None, serial: bool = F
     compiled, busy, running, failed = set(), set(), {}, []  # running: {future: entries it compiles}
     done_s = 0.0
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=exit_with_parent, initargs=(os.getpid(),))
+                               initializer=compile_worker_init, initargs=(os.getpid(),))
     try:
         while waiting or running:
             for q, need in _next_tasks(waiting, deps, compiled, busy, workers - len(running)):

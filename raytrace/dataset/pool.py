@@ -13,7 +13,6 @@ from __future__ import annotations
 import contextlib
 import functools
 import os
-import sys
 import time
 
 from . import UsageError, jit, scenes, warn
@@ -32,14 +31,16 @@ _STOP_GRACE_S = 30.0  # a worker whose parent died exits by then even if its fra
 
 def _worker_init(threads: int) -> None:
     """Process-pool initializer: share the cores between the workers; stop on SIGINT or
-    SIGTERM (:func:`_worker_stop`) and when the parent is gone (:func:`_abandon_frame`)."""
+    SIGTERM (:func:`_worker_stop`) and when the parent is gone (:func:`_abandon_frame`); at the
+    pool's shutdown, end without the interpreter's teardown (:func:`raytrace._threads.skip_teardown`)."""
     import signal
     global _IN_POOL_WORKER
     _IN_POOL_WORKER = True
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _worker_stop)
-    from .._threads import exit_with_parent
+    from .._threads import exit_with_parent, skip_teardown
     exit_with_parent(os.getppid(), _PARENT_POLL_S, _abandon_frame)
+    skip_teardown()
     try:
         import numba
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
@@ -368,15 +369,9 @@ def exit_without_teardown(status: int) -> None:
     command (of a 2-frame main job's ~2.8 s; docs/performance.md, "Fixed cost"). Nothing is left
     to write by then: every file is written and closed, every thread pool idle."""
     import atexit
-    status = 0 if status is None else int(status)
+    from .._threads import exit_now
     atexit._run_exitfuncs()
-    for stream in (sys.stdout, sys.stderr):  # None where a reader left early (main's dry run)
-        try:
-            if stream is not None:
-                stream.flush()
-        except (OSError, ValueError):  # a closed pipe: as Python's own flush at exit reports it
-            status = status or 120
-    os._exit(status)
+    exit_now(0 if status is None else int(status))
 
 
 def interruption(exc: BaseException) -> KeyboardInterrupt | None:
