@@ -85,7 +85,9 @@ def exit_now(status: int = 0) -> None:
 
 def skip_teardown() -> None:
     """Process-pool initializer (or part of one): once this worker's task loop has returned and
-    multiprocessing has cleaned up, its last exit handler ends it at once (:func:`exit_now`)."""
+    multiprocessing has cleaned up (its process bootstrap does, before the interpreter exits),
+    an exit handler registered after the libraries' own, so run before them, ends it at once
+    (:func:`exit_now`)."""
     import atexit
     atexit.register(exit_now)
 
