@@ -9,6 +9,10 @@ Embree's BVH built before the clock starts, numba's cache warm), the median of `
   (``raytrace.presets.CAST_CHUNKS_ON_TWO_THREADS``), alternated round by round so a slow spell of
   a shared machine hits both alike; and whether the two caches are the same bits (every
   array, sparse matrix and glossy record).
+* ``--serial-builds``: every build on the kernels' serial builds, as a fresh install's first run
+  builds the scenes its pool's workers wait for (``raytrace._jit.serial_builds``: the chunks
+  two at a time each on one numba thread, against one after the other on one thread, what that
+  run did before).
 * *Lattice merge.* The merge of lattice points into samples (distinct rows of component, cell
   and normal cell), on the keys of that target's two lattices: ``raytrace.cache._row_ids`` (one
   int64 per row, a 1-d sort) against ``np.unique(key, axis=0, return_inverse=True)`` (what it
@@ -50,13 +54,20 @@ def _members(c) -> list[str]:
     return [k for k in dir(c) if not k.startswith("__") and k != "scene" and not callable(getattr(c, k))]
 
 
+SERIAL_BUILDS = False  # --serial-builds
+
+
 def _build(model, two: bool):
+    import contextlib
+
+    from raytrace._jit import serial_builds
     presets.CAST_CHUNKS_ON_TWO_THREADS = two
     scene = Scene(model)
     scene.embree  # the BVH is not the cache's
-    t0 = time.perf_counter()
-    cache = scene.radiance_cache()
-    return time.perf_counter() - t0, cache
+    with serial_builds(2) if SERIAL_BUILDS else contextlib.nullcontext():
+        t0 = time.perf_counter()
+        cache = scene.radiance_cache()
+        return time.perf_counter() - t0, cache
 
 
 def _lattice_keys(model) -> list[np.ndarray]:
@@ -79,7 +90,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--targets", nargs="+", default=list(BUILTIN_TARGETS), choices=list(BUILTIN_TARGETS))
+    ap.add_argument("--serial-builds", action="store_true", help="the kernels' serial builds, as a fresh install's "
+                    "first run builds its scenes")
     args = ap.parse_args(argv)
+    global SERIAL_BUILDS
+    SERIAL_BUILDS = args.serial_builds
     saved = presets.CAST_CHUNKS_ON_TWO_THREADS
     ratios = []
     print("| target | rows | one after the other, s | two at a time, s | ratio | same bits | merge, np.unique(axis=0) s"

@@ -34,8 +34,10 @@ import os
 # → 0.243 (two interleaved runs each, benchmarks/bench_time_error.py scenes)
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
+import contextlib
 import ctypes
 import sys
+import threading
 
 import numba
 
@@ -230,6 +232,33 @@ class ThreadedKernel:
 
     def __repr__(self) -> str:
         return f"<ThreadedKernel {self.__module__}.{self.__qualname__}>"
+
+
+_LOCAL = threading.local()  # .cores: set by serial_builds on the thread that runs under it
+
+
+@contextlib.contextmanager
+def serial_builds(cores: int):
+    """This thread's kernels on their serial builds (numba's thread count 1: see
+    :class:`ThreadedKernel`) while it has ``cores`` cores to itself: work split into independent
+    pieces (:func:`side_cores`) then runs them side by side on side threads, each piece on the
+    serial builds too. For a process whose numba cache holds the serial builds only (a fresh
+    install's first run compiles those) and whose cores are free (the CLI building the scenes
+    its pool's workers wait for). The previous thread count is restored."""
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    _LOCAL.cores = max(1, int(cores))
+    try:
+        yield
+    finally:
+        _LOCAL.cores = 1
+        numba.set_num_threads(before)
+
+
+def side_cores() -> int:
+    """The cores the calling thread's work may spread over: numba's thread count, or the
+    ``cores`` of :func:`serial_builds` where that is more."""
+    return max(numba.get_num_threads(), getattr(_LOCAL, "cores", 1))
 
 
 SERIAL_SUFFIX = ".serial"

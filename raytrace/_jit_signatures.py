@@ -260,7 +260,7 @@ SIGNATURES = {
         '(float64, float64, float64, float64, float64, float64)',
     ]),
     'raytrace.brdf._split_sum': (0.55, [
-        '(int64, int64, int64)',
+        '(int64, int64, int64, int64, int64)',
     ]),
     'raytrace.brdf.brdf_cos': (0.64, [
         '(float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64, float64)',

@@ -75,7 +75,6 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 import scipy.sparse as sp
 import trimesh
@@ -86,6 +85,7 @@ from ._cache_kernels import (_bin_hits, _cache_rays, _csr_sum, _gauss_seidel_swe
                              _glossy_bounce,
                              _interp_rows, _irradiance_corners, _jacobi_step, _lattice_points, _lookup_rows, _oct_cells,
                              _ray_cells, _rows_irradiance, _sun_rays, _zero_rows)
+from ._jit import side_cores
 from ._threads import submit
 from .brdf import bounce_albedo
 
@@ -538,10 +538,11 @@ class RadianceCache:
 
         starts = range(0, len(rows_all), chunk)
         # the chunks (of about presets.CAST_CHUNK_RAYS rays) two at a time on a side pool
-        # (raytrace._threads.submit; presets.CAST_CHUNKS_ON_TWO_THREADS); False: one after the
-        # other. The same cache bit for bit (tests/raytrace/test_cache_solve.py); the four built-in
+        # (raytrace._threads.submit; presets.CAST_CHUNKS_ON_TWO_THREADS) where this thread has two
+        # cores: numba's threads, or the serial builds on free cores (raytrace._jit.serial_builds);
+        # False: one after the other. The same cache bit for bit (tests/raytrace/test_cache_solve.py); the four built-in
         # targets' caches built in 0.71–0.85× the time (BENCHMARKS.md, "Building the radiance cache")
-        if presets.CAST_CHUNKS_ON_TWO_THREADS and numba.get_num_threads() > 1 and len(starts) > 1:
+        if presets.CAST_CHUNKS_ON_TWO_THREADS and side_cores() > 1 and len(starts) > 1:
             # a chunk's NumPy steps run on one core, which the other chunk's Embree and kernels
             # then use; every ray is keyed by its row, so the pieces are the same bits in any
             # order, and they are put back in chunk order

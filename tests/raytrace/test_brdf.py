@@ -169,6 +169,30 @@ def test_split_sum_table_matches_the_albedo_by_quadrature(alpha, mu_o):
     np.testing.assert_allclose(got, expect, rtol=0.015)
 
 
+def test_split_sum_table_in_two_halves_on_two_threads_is_the_same_bits(monkeypatch):
+    """The split-sum table computed as two halves of its μ rows side by side (a fresh install's
+    first run, ``raytrace._jit.serial_builds`` on two cores) is the one-piece table bit for bit,
+    each half on a thread of its own."""
+    import threading
+
+    from raytrace import _jit
+    compute, ran = brdf._split_sum, []
+
+    def spy(*args):
+        ran.append((args[-2:], threading.current_thread().name))
+        return compute(*args)
+
+    whole = compute(9, 7, 64, 0, 9)
+    assert whole.shape == (9, 7, 2)
+    with monkeypatch.context() as m:
+        m.setattr(brdf, "_split_sum", spy)
+        with _jit.serial_builds(2):
+            halves = brdf._split_sum_table(9, 7, 64)
+    assert sorted(r for r, _ in ran) == [(0, 4), (4, 9)]
+    assert all(name.startswith("raytrace-splitsum") for _, name in ran)
+    assert halves.shape == whole.shape and halves.tobytes() == whole.tobytes()
+
+
 # ---- rendered: a gold sphere
 
 W, H, F = 160, 120, 200.0

@@ -164,32 +164,48 @@ def _same(a, b, where):
 def test_cache_rays_in_chunks_on_two_threads_build_the_same_cache(monkeypatch):
     """``RadianceCache._cast`` runs its chunks of rays two at a time (raytrace._threads): the
     matrices, glossy records and per-row flags are the same bits as one chunk after another,
-    and with one numba thread. Chunks of 16 rows, so the box's rows (coarse and contact) make
-    dozens of them."""
+    and with one numba thread; and two at a time on the serial builds (``serial_builds``: a
+    fresh install's scenes built for the pool's workers). Chunks of 16 rows, so the box's rows
+    (coarse and contact) make dozens of them."""
+    import contextlib
+
     from raytrace import cache as cache_mod
+    from raytrace._jit import serial_builds
     if numba.get_num_threads() < 2:
         pytest.skip("one numba thread: the chunks run one after the other")
     monkeypatch.setattr(presets, "CAST_CHUNK_RAYS", 16 * 128)
-    submitted = []
+    submitted, chunk_threads = [], set()
     submit = cache_mod.submit
 
-    def spy(*a):
-        submitted.append(a[0])
-        return submit(*a)
+    def spy(name, workers, fn, *args):
+        submitted.append(name)
+
+        def counted(*a):
+            chunk_threads.add(numba.get_num_threads())
+            return fn(*a)
+        return submit(name, workers, counted, *args)
 
     monkeypatch.setattr(cache_mod, "submit", spy)
-    built, on_pool = [], []
-    for two, threads in ((True, numba.get_num_threads()), (False, numba.get_num_threads()), (True, 1)):
+    built, on_pool, threads_seen = [], [], []
+    n = numba.get_num_threads()
+    for two, threads, ctx in ((True, n, contextlib.nullcontext), (False, n, contextlib.nullcontext),
+                              (True, 1, contextlib.nullcontext), (True, n, lambda: serial_builds(2))):
         monkeypatch.setattr(presets, "CAST_CHUNKS_ON_TWO_THREADS", two)
         old = numba.get_num_threads()
         numba.set_num_threads(threads)
         submitted.clear()
+        chunk_threads.clear()
         try:
-            built.append(_open_box().radiance_cache(spacing_m=0.4))
+            with ctx():
+                built.append(_open_box().radiance_cache(spacing_m=0.4))
         finally:
             numba.set_num_threads(old)
         on_pool.append(len(submitted))
-    assert on_pool[0] > 4 and on_pool[1:] == [0, 0]  # the side pool ran the first build only
+        threads_seen.append(set(chunk_threads))
+    assert numba.get_num_threads() == n  # serial_builds restored the thread count
+    # the side pool ran the first and the last build, the last on one numba thread per chunk
+    assert on_pool[0] > 4 and on_pool[1:3] == [0, 0] and on_pool[3] == on_pool[0]
+    assert threads_seen[0] == {n} and threads_seen[3] == {1}
     first = built[0]
     assert first._f is not None and first._c["W_g"] is not None  # contact rows and glossy transfer present
     assert first.n_coarse_rows > 4 * 16

@@ -97,7 +97,7 @@ def test_an_unwritable_entry_is_no_error(tmp_path):
 # --------------------------------------------------------------------------- what is cached
 def test_the_split_sum_table_from_the_cache_is_the_computed_one(tmp_path, monkeypatch):
     from raytrace import brdf
-    direct = brdf._split_sum(brdf._MU_BINS, brdf._MU_BINS, brdf._SPLIT_SUM_SAMPLES)  # computed, no cache
+    direct = brdf._split_sum(brdf._MU_BINS, brdf._MU_BINS, brdf._SPLIT_SUM_SAMPLES, 0, brdf._MU_BINS)  # no cache
     brdf.split_sum_table.cache_clear()
     try:
         first = brdf.split_sum_table()  # computed and stored (this test's own cache folder)
