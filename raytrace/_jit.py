@@ -245,13 +245,13 @@ def serial_builds(cores: int):
     serial builds too. For a process whose numba cache holds the serial builds only (a fresh
     install's first run compiles those) and whose cores are free (the CLI building the scenes
     its pool's workers wait for). The previous thread count is restored."""
-    before = numba.get_num_threads()
+    before, before_cores = numba.get_num_threads(), getattr(_LOCAL, "cores", 1)
     numba.set_num_threads(1)
     _LOCAL.cores = max(1, int(cores))
     try:
         yield
     finally:
-        _LOCAL.cores = 1
+        _LOCAL.cores = before_cores
         numba.set_num_threads(before)
 
 

@@ -175,6 +175,8 @@ def test_split_sum_table_in_two_halves_on_two_threads_is_the_same_bits(monkeypat
     each half on a thread of its own."""
     import threading
 
+    import numba
+
     from raytrace import _jit
     compute, ran = brdf._split_sum, []
 
@@ -187,7 +189,11 @@ def test_split_sum_table_in_two_halves_on_two_threads_is_the_same_bits(monkeypat
     with monkeypatch.context() as m:
         m.setattr(brdf, "_split_sum", spy)
         with _jit.serial_builds(2):
+            with _jit.serial_builds(3):  # nested: the inner one's cores, then the outer one's again
+                assert _jit.side_cores() == 3
+            assert _jit.side_cores() == 2 and numba.get_num_threads() == 1
             halves = brdf._split_sum_table(9, 7, 64)
+    assert _jit.side_cores() == numba.get_num_threads()  # serial_builds ended: numba's threads again
     assert sorted(r for r, _ in ran) == [(0, 4), (4, 9)]
     assert all(name.startswith("raytrace-splitsum") for _, name in ran)
     assert halves.shape == whole.shape and halves.tobytes() == whole.tobytes()
