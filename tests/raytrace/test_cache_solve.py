@@ -244,9 +244,10 @@ def test_csr_assembly_against_scipy():
 
 
 def test_contact_rows_summed_per_chunk_give_the_listed_matrices(monkeypatch):
-    """The contact rows' W_ss and W_sb summed by each chunk of rays as it is cast
-    (``presets.ASSEMBLE_CONTACT_PER_CHUNK``) are the same bits as those assembled from the lists of
-    every hit, with chunks of 16 rows (dozens of them) on one thread and two."""
+    """The contact rows' W_ss and W_sb, and their glossy W_g and glint records, summed (kept) by
+    each chunk of rays as it is cast (``presets.ASSEMBLE_CONTACT_PER_CHUNK``) are the same bits as
+    those assembled from the lists of every hit, with chunks of 16 rows (dozens of them) on one
+    thread and two."""
     from raytrace import cache as cache_mod
     monkeypatch.setattr(presets, "CAST_CHUNK_RAYS", 16 * 128)
     summed = []  # rows per call of RadianceCache._summed: per chunk, or per matrix from the lists
@@ -274,6 +275,8 @@ def test_contact_rows_summed_per_chunk_give_the_listed_matrices(monkeypatch):
     first = built[0]
     assert first._f is not None and len(first.contact_rows) > 4 * 16
     assert first._f["W_ss"].nnz > 0 and first._f["W_sb"].nnz > 0
+    g, glint = first._f["W_g"], first._f["glint"]
+    assert g is not None and len(g[1]) > 0 and len(glint["row"]) > 0  # the box's glossy lid reflects
     for other in built[1:]:
         for k in ("W_ss", "W_sb"):
             a, b = first._f[k], other._f[k]
@@ -281,6 +284,15 @@ def test_contact_rows_summed_per_chunk_give_the_listed_matrices(monkeypatch):
             for part in ("indptr", "indices", "data"):
                 x, y = getattr(a, part), getattr(b, part)
                 assert x.dtype == y.dtype and np.array_equal(x.view(np.uint8), y.view(np.uint8)), (k, part)
+        for x, y in zip(first._f["W_g"], other._f["W_g"]):
+            assert x.dtype == y.dtype and x.shape == y.shape and np.array_equal(x.view(np.uint8), y.view(np.uint8))
+        for a, b in zip(first._f["W_gb"], other._f["W_gb"]):
+            for part in ("indptr", "indices", "data"):
+                assert np.array_equal(getattr(a, part), getattr(b, part)), ("W_gb", part)
+        assert first._f["glint"].keys() == other._f["glint"].keys()
+        for k, x in first._f["glint"].items():
+            y = other._f["glint"][k]
+            assert x.dtype == y.dtype and x.shape == y.shape and np.array_equal(x.view(np.uint8), y.view(np.uint8)), k
 
 
 @pytest.mark.parametrize("omega", [1.0, 1.2])
