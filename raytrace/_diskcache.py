@@ -171,22 +171,47 @@ def write(path: str, key: bytes, payload: bytes) -> bool:
     """Store ``payload`` as the entry of key digest ``key`` at ``path`` (atomic: a temporary file
     in the same folder, renamed into place), then drop the kind's least recently used entries
     beyond :data:`KEEP`. False, leaving nothing behind, if it cannot be written."""
+    return write_stream(path, key, lambda fh: fh.write(payload))
+
+
+class _Hashed:
+    """A file's ``write`` that also counts the bytes and takes their SHA-256."""
+
+    def __init__(self, fh):
+        self.fh, self.sha, self.n = fh, hashlib.sha256(), 0
+
+    def write(self, data) -> int:
+        self.sha.update(data)
+        self.n += memoryview(data).nbytes
+        return self.fh.write(data)
+
+
+def write_stream(path: str, key: bytes, dump) -> bool:
+    """:func:`write` of the payload that ``dump(file)`` writes (``pickle.dump``'s way): streamed to
+    the file, its length and SHA-256 taken as it goes, so the payload is never whole in memory
+    (a scene of a user's CAD mesh: gigabytes). False, leaving nothing behind, if it cannot be
+    written; what ``dump`` raises otherwise is raised, leaving nothing behind either."""
     import tempfile
     folder, name = os.path.split(path)
     tmp = None
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
         with os.fdopen(fd, "wb") as fh:
-            fh.write(MAGIC + _HEADER.pack(key, len(payload), hashlib.sha256(payload).digest()))
-            fh.write(payload)
+            fh.write(MAGIC + _HEADER.pack(key, 0, bytes(32)))  # the header once the payload is known
+            out = _Hashed(fh)
+            dump(out)
+            fh.seek(len(MAGIC))
+            fh.write(_HEADER.pack(key, out.n, out.sha.digest()))
         os.replace(tmp, path)
-    except OSError:
+    except BaseException as exc:
         if tmp is not None:
             try:
                 os.unlink(tmp)
             except OSError:
                 pass
-        return False
+        if isinstance(exc, OSError):
+            return False
+        raise
     _evict(folder, name.partition("-")[0])
     return True
 

@@ -196,15 +196,16 @@ def prebuild_scenes(tasks: list, folder: str | None) -> dict:
             continue
         cache = scene.radiance_cache(**options)
         if path is not None or folder is not None:
-            payload = pickle.dumps((scene, cache, options), protocol=pickle.HIGHEST_PROTOCOL)
-            if path is not None and _diskcache.write(path, key, payload):
+            def dump(fh, what=(scene, cache, options)):  # streamed: a CAD mesh's scene is gigabytes
+                pickle.dump(what, fh, protocol=pickle.HIGHEST_PROTOCOL)
+            if path is not None and _diskcache.write_stream(path, key, dump):
                 out[spec] = path
             elif folder is not None:
                 path = os.path.join(folder, f"scene{len(out)}.pickle")
-                if not _diskcache.write(path, key or bytes(32), payload):
+                if not _diskcache.write_stream(path, key or bytes(32), dump):
                     raise OSError(f"cannot write {path}")
                 out[spec] = path
-            del payload
+            del dump
         if folder is None:
             scene.embree  # noqa: B018 - this process renders: keep the scene as built
             _SCENES.setdefault(spec, scene)

@@ -92,6 +92,31 @@ def test_the_least_recently_used_entries_beyond_keep_are_dropped(tmp_path):
 
 def test_an_unwritable_entry_is_no_error(tmp_path):
     assert not D.write(str(tmp_path / "no" / "such" / "t-00.bin"), b"k" * 32, b"payload")
+    assert not D.write_stream(str(tmp_path / "no" / "such" / "t-00.bin"), b"k" * 32, lambda fh: fh.write(b"x"))
+
+
+def test_a_streamed_entry_is_the_pickle_written_whole_and_a_failed_one_leaves_nothing(tmp_path):
+    """``write_stream`` (a scene pickled straight to its file, never whole in memory): the entry
+    reads back as ``pickle.dumps`` of the object, arrays written from their buffers included;
+    a ``dump`` that raises leaves no entry and no temporary file, and raises."""
+    import pickle
+    obj = {"a": np.arange(300_000, dtype=np.float64), "b": np.ones((700, 3), np.float32)[::2], "c": "text"}
+    key = D.key_digest("s", b"obj")
+    path = D.entry_path("s", key, str(tmp_path))
+    assert D.write_stream(path, key, lambda fh: pickle.dump(obj, fh, protocol=pickle.HIGHEST_PROTOCOL))
+    back = pickle.loads(D.read_mapped(path, key))
+    assert back.keys() == obj.keys() and back["c"] == "text"
+    assert all(np.array_equal(back[k], obj[k]) and back[k].dtype == obj[k].dtype for k in ("a", "b"))
+    assert D.read(path, key) == pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    # a dump that fails half-way: the old entry stays, nothing else is left
+    other = D.entry_path("s", D.key_digest("s", b"broken"), str(tmp_path))
+
+    def broken(fh):
+        fh.write(b"half of a payload")
+        raise pickle.PicklingError("cannot pickle this")
+    with pytest.raises(pickle.PicklingError):
+        D.write_stream(other, D.key_digest("s", b"broken"), broken)
+    assert [p.name for p in tmp_path.iterdir()] == [os.path.basename(path)]
 
 
 # --------------------------------------------------------------------------- what is cached
