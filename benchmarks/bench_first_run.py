@@ -20,6 +20,10 @@ the ratios of each tree's medians to the first's::
 
     git worktree add /tmp/before <commit>
     python benchmarks/bench_first_run.py --tree /tmp/before --tree .
+
+``--new-model`` times instead the first run of a model whose scene is not stored yet (a user's
+mesh: ``--args "--mesh FILE --frames 10"``): numba's cache warm, the persistent cache empty;
+with the peak resident memory of the command's largest process (its workers included).
 """
 
 from __future__ import annotations
@@ -37,16 +41,47 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def run(args: list, cache_dir: str, tree: Path = ROOT) -> dict:
-    env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir, ORBITSYNTH_CACHE_DIR=cache_dir + "-orbitsynth")
-    with tempfile.TemporaryDirectory() as tmp:
+def run(args: list, cache_dir: str, tree: Path = ROOT, scene_dir: str | None = None) -> dict:
+    """One ``cli.py`` process: numba's cache in ``cache_dir``, the persistent cache in
+    ``scene_dir`` (default ``cache_dir`` + ``-orbitsynth``); its wall time and peak RSS (the
+    largest of the process and the children it waited for, as Linux's wait4 reports it)."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir, ORBITSYNTH_CACHE_DIR=scene_dir or cache_dir + "-orbitsynth")
+    with tempfile.TemporaryDirectory() as tmp, tempfile.TemporaryFile("w+") as err:
         t0 = time.perf_counter()
-        res = subprocess.run([sys.executable, str(tree / "cli.py"), *args, "--out", os.path.join(tmp, "o")],
-                             capture_output=True, text=True, check=False, cwd=tmp, env=env)
+        proc = subprocess.Popen([sys.executable, str(tree / "cli.py"), *args, "--out", os.path.join(tmp, "o")],
+                                stdout=subprocess.DEVNULL, stderr=err, cwd=tmp, env=env)
+        _, status, usage = os.wait4(proc.pid, 0)
         wall = time.perf_counter() - t0
-    if res.returncode != 0:
-        raise RuntimeError(f"{tree}/cli.py {' '.join(args)} failed: {res.stderr.strip()[-400:]}")
-    return {"wall_s": wall, "compiled": "compiling" in res.stderr, "summary": res.stdout.strip().splitlines()[-1]}
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        err.seek(0)
+        stderr = err.read()
+    if proc.returncode != 0:
+        raise RuntimeError(f"{tree}/cli.py {' '.join(args)} failed: {stderr.strip()[-400:]}")
+    return {"wall_s": wall, "compiled": "compiling" in stderr, "peak_gib": usage.ru_maxrss / 2 ** 20}
+
+
+def new_model(args: list, trees: list, repeats: int) -> None:
+    """``--new-model``: each tree's first run of a model with numba's cache warm and the
+    persistent cache empty, alternated; wall and peak RSS."""
+    out = {t: [] for t in trees}
+    with tempfile.TemporaryDirectory() as root:
+        numba_dirs = {t: os.path.join(root, f"numba{i}") for i, t in enumerate(trees)}
+        print("filling numba's caches (untimed) ...", flush=True)
+        for i, t in enumerate(trees):
+            run(args, numba_dirs[t], t, os.path.join(root, f"fill{i}"))
+        for k in range(repeats):
+            for i, t in enumerate(trees if k % 2 == 0 else trees[::-1]):
+                r = run(args, numba_dirs[t], t, os.path.join(root, f"scene-{t.name}-{k}"))
+                assert not r["compiled"], r
+                out[t].append(r)
+                print(f"round {k + 1} {t}: {r['wall_s']:.1f} s, peak {r['peak_gib']:.2f} GiB", flush=True)
+    print(f"\ncli.py {' '.join(args)}: numba's cache warm, the persistent cache empty")
+    print("| tree | " + " | ".join(f"round {k + 1}, s / GiB" for k in range(repeats)) + " | median s | median GiB |")
+    print("|---|" + "---|" * (repeats + 2))
+    for t in trees:
+        print(f"| {t.name} | " + " | ".join(f"{r['wall_s']:.1f} / {r['peak_gib']:.2f}" for r in out[t])
+              + f" | {statistics.median(r['wall_s'] for r in out[t]):.1f}"
+              + f" | {statistics.median(r['peak_gib'] for r in out[t]):.2f} |")
 
 
 def main() -> None:
@@ -55,9 +90,14 @@ def main() -> None:
     p.add_argument("--args", default="--target cassini --pattern spiral")
     p.add_argument("--tree", action="append", type=Path, help="a checkout whose cli.py to run (repeatable; "
                    "default: this one)")
+    p.add_argument("--new-model", action="store_true", help="the first run of a model not stored yet: numba's "
+                   "cache warm, the persistent cache empty")
     a = p.parse_args()
     args = shlex.split(a.args)
     trees = [t.resolve() for t in a.tree] if a.tree else [ROOT]
+    if a.new_model:
+        new_model(args, trees, a.repeats)
+        return
     cold = {t: [] for t in trees}
     warm = {t: [] for t in trees}
     with tempfile.TemporaryDirectory() as root:
