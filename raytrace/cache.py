@@ -336,11 +336,11 @@ class RadianceCache:
         pos_all, nrm_all = np.concatenate([pos, pos_f]), np.concatenate([nrm, nrm_f])
         self.contact_rows = 2 * n_c + np.flatnonzero(valid_f & active)
         ray_pos_f = self._ray_origins(pos_f, face_f)
-        # their W_ss and W_sb summed by each chunk of rays as it is cast (their columns' aliases are
-        # the coarse rows', known by then; presets.ASSEMBLE_CONTACT_PER_CHUNK), not from lists of
-        # every hit: the same matrices bit for bit; the cache of a CAD mesh with many contacts built
-        # in ~1/3 of the time (BENCHMARKS.md, "Building the radiance cache of a user's mesh").
-        # False: from the lists.
+        # their W_ss, W_sb and W_g summed by each chunk of rays as it is cast (their columns'
+        # aliases are the coarse rows', known by then; presets.ASSEMBLE_CONTACT_PER_CHUNK), not
+        # from lists of every hit: the same matrices bit for bit; the cache of a CAD mesh with many
+        # contacts built in ~1/3 of the time, in less memory (BENCHMARKS.md, "Building the
+        # radiance cache of a user's mesh"). False: from the lists.
         raw_f = self._cast(np.concatenate([self._c_ray_pos, ray_pos_f]), nrm_all, self.contact_rows, 2 * n_c,
                            assemble=(valid_f, 2 * n_c) if presets.ASSEMBLE_CONTACT_PER_CHUNK else None)
         ok_f = self._unburied(valid_f, raw_f, row0=2 * n_c)
@@ -492,10 +492,11 @@ class RadianceCache:
         the rays that hit the inside of a closed shell (``buried``) or any surface nearer than
         _CONTACT_DISTANCE lattice spacings (``near``). With ``assemble`` = (valid, row0), rows
         whose columns' aliases are known already (the contact rows): each chunk sums its rows'
-        entries of W_ss and W_sb itself (:func:`_csr_sum`, rows not :meth:`_unburied` left
-        empty), which :meth:`_matrices` stacks, instead of listing every hit: the same matrices
-        bit for bit (a row's entries come from one chunk, in the same order), without the
-        lists' copies (~3 entries per cache ray: 36 M for Hubble's 12 M contact rays)."""
+        entries of W_ss, W_sb and the glossy W_g itself (:func:`_csr_sum`, rows not
+        :meth:`_unburied` left empty) and keeps only those rows' glint records
+        (:meth:`_glossy_summed`), which :meth:`_matrices` stacks, instead of listing every hit:
+        the same matrices bit for bit (a row's entries come from one chunk, in the same order),
+        without the lists' copies (~3 entries per cache ray: 36 M for Hubble's 12 M contact rays)."""
         scene = self.scene
         G = self.G
         chunk = max(1, presets.CAST_CHUNK_RAYS // G)
