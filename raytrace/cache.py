@@ -554,7 +554,7 @@ class RadianceCache:
         # cores: numba's threads, or the serial builds on free cores (raytrace._jit.serial_builds);
         # False: one after the other. The same cache bit for bit (tests/raytrace/test_cache_solve.py);
         # the four built-in targets' caches built in 0.71–0.85× the time on numba's two threads,
-        # 0.57–0.65× on the serial builds (BENCHMARKS.md, "Building the radiance cache")
+        # 0.60–0.64× on the serial builds (BENCHMARKS.md, "Building the radiance cache")
         if presets.CAST_CHUNKS_ON_TWO_THREADS and side_cores() > 1 and len(starts) > 1:
             # a chunk's NumPy steps run on one core, which the other chunk's Embree and kernels
             # then use; every ray is keyed by its row, so the pieces are the same bits in any

@@ -129,7 +129,7 @@ def _prebuild_threads(threads: int, quality: str):
     install): then the serial builds the workers use, rather than compiling the parallel ones
     for this alone (their recorded compile times, ``_jit_signatures.py``, add up to over 10 CPU
     s), with the cache's chunks of rays and the split-sum table's halves side by side on the
-    cores (``raytrace._jit.serial_builds``; the built-in targets' caches 0.59× the time on one
+    cores (``raytrace._jit.serial_builds``; the built-in targets' caches 0.61× the time on one
     thread, BENCHMARKS.md "Building the radiance cache"). The same scene and cache either way
     (``raytrace._jit.ThreadedKernel``)."""
     if threads != 1 or not jit.kernels_not_compiled(quality, serial=False):
