@@ -164,26 +164,22 @@ def _ranges(starts, counts):
     return np.arange(int(ends[-1]), dtype=np.int64) + offs
 
 
-def _stack_rows(pieces, rows, n_rows: int, n_cols: int):
-    """One scipy CSR matrix (n_rows, n_cols), canonical (columns sorted, no duplicates), of one
-    channel, from :func:`_csr_sum`'s pieces of consecutive runs of ``rows`` (ascending; the
-    other rows empty), in order."""
-    counts = np.zeros(n_rows, np.int64)
-    counts[rows] = np.concatenate([np.diff(p[0]) for p in pieces])
-    indptr = np.concatenate([[0], np.cumsum(counts)])
-    W = sp.csr_matrix((np.concatenate([p[2][:, 0] for p in pieces]), np.concatenate([p[1] for p in pieces]), indptr),
-                      shape=(n_rows, n_cols))
-    W.has_sorted_indices = True
-    return W
-
-
-def _stack_rows_rgb(pieces, rows, n_rows: int):
-    """(indptr, indices, data (nnz, 3)) of one CSR matrix of n_rows rows from :func:`_csr_sum`'s
+def _stack_pieces(pieces, rows, n_rows: int):
+    """(indptr, indices, data (nnz, k)) of one CSR matrix of n_rows rows from :func:`_csr_sum`'s
     pieces of consecutive runs of ``rows`` (ascending; the other rows empty), in order."""
     counts = np.zeros(n_rows, np.int64)
     counts[rows] = np.concatenate([np.diff(p[0]) for p in pieces])
     indptr = np.concatenate([[0], np.cumsum(counts)])
     return indptr, np.concatenate([p[1] for p in pieces]), np.concatenate([p[2] for p in pieces])
+
+
+def _stack_rows(pieces, rows, n_rows: int, n_cols: int):
+    """One scipy CSR matrix (n_rows, n_cols), canonical (columns sorted, no duplicates), of one
+    channel, from :func:`_csr_sum`'s pieces (:func:`_stack_pieces`)."""
+    indptr, indices, data = _stack_pieces(pieces, rows, n_rows)
+    W = sp.csr_matrix((np.ascontiguousarray(data[:, 0]), indices, indptr), shape=(n_rows, n_cols))
+    W.has_sorted_indices = True
+    return W
 
 
 class CacheFrame:
@@ -614,7 +610,7 @@ class RadianceCache:
             # one CSR pattern with RGB entries: (indptr, indices, data (nnz, 3)), the entries
             # summed in input order, then divided by G
             if assembled:
-                indptr, indices, data = _stack_rows_rgb(raw["g_sum"], raw["rows"] - row0, n_rows)
+                indptr, indices, data = _stack_pieces(raw["g_sum"], raw["rows"] - row0, n_rows)
             else:
                 gr = np.concatenate(raw["g_rows"]) - row0
                 gc = alias[np.concatenate(raw["g_cols"])]
