@@ -2,7 +2,7 @@
 and others (e.g. a worktree of an older commit), interleaved.
 
     python benchmarks/bench_fixed_cost.py [--repeats 5] [--trees . /tmp/base] [--frames 2 48]
-                                          [--stages-only | --runs-only]
+                                          [--stages-only | --runs-only] [--shading]
 
 Stages: each in a fresh process on one numba thread, as in a pool's worker, with the tree on
 ``PYTHONPATH`` and numba's cache warm: importing ``cli``; ``cli.plan_sequence`` of the main job
@@ -13,7 +13,10 @@ Stages: each in a fresh process on one numba thread, as in a pool's worker, with
 second frame (``cli.render_frame_images`` of the planned tasks, images not written), the first
 loading the scene another process built, as a pool's worker does. Runs:
 ``python cli.py --target cassini --pattern spiral --frames N --quiet`` into a temporary folder,
-caches warm. Every repetition runs each tree once, in turn (rotated), so a shared machine's load
+caches warm. ``--shading`` adds, in the same rounds, the shading alone of the same N frames
+(``raytrace.shade.render`` on two forked processes of one numba thread each, warmed by one frame; no
+degradation, encoding or files) and prints the marginal cost per frame of both (the two largest N)
+and their ratio. Every repetition runs each tree once, in turn (rotated), so a shared machine's load
 falls on all alike. Prints per stage and tree the median wall and CPU seconds, and per run the
 median wall time and CPU time (the run's and its workers') with their ratios to the first tree's:
 on a loaded machine the CPU times are the steadier figure.
@@ -92,6 +95,51 @@ print(json.dumps(out))
 """
 
 
+# the shading alone of the main job's first N frames: two forked processes on one numba thread
+# each (as the CLI's two workers), each warmed by one frame, then the frames shared out one at a
+# time; no degradation, no encoding, no files. Prints the wall seconds of the N frames.
+SHADING = r"""
+import json, multiprocessing as mp, sys, time
+N, PREBUILT = int(sys.argv[1]), sys.argv[2]
+
+def init(barrier):
+    global TASKS, render
+    import numba
+    numba.set_num_threads(1)
+    import numpy as np
+    import cli
+    from raytrace.camera import Camera
+    from raytrace.dataset import folder, scenes
+    from raytrace.shade import render as shade_render
+    cfg, given = cli.resolve_config(cli.build_parser().parse_args(["--target", "cassini", "--pattern", "spiral",
+                                                                   "--frames", str(max(N, 2))]))
+    TASKS, _ = folder.tasks_for(cli.plan_sequence(cfg, given), "", None, write=False)
+
+    def render(i):
+        task = TASKS[i]
+        c, r = task["cfg"], task["cfg"]["render"]
+        seed, _ = folder.frame_seeds(c["sequence"]["seed"], task["frame"])
+        shade_render(scenes.scene(task["model_spec"], PREBUILT), Camera(*task["camera"]),
+                     np.reshape(task["R_cam_from_body"], (3, 3)), np.asarray(task["t_cam_m"], dtype=np.float64),
+                     scenes.lighting_of(task["light"], r, scenes.star_field(c), c["sequence"]["seed"]),
+                     quality=r["quality"], samples=r["samples"], seed=seed)
+    render(0)  # numba's kernels, the scene, its tables
+    barrier.wait()
+
+def frame(i):
+    render(i)
+
+if __name__ == "__main__":
+    ctx = mp.get_context("fork")
+    barrier = ctx.Barrier(3)
+    with ctx.Pool(2, initializer=init, initargs=(barrier,)) as pool:
+        barrier.wait()
+        t0 = time.perf_counter()
+        pool.map(frame, range(N), chunksize=1)
+        print(json.dumps({"wall": time.perf_counter() - t0}))
+"""
+
+
 def run_python(tree: str, code: str, env: dict, *args) -> dict:
     res = subprocess.run([sys.executable, "-c", code, *args], cwd=tree, env=dict(env, PYTHONPATH=tree),
                          capture_output=True, text=True, check=True)
@@ -123,12 +171,16 @@ def main() -> None:
     group = ap.add_mutually_exclusive_group()
     group.add_argument("--stages-only", action="store_true")
     group.add_argument("--runs-only", action="store_true")
+    ap.add_argument("--shading", action="store_true",
+                    help="with the runs: also the shading alone of the same frames on two processes, and the "
+                         "marginal cost per frame of the runs (the two largest --frames) over it")
     a = ap.parse_args()
     trees = [str(Path(t).resolve()) for t in a.trees]
     cache = tempfile.mkdtemp(prefix="bench-fixed-cache-")
     env = dict(os.environ, ORBITSYNTH_CACHE_DIR=cache, OPENBLAS_NUM_THREADS="1")
     stages = {t: {} for t in trees}
     runs = {t: {f: [] for f in a.frames} for t in trees}
+    shading = {t: {f: [] for f in a.frames} for t in trees}
     try:
         for tree in trees:  # warm-up: numba's cache, the persistent cache, the page cache
             run_python(tree, STAGES, env)
@@ -146,6 +198,11 @@ def main() -> None:
                 if not a.stages_only:
                     for f in a.frames:
                         runs[tree][f].append(run_job(tree, f, env))
+                    if a.shading:
+                        with tempfile.TemporaryDirectory() as tmp:
+                            path = run_python(tree, PREBUILD, env, tmp)["path"]
+                            for f in a.frames:
+                                shading[tree][f].append(run_python(tree, SHADING, env, str(f), path)["wall"])
             print(f"repeat {k + 1}/{a.repeats} done", file=sys.stderr, flush=True)
     finally:
         shutil.rmtree(cache, ignore_errors=True)
@@ -166,6 +223,15 @@ def main() -> None:
             print(f"main job, {f} frames (median wall s, its ratio; median CPU s, its ratio; runs' wall): " + " | ".join(
                 f"{t}: {w:.2f} s ({w / wall[0]:.2f}x), CPU {c:.2f} s ({c / cpu[0]:.2f}x); "
                 f"{', '.join(f'{x:.1f}' for x, _ in runs[t][f])}" for t, w, c in zip(trees, wall, cpu)))
+        if a.shading and len(a.frames) > 1:
+            f0, f1 = sorted(a.frames)[-2:]
+            for t in trees:
+                job = (statistics.median(w for w, _ in runs[t][f1]) - statistics.median(w for w, _ in runs[t][f0])) / (f1 - f0)
+                sh = {f: statistics.median(shading[t][f]) for f in (f0, f1)}
+                per = (sh[f1] - sh[f0]) / (f1 - f0)
+                print(f"{t}: shading alone of {f0} / {f1} frames on two processes {sh[f0]:.2f} / {sh[f1]:.2f} s "
+                      f"(runs: {', '.join(f'{x:.2f}' for x in shading[t][f1])}); marginal per frame: "
+                      f"main job {job:.3f} s, shading {per:.3f} s, ratio {job / per:.2f}")
 
 
 if __name__ == "__main__":
