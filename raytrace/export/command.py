@@ -269,7 +269,11 @@ def export_main(argv: list) -> int:
         from tqdm import tqdm
         bar = tqdm(total=n, unit="frame", desc=f"export {args.format}", file=sys.stderr, leave=False)
     try:
-        done = run_export(args, plan, progress=None if bar is None else bar.update)
+        try:
+            done = run_export(args, plan, progress=None if bar is None else bar.update)
+        finally:  # the bar's line cleared before any message below
+            if bar is not None:
+                bar.close()
     except (UsageError, ValueError) as exc:
         sys.stderr.write(f"{PROG}: error: {exc}\n")
         return 2
@@ -283,9 +287,6 @@ def export_main(argv: list) -> int:
         sys.stderr.write(f"{PROG}: error: export failed ({type(exc).__name__}: {msg}); the finished part is kept, "
                          "rerun the same command to continue\n")
         return 1
-    finally:
-        if bar is not None:
-            bar.close()
     if done is None:
         sys.stdout.write(f"{args.out}: already this export, finished; nothing to do\n")
         return 0

@@ -275,6 +275,19 @@ def test_a_bad_frame_found_while_writing_leaves_nothing(two_targets, tmp_path, c
     assert sorted(os.listdir(tmp_path)) == ["broken"]
 
 
+def test_an_error_while_the_bar_runs_starts_its_own_line(two_targets, tmp_path, capsys):
+    """With the progress bar (no --quiet), the bar's line is cleared before the one-line error:
+    a log of stderr shows ``cli.py: error: …`` at the start of a line, not after the bar."""
+    broken = tmp_path / "broken"
+    shutil.copytree(two_targets["icesat"][0], broken)
+    (broken / "mask" / "000007.png").write_bytes(b"not a png")
+    status = export_main(["--format", "bop", str(broken), "--out", str(tmp_path / "out"), "--workers", "1"])
+    err = capsys.readouterr().err
+    assert status == 2 and "export bop" in err  # the bar was drawn
+    last = err.rstrip("\n").split("\n")[-1].split("\r")[-1]  # what a terminal shows on the last line
+    assert last.startswith("cli.py: error: ") and "mask/000007.png is not a readable image" in last
+
+
 # --------------------------------------------------------------------------- BOP, third-party views
 def load_ply_like_bop_toolkit(path):
     """A reader following bop_toolkit ``inout.load_ply`` (bop_toolkit_lib/inout.py): header
