@@ -23,7 +23,9 @@ the ratios of each tree's medians to the first's::
 
 ``--new-model`` times instead the first run of a model whose scene is not stored yet (a user's
 mesh: ``--args "--mesh FILE --frames 10"``): numba's cache warm, the persistent cache empty;
-with the peak resident memory of the command's largest process (its workers included).
+with the peak resident memory of the command's largest process (its workers included) and the
+peak of the processes' summed PSS (shared pages counted once). ``--stored-model``: the same for a
+later run, the scene stored by an untimed first run.
 """
 
 from __future__ import annotations
@@ -41,28 +43,57 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def run(args: list, cache_dir: str, tree: Path = ROOT, scene_dir: str | None = None) -> dict:
+def _tree_pss_mib(pid: int) -> float:
+    """The summed proportional set size (``Pss`` of ``smaps_rollup``: shared pages divided among
+    the processes mapping them) of ``pid`` and its descendants [MiB]; 0 for those gone."""
+    todo, total = [pid], 0.0
+    while todo:
+        p = todo.pop()
+        try:
+            for tid in os.listdir(f"/proc/{p}/task"):
+                with open(f"/proc/{p}/task/{tid}/children", encoding="ascii") as fh:
+                    todo += [int(c) for c in fh.read().split()]
+            with open(f"/proc/{p}/smaps_rollup", encoding="ascii") as fh:
+                total += sum(int(line.split()[1]) for line in fh if line.startswith("Pss:")) / 1024
+        except (OSError, ValueError):
+            pass
+    return total
+
+
+def run(args: list, cache_dir: str, tree: Path = ROOT, scene_dir: str | None = None, sample: bool = False) -> dict:
     """One ``cli.py`` process: numba's cache in ``cache_dir``, the persistent cache in
-    ``scene_dir`` (default ``cache_dir`` + ``-orbitsynth``); its wall time and peak RSS (the
-    largest of the process and the children it waited for, as Linux's wait4 reports it)."""
+    ``scene_dir`` (default ``cache_dir`` + ``-orbitsynth``); its wall time, peak RSS (the
+    largest of the process and the children it waited for, as Linux's wait4 reports it) and, with
+    ``sample``, the peak of the processes' summed PSS (read every 0.2 s: the end is then seen up
+    to 0.05 s late)."""
     env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir, ORBITSYNTH_CACHE_DIR=scene_dir or cache_dir + "-orbitsynth")
     with tempfile.TemporaryDirectory() as tmp, tempfile.TemporaryFile("w+") as err:
         t0 = time.perf_counter()
         proc = subprocess.Popen([sys.executable, str(tree / "cli.py"), *args, "--out", os.path.join(tmp, "o")],
                                 stdout=subprocess.DEVNULL, stderr=err, cwd=tmp, env=env)
-        _, status, usage = os.wait4(proc.pid, 0)
+        pss, last = 0.0, 0.0
+        while True:
+            pid, status, usage = os.wait4(proc.pid, 0 if not sample else os.WNOHANG)
+            if pid:
+                break
+            if time.perf_counter() - last >= 0.2:
+                pss, last = max(pss, _tree_pss_mib(proc.pid)), time.perf_counter()
+            time.sleep(0.05)
         wall = time.perf_counter() - t0
         proc.returncode = os.waitstatus_to_exitcode(status)
         err.seek(0)
         stderr = err.read()
     if proc.returncode != 0:
         raise RuntimeError(f"{tree}/cli.py {' '.join(args)} failed: {stderr.strip()[-400:]}")
-    return {"wall_s": wall, "compiled": "compiling" in stderr, "peak_gib": usage.ru_maxrss / 2 ** 20}
+    return {"wall_s": wall, "compiled": "compiling" in stderr, "peak_gib": usage.ru_maxrss / 2 ** 20,
+            "pss_gib": pss / 1024 if sample else None}
 
 
-def new_model(args: list, trees: list, repeats: int) -> None:
+def new_model(args: list, trees: list, repeats: int, stored: bool = False) -> None:
     """``--new-model``: each tree's first run of a model with numba's cache warm and the
-    persistent cache empty, alternated; wall and peak RSS."""
+    persistent cache empty, alternated; ``--stored-model`` (``stored``): a later run, the model's
+    scene stored by an untimed first run. Wall time, peak RSS of the largest process and peak of
+    the processes' summed PSS."""
     out = {t: [] for t in trees}
     with tempfile.TemporaryDirectory() as root:
         numba_dirs = {t: os.path.join(root, f"numba{i}") for i, t in enumerate(trees)}
@@ -71,17 +102,23 @@ def new_model(args: list, trees: list, repeats: int) -> None:
             run(args, numba_dirs[t], t, os.path.join(root, f"fill{i}"))
         for k in range(repeats):
             for i, t in enumerate(trees if k % 2 == 0 else trees[::-1]):
-                r = run(args, numba_dirs[t], t, os.path.join(root, f"scene-{t.name}-{k}"))
+                scene_dir = os.path.join(root, f"fill{trees.index(t)}" if stored else f"scene-{t.name}-{k}")
+                r = run(args, numba_dirs[t], t, scene_dir, sample=True)
                 assert not r["compiled"], r
                 out[t].append(r)
-                print(f"round {k + 1} {t}: {r['wall_s']:.1f} s, peak {r['peak_gib']:.2f} GiB", flush=True)
-    print(f"\ncli.py {' '.join(args)}: numba's cache warm, the persistent cache empty")
-    print("| tree | " + " | ".join(f"round {k + 1}, s / GiB" for k in range(repeats)) + " | median s | median GiB |")
-    print("|---|" + "---|" * (repeats + 2))
+                print(f"round {k + 1} {t}: {r['wall_s']:.1f} s, peak {r['peak_gib']:.2f} GiB, summed PSS "
+                      f"{r['pss_gib']:.2f} GiB", flush=True)
+    print(f"\ncli.py {' '.join(args)}: numba's cache warm, the persistent cache "
+          f"{'holding the scene' if stored else 'empty'}")
+    print("| tree | " + " | ".join(f"round {k + 1}, s / GiB / GiB" for k in range(repeats))
+          + " | median s | median peak RSS, GiB | median peak summed PSS, GiB |")
+    print("|---|" + "---|" * (repeats + 3))
     for t in trees:
-        print(f"| {t.name} | " + " | ".join(f"{r['wall_s']:.1f} / {r['peak_gib']:.2f}" for r in out[t])
+        print(f"| {t.name} | " + " | ".join(f"{r['wall_s']:.1f} / {r['peak_gib']:.2f} / {r['pss_gib']:.2f}"
+                                            for r in out[t])
               + f" | {statistics.median(r['wall_s'] for r in out[t]):.1f}"
-              + f" | {statistics.median(r['peak_gib'] for r in out[t]):.2f} |")
+              + f" | {statistics.median(r['peak_gib'] for r in out[t]):.2f}"
+              + f" | {statistics.median(r['pss_gib'] for r in out[t]):.2f} |")
 
 
 def main() -> None:
@@ -92,11 +129,13 @@ def main() -> None:
                    "default: this one)")
     p.add_argument("--new-model", action="store_true", help="the first run of a model not stored yet: numba's "
                    "cache warm, the persistent cache empty")
+    p.add_argument("--stored-model", action="store_true", help="a later run of a model: numba's cache warm, "
+                   "its scene stored by a first run")
     a = p.parse_args()
     args = shlex.split(a.args)
     trees = [t.resolve() for t in a.tree] if a.tree else [ROOT]
-    if a.new_model:
-        new_model(args, trees, a.repeats)
+    if a.new_model or a.stored_model:
+        new_model(args, trees, a.repeats, stored=a.stored_model)
         return
     cold = {t: [] for t in trees}
     warm = {t: [] for t in trees}

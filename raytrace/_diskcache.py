@@ -147,9 +147,10 @@ def read(path: str, key: bytes | None = None) -> bytes | None:
 
 
 def read_mapped(path: str, key: bytes | None = None) -> memoryview | None:
-    """:func:`read` without copying the payload: a read-only view of the file mapped into memory
-    (for one large entry read once: the copy and its fresh pages cost a worker ~0.1 s for a
-    100 MB scene); None where :func:`read` would return None."""
+    """:func:`read` without copying the payload: a view of the file mapped into memory privately
+    (copy-on-write: writable, and its pages shared with the operating system's file cache, so
+    with every process that maps the same file, until one writes to them); None where
+    :func:`read` would return None. For one large entry (:func:`load_buffers`)."""
     import mmap
     try:
         with open(path, "rb") as fh:
@@ -159,12 +160,65 @@ def read_mapped(path: str, key: bytes | None = None) -> memoryview | None:
             start = fh.tell()
             if os.fstat(fh.fileno()).st_size != start + head[0] or head[0] == 0:
                 return None
-            view = memoryview(mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ))[start:]
+            view = memoryview(mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_COPY))[start:]
     except (OSError, ValueError):
         return None
     if hashlib.sha256(view).digest() != head[1]:
         return None
     return view
+
+
+PAYLOAD_AT = len(MAGIC) + _HEADER.size
+"""Where an entry's payload starts in its file [bytes]."""
+ALIGN = 64
+"""Alignment of the arrays :func:`dump_buffers` stores, in the file [bytes]."""
+_COUNTS = struct.Struct("<QQ")  # length of the pickle stream, number of buffers; also (offset, length)
+
+
+def dump_buffers(obj, fh) -> None:
+    """Write ``obj`` to the payload stream ``fh`` (:func:`write_stream`'s ``dump``) as a pickle
+    (protocol 5) whose contiguous NumPy arrays are stored out of band, each at an offset of the
+    file that is a multiple of :data:`ALIGN`, so that :func:`load_buffers` places them on the
+    mapped file without copying. Layout of the payload: the pickle stream's length and the number
+    of buffers (two little-endian uint64), the stream, a table of (offset in the payload, length)
+    per buffer, then the buffers (zeros between them)."""
+    import pickle
+    buffers = []
+    stream = pickle.dumps(obj, protocol=5, buffer_callback=buffers.append)
+    views = [b.raw() for b in buffers]
+    pos = _COUNTS.size + len(stream) + _COUNTS.size * len(views)
+    table = []
+    for v in views:
+        pos += -(PAYLOAD_AT + pos) % ALIGN
+        table.append((pos, v.nbytes))
+        pos += v.nbytes
+    fh.write(_COUNTS.pack(len(stream), len(views)))
+    fh.write(stream)
+    fh.write(b"".join(_COUNTS.pack(*t) for t in table))
+    at = _COUNTS.size + len(stream) + _COUNTS.size * len(views)
+    for (offset, n), v in zip(table, views):
+        fh.write(bytes(offset - at))
+        fh.write(v)
+        at = offset + n
+
+
+def load_buffers(payload: memoryview):
+    """The object :func:`dump_buffers` wrote, from its payload (:func:`read_mapped`'s view): its
+    arrays are views of the payload's memory, not copies (writable where the view is). Raises
+    ValueError where the layout does not fit the payload."""
+    import pickle
+    n_stream, n_buf = _COUNTS.unpack_from(payload, 0)
+    table_at = _COUNTS.size + n_stream
+    end = table_at + _COUNTS.size * n_buf
+    if end > len(payload):
+        raise ValueError("the payload is shorter than its pickle stream and buffer table")
+    buffers = []
+    for k in range(n_buf):
+        offset, n = _COUNTS.unpack_from(payload, table_at + _COUNTS.size * k)
+        if offset < end or offset + n > len(payload):
+            raise ValueError(f"buffer {k} lies outside the payload")
+        buffers.append(payload[offset:offset + n])
+    return pickle.loads(payload[_COUNTS.size:table_at], buffers=buffers)
 
 
 def write(path: str, key: bytes, payload: bytes) -> bool:

@@ -109,16 +109,20 @@ def load_prebuilt(path: str):
     """The Scene pickled by :func:`prebuild_scenes` at ``path``, its radiance cache attached;
     None (and the worker builds its own) if the file cannot be read or is not intact."""
     import pickle
+    import struct
 
     from .. import _diskcache
     payload = _diskcache.read_mapped(path)
     try:
         if payload is None:
             raise ValueError(f"{path} is missing, truncated or corrupt")
-        scene, cache, options = pickle.loads(payload)  # our own file, checksummed
+        # our own file, checksummed; its arrays stay on the mapped file (no copy: a CAD mesh's
+        # scene is gigabytes, and the pool's workers share its pages until one writes to them)
+        scene, cache, options = _diskcache.load_buffers(payload)
         scene.adopt_radiance_cache(cache, **options)
         return scene
-    except (pickle.UnpicklingError, EOFError, ValueError, AttributeError, ImportError, TypeError) as exc:
+    except (pickle.UnpicklingError, EOFError, ValueError, AttributeError, ImportError, TypeError,
+            struct.error) as exc:
         warn(f"building the scene in the worker ({exc})")
         folder = _diskcache.cache_dir()
         if folder is not None and os.path.dirname(os.path.abspath(path)) == os.path.abspath(folder):
@@ -174,8 +178,6 @@ def prebuild_scenes(tasks: list, folder: str | None) -> dict:
     every frame): only the persistent cache, and a scene built here is kept for this process's
     frames (:func:`scene`). Only for tasks that shade (the ``fast`` and ``balanced`` presets with
     an image modality); nothing is built for the others."""
-    import pickle
-
     from .. import _diskcache
     out = {}
     for task in tasks:
@@ -197,7 +199,7 @@ def prebuild_scenes(tasks: list, folder: str | None) -> dict:
         cache = scene.radiance_cache(**options)
         if path is not None or folder is not None:
             def dump(fh, what=(scene, cache, options)):  # streamed: a CAD mesh's scene is gigabytes
-                pickle.dump(what, fh, protocol=pickle.HIGHEST_PROTOCOL)
+                _diskcache.dump_buffers(what, fh)
             if path is not None and _diskcache.write_stream(path, key, dump):
                 out[spec] = path
             elif folder is not None:
