@@ -13,7 +13,10 @@ numba compiles for it. Each file carries its key's digest, its length and the SH
 payload: a truncated, corrupt or foreign file reads as absent and is written anew. Writes go to
 a temporary name in the same folder and are renamed into place (atomic), so processes that
 write the same entry at once each leave a complete file and readers never see half of one.
-The cache keeps the :data:`KEEP` most recently used entries of each kind.
+The cache keeps the :data:`KEEP` most recently used entries of each kind. A scene (gigabytes for
+a user's CAD mesh) is stored with its arrays out of band (:func:`dump_buffers`) and mapped, not
+read (:func:`read_mapped`, :func:`load_buffers`): the processes that load it share its pages.
+Entries are never rewritten in place, only replaced, so a mapped file never changes under a reader.
 """
 
 from __future__ import annotations
