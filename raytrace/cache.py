@@ -588,7 +588,9 @@ class RadianceCache:
     def _matrices(self, raw, ok, row0, n_rows):
         """The transfer matrices of the rows ``row0 …`` cast in ``raw`` (rows not ``ok`` left
         empty), columns on the coarse lattice: a hit on a buried coarse row counts for the row
-        standing in for it."""
+        standing in for it. The chunks' pieces are freed as they are stacked (``raw``'s lists of
+        them emptied; its ``rows`` and ``near`` kept): with a CAD mesh's glint records they are
+        gigabytes, and stacking them all while every piece lives doubled the build's peak."""
         G = self.G
         alias = self._c_alias
         n_c = len(alias)
@@ -604,6 +606,8 @@ class RadianceCache:
                                   cat("blk_rows", 0) - row0, cat("blk_cells", 0), ok)
             ss, sb, rows = [pieces[0]], [pieces[1]], np.arange(n_rows)
         out = {"W_ss": _stack_rows(ss, rows, n_rows, n_c), "W_sb": _stack_rows(sb, rows, n_rows, self.n_cells ** 2)}
+        ss.clear()
+        sb.clear()
         out["W_g"], out["W_gb"], out["glint"] = None, None, None
         assembled = raw.get("assembled", False)  # W_g summed and the records kept per chunk by _cast
         if any(raw["g_hit"]) if assembled else raw["g_rows"]:  # _glossy_chunk appends to all its lists or to none
@@ -611,12 +615,18 @@ class RadianceCache:
             # summed in input order, then divided by G
             if assembled:
                 indptr, indices, data = _stack_pieces(raw["g_sum"], raw["rows"] - row0, n_rows)
+                raw["g_sum"].clear()
             else:
                 gr = np.concatenate(raw["g_rows"]) - row0
                 gc = alias[np.concatenate(raw["g_cols"])]
                 gw = np.concatenate(raw["g_w"])  # (hit, lattice point, channel)
+                for k in ("g_rows", "g_cols", "g_w"):
+                    raw[k].clear()
                 indptr, indices, data = _csr_sum(gr, gc, gw, ok[gr], n_rows, n_c)
-            out["W_g"] = (indptr, indices.astype(np.int64), data / G)
+                del gr, gc, gw
+            data /= G
+            out["W_g"] = (indptr, indices.astype(np.int64, copy=False), data)
+            del indptr, indices, data
             bbr = np.concatenate(raw["gb_rows"]) - row0
             bbc = np.concatenate(raw["gb_cells"])
             bbw = np.concatenate(raw["gb_w"])
@@ -634,7 +644,9 @@ class RadianceCache:
             glint = {}
             for k, v in rec.items():
                 a = np.concatenate(v) if keep is None else np.concatenate(v)[keep]
+                v.clear()
                 glint[k] = np.ascontiguousarray(a if order is None else a[order])
+                del a
             glint["row"] = glint["row"] - row0
             glint["ptr"] = np.searchsorted(glint["row"], np.arange(n_rows + 1)).astype(np.int64)
             out["glint"] = glint
