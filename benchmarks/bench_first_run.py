@@ -41,23 +41,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _tree_pss_mib(pid: int) -> float:
-    """The summed proportional set size (``Pss`` of ``smaps_rollup``: shared pages divided among
-    the processes mapping them) of ``pid`` and its descendants [MiB]; 0 for those gone."""
-    todo, total = [pid], 0.0
-    while todo:
-        p = todo.pop()
-        try:
-            for tid in os.listdir(f"/proc/{p}/task"):
-                with open(f"/proc/{p}/task/{tid}/children", encoding="ascii") as fh:
-                    todo += [int(c) for c in fh.read().split()]
-            with open(f"/proc/{p}/smaps_rollup", encoding="ascii") as fh:
-                total += sum(int(line.split()[1]) for line in fh if line.startswith("Pss:")) / 1024
-        except (OSError, ValueError):
-            pass
-    return total
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from bench_memory import sample as tree_memory  # noqa: E402  ((largest RSS, summed RSS, summed PSS) [MiB])
 
 
 def run(args: list, cache_dir: str, tree: Path = ROOT, scene_dir: str | None = None, sample: bool = False) -> dict:
@@ -77,7 +62,7 @@ def run(args: list, cache_dir: str, tree: Path = ROOT, scene_dir: str | None = N
             if pid:
                 break
             if time.perf_counter() - last >= 0.2:
-                pss, last = max(pss, _tree_pss_mib(proc.pid)), time.perf_counter()
+                pss, last = max(pss, tree_memory(proc.pid)[2]), time.perf_counter()
             time.sleep(0.05)
         wall = time.perf_counter() - t0
         proc.returncode = os.waitstatus_to_exitcode(status)

@@ -497,7 +497,7 @@ class RadianceCache:
         G = self.G
         chunk = max(1, presets.CAST_CHUNK_RAYS // G)
         raw = {k: [] for k in ("hit_rows", "hit_cols", "hit_w", "blk_rows", "blk_cells", "g_rows", "g_cols", "g_w",
-                               "gb_rows", "gb_cells", "gb_w", "ss", "sb", "g_sum", "g_hit")}
+                               "gb_rows", "gb_cells", "gb_w", "ss", "sb", "g_sum")}
         rec = {k: [] for k in ("row", "face", "u", "v", "side", "n", "wo")}
         glossy_face = self.glossy_comp[scene.component_of_face]
         any_glossy = bool(glossy_face.any())
@@ -572,13 +572,12 @@ class RadianceCache:
         rows not ``ok`` left empty; every chunk has one) rather than listed, and its glint records
         of rows not ``ok`` dropped: the same matrix and records bit for bit as from the lists (a
         row's entries come from one chunk, in the same order), without their copies (Hubble's
-        contact rows: 14 M continuations, 16 M records). ``g_hit``: whether the chunk listed any."""
+        contact rows: 14 M continuations, 16 M records)."""
         hit = bool(part["g_rows"])  # _glossy_chunk appends to all its lists or to none
         cols = part["g_cols"][0] if hit else np.empty((0, 3), np.int64)
         local = np.searchsorted(rows, part["g_rows"][0]) if hit else np.empty(0, np.int64)
         weights = part["g_w"][0] if hit else np.empty((0, 3, 3))
         part["g_sum"].append(_csr_sum(local, self._c_alias[cols], weights, ok[local], len(rows), len(self._c_alias)))
-        part["g_hit"].append(hit)
         part["g_rows"], part["g_cols"], part["g_w"] = [], [], []
         if hit:
             keep = ok[np.searchsorted(rows, rec["row"][0])]
@@ -610,7 +609,7 @@ class RadianceCache:
         sb.clear()
         out["W_g"], out["W_gb"], out["glint"] = None, None, None
         assembled = raw.get("assembled", False)  # W_g summed and the records kept per chunk by _cast
-        if any(raw["g_hit"]) if assembled else raw["g_rows"]:  # _glossy_chunk appends to all its lists or to none
+        if raw["gb_rows"]:  # _glossy_chunk appends to all its lists or to none (W_g's, summed, are emptied)
             # one CSR pattern with RGB entries: (indptr, indices, data (nnz, 3)), the entries
             # summed in input order, then divided by G
             if assembled:
